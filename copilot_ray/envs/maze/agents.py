@@ -1,0 +1,112 @@
+"""Agent geometries: what moves through the maze, in its configuration space.
+
+The maze env only talks to an `AgentGeometry`, so a rigid body (x, y, angle; a stick checked by
+interpolation) or a 3-link snake (base + joint angles) plugs in without touching the maze code. The goal
+is a full configuration, so planning happens in configuration space.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .geometry import Obstacles
+    from .render import Canvas
+
+
+class AgentGeometry(ABC):
+    """Kinematics and collision geometry of one agent kind."""
+
+    name: str
+    config_dim: int
+    action_dim: int
+
+    @property
+    @abstractmethod
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of the configuration space, float64 [config_dim] each."""
+
+    @property
+    @abstractmethod
+    def nominal_step_distance(self) -> float:
+        """Furthest the configuration moves (in `distance` units) in one step."""
+
+    @abstractmethod
+    def step(self, config: np.ndarray, action: np.ndarray) -> np.ndarray:
+        """The configuration the action would reach if nothing were in the way."""
+
+    @abstractmethod
+    def motions_collide(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """bool [N]: does moving straight (in configuration space) from a[i] to b[i] hit anything?"""
+
+    @abstractmethod
+    def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """float [N]: distance between configurations (wraps angles where there are any)."""
+
+    @abstractmethod
+    def clearance(self, obstacles: Obstacles, configs: np.ndarray) -> np.ndarray:
+        """float [N]: distance from the agent's body at each configuration to obstacles and border."""
+
+    @abstractmethod
+    def draw(self, canvas: Canvas, config: np.ndarray, color: tuple[int, int, int]) -> None:
+        """Draw the agent's body at `config`."""
+
+    def shortest_path_lengths(
+        self, obstacles: Obstacles, starts: np.ndarray, goals: np.ndarray
+    ) -> np.ndarray:
+        """float [N]: exact shortest collision-free path lengths; only where an exact method exists."""
+        raise NotImplementedError(f"no exact shortest path for agent {self.name!r}")
+
+
+class PointMass(AgentGeometry):
+    """A point at (x, y) that moves by `speed * a / max(1, |a|)` per step, a in [-1, 1]^2.
+
+    The action is clipped to the unit disc (not the box) so that no direction is faster than `speed`
+    and `nominal_step_distance` is exactly `speed`.
+    """
+
+    name = "point"
+    config_dim = 2
+    action_dim = 2
+
+    def __init__(self, speed: float):
+        if not (np.isfinite(speed) and speed > 0):
+            raise ValueError(f"speed must be a positive number, got {speed!r}")
+        self.speed = float(speed)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(2), np.ones(2)
+
+    @property
+    def nominal_step_distance(self) -> float:
+        return self.speed
+
+    def step(self, config: np.ndarray, action: np.ndarray) -> np.ndarray:
+        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        norm = float(np.linalg.norm(action))
+        return np.asarray(config, dtype=np.float64) + self.speed * action / max(1.0, norm)
+
+    def motions_collide(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return obstacles.segments_collide(a, b)
+
+    def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(np.asarray(b, dtype=np.float64) - np.asarray(a, dtype=np.float64), axis=-1)
+
+    def clearance(self, obstacles: Obstacles, configs: np.ndarray) -> np.ndarray:
+        return obstacles.clearance(configs)
+
+    def draw(self, canvas: Canvas, config: np.ndarray, color: tuple[int, int, int]) -> None:
+        canvas.disc(np.asarray(config)[:2], radius_px=max(2.0, canvas.size / 80), color=color)
+
+    def shortest_path_lengths(
+        self, obstacles: Obstacles, starts: np.ndarray, goals: np.ndarray
+    ) -> np.ndarray:
+        return obstacles.visibility_graph.lengths(starts, goals)
+
+
+# Agent kinds by env_config["agent"]; the rigid body and the snake add one line each.
+AGENTS = {"point": PointMass}

@@ -1,0 +1,274 @@
+"""`GoalMazeEnv`: a goal-conditioned agent in a 1 x 1 maze (the paper's Maze, Section 4)."""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .agents import AGENTS, AgentGeometry
+from .geometry import Obstacles
+from .layouts import Layout, load_layout
+from .render import render_maze
+from .tasks import SPLITS, sample_task_pairs, split_rng
+
+# four-rooms: 67 % of straight test start->goal lines collide, yet no task needs more than two doorways.
+DEFAULT_LAYOUT = "four-rooms"
+# Chosen so that the mean shortest path on the default layout's test tasks takes >= 200 steps (the
+# paper's ">= 200 steps on average"); `benchmarks/maze_geometry.py` prints the figure.
+DEFAULT_SPEED = 0.0025
+
+DEFAULTS: dict[str, Any] = {
+    "layout": DEFAULT_LAYOUT,
+    "speed": DEFAULT_SPEED,
+    "success_radius": 0.025,
+    "goal_reward": 1.0,
+    "max_episode_steps": 1000,
+    "num_train_tasks": 300,
+    "num_test_tasks": 100,
+    "task_seed": 0,
+    "task_split": "train",
+    "render_mode": None,
+    "render_size": 256,
+}
+
+
+def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
+    """Merge over DEFAULTS; reject unknown keys and bad values, naming the key and the value."""
+    unknown = [k for k in config if k not in DEFAULTS]
+    if unknown:
+        raise ValueError(
+            f"unknown maze env_config key {unknown[0]!r}; valid keys: {', '.join(sorted(DEFAULTS))}"
+        )
+    cfg = {**DEFAULTS, **{k: config[k] for k in config}}
+
+    def bad(key: str, need: str) -> ValueError:
+        return ValueError(f"env_config[{key!r}] = {cfg[key]!r}: must be {need}")
+
+    def is_number(v: Any) -> bool:
+        return isinstance(v, numbers.Real) and not isinstance(v, bool) and np.isfinite(v)
+
+    def is_int(v: Any) -> bool:
+        return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+    if not isinstance(cfg["layout"], str | Path | Layout):
+        raise bad("layout", "a built-in layout name or a path to a layout file")
+    for key in ("speed", "success_radius"):
+        if not (is_number(cfg[key]) and 0 < cfg[key] < 0.5):
+            raise bad(key, "a number in (0, 0.5)")
+    if not is_number(cfg["goal_reward"]):
+        raise bad("goal_reward", "a finite number")
+    for key in ("max_episode_steps", "num_train_tasks", "num_test_tasks"):
+        if not (is_int(cfg[key]) and cfg[key] > 0):
+            raise bad(key, "a positive integer")
+    if not (is_int(cfg["task_seed"]) and cfg["task_seed"] >= 0):
+        raise bad("task_seed", "a non-negative integer")
+    if cfg["task_split"] not in SPLITS:
+        raise bad("task_split", f"one of {', '.join(SPLITS)}")
+    if cfg["render_mode"] not in GoalMazeEnv.metadata["render_modes"] + [None]:
+        raise bad("render_mode", f"None or one of {GoalMazeEnv.metadata['render_modes']}")
+    if not (is_int(cfg["render_size"]) and cfg["render_size"] >= 16):
+        raise bad("render_size", "an integer >= 16")
+    return cfg
+
+
+class GoalMazeEnv(gym.Env):
+    """An agent moves through a maze of square obstacles in the unit square towards a goal configuration.
+
+    A move whose straight motion would touch an obstacle or the border is blocked (the agent stays) and
+    reported as `info["collision"]`. The episode terminates within `success_radius` of the goal;
+    `info["success"]` additionally needs a collision-free episode. Truncation after `max_episode_steps`
+    happens here (no TimeLimit wrapper) so that RLlib sees it.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    def __init__(self, env_config: Mapping[str, Any] | None = None, *, agent: str = "point", **kwargs: Any):
+        config = _check_config({**dict(env_config or {}), **kwargs})
+        if agent not in AGENTS:
+            raise ValueError(f"unknown maze agent {agent!r}; valid: {', '.join(AGENTS)}")
+        self.config = config
+        self.layout: Layout = load_layout(config["layout"])
+        self.obstacles = Obstacles.from_layout(self.layout)
+        self.agent_geometry: AgentGeometry = AGENTS[agent](speed=float(config["speed"]))
+        self.success_radius = float(config["success_radius"])
+        self.goal_reward = float(config["goal_reward"])
+        self.max_episode_steps = int(config["max_episode_steps"])
+        self.render_mode = config["render_mode"]
+
+        low, high = (b.astype(np.float32) for b in self.agent_geometry.bounds)
+        self.goal_dim = self.agent_geometry.config_dim
+        self.goal_space = spaces.Box(low, high, dtype=np.float32)
+        self.observation_space = spaces.Dict(
+            {
+                "observation": spaces.Box(low, high, dtype=np.float32),
+                "achieved_goal": spaces.Box(low, high, dtype=np.float32),
+                "desired_goal": spaces.Box(low, high, dtype=np.float32),
+            }
+        )
+        n_act = self.agent_geometry.action_dim
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n_act,), dtype=np.float32)
+
+        self._fixed: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._next_task: tuple[np.ndarray, np.ndarray] | None = None
+        self._render_path: np.ndarray | None = None
+        self._config_now = np.zeros(self.goal_dim)
+        self._goal = np.zeros(self.goal_dim)
+        self._steps = 0
+        self._collisions = 0
+
+    # --- planning interface -------------------------------------------------------------------------
+
+    @property
+    def nominal_step_distance(self) -> float:
+        """Furthest the agent moves in goal space in one step (turns step counts into distances)."""
+        return self.agent_geometry.nominal_step_distance
+
+    def goal_distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """[N, d], [N, d] -> [N] (or [d], [d] -> scalar)."""
+        return self.agent_geometry.distance(a, b)
+
+    def segments_collide(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """[N, d], [N, d] -> bool [N]: the straight motion touches an obstacle or leaves the square."""
+        return self.agent_geometry.motions_collide(self.obstacles, a, b)
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None) -> Any:
+        """Sparse: goal_reward within success_radius, else 0. [N, d] -> [N]; [d] -> float."""
+        reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
+        reward = np.where(reached, self.goal_reward, 0.0)
+        return float(reward) if np.ndim(reward) == 0 else reward
+
+    def sample_tasks(
+        self, n: int, split: str = "train", seed: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(starts, goals) float32 [n, goal_dim], deterministic for (split, seed); seed defaults to task_seed."""
+        seed = self.config["task_seed"] if seed is None else seed
+        return self._sample(n, split_rng(split, seed))
+
+    def tasks(self, split: str) -> tuple[np.ndarray, np.ndarray]:
+        """The fixed task sets: `train` (num_train_tasks) and `test` (num_test_tasks), disjoint."""
+        if split not in ("train", "test"):
+            raise ValueError(f"no fixed task set {split!r}; valid: train, test")
+        if not self._fixed:
+            for name in ("train", "test"):
+                self._fixed[name] = self.sample_tasks(self.config[f"num_{name}_tasks"], name)
+            train = {tuple(r) for r in np.concatenate(self._fixed["train"], axis=1).tolist()}
+            test = {tuple(r) for r in np.concatenate(self._fixed["test"], axis=1).tolist()}
+            assert not train & test, "train and test tasks overlap"
+        starts, goals = self._fixed[split]
+        return starts.copy(), goals.copy()
+
+    def _sample(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        return sample_task_pairs(
+            self.agent_geometry,
+            self.obstacles,
+            n,
+            rng,
+            margin=self.success_radius,
+            min_separation=2.0 * self.success_radius,
+        )
+
+    # --- task control -------------------------------------------------------------------------------
+
+    def _as_config(self, value: Any, key: str) -> np.ndarray:
+        arr = np.asarray(value, dtype=np.float32).astype(np.float64)
+        if arr.shape != (self.goal_dim,) or not np.isfinite(arr).all():
+            raise ValueError(f"{key} must be {self.goal_dim} finite numbers, got {value!r}")
+        if self.agent_geometry.clearance(self.obstacles, arr[None])[0] <= 0.0:
+            raise ValueError(f"{key} {arr.tolist()} lies in an obstacle or outside the maze")
+        return arr
+
+    def set_task(self, start: Any, goal: Any) -> None:
+        """Use (start, goal) for the next reset and every later one, until changed or cleared."""
+        self._next_task = (self._as_config(start, "start"), self._as_config(goal, "goal"))
+
+    def clear_task(self) -> None:
+        """Go back to drawing tasks from `task_split`."""
+        self._next_task = None
+
+    def set_render_path(self, points: Any) -> None:
+        """Sub-goals [P, goal_dim] drawn as a polyline by `render()`; None clears."""
+        self._render_path = (
+            None if points is None else np.asarray(points, dtype=np.float64).reshape(-1, self.goal_dim)
+        )
+
+    # --- gymnasium API ------------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"start", "goal"}
+        if unknown:
+            raise ValueError(f"unknown reset option {sorted(unknown)[0]!r}; valid: start, goal")
+        if options:
+            if set(options) != {"start", "goal"}:
+                raise ValueError("reset options need both 'start' and 'goal'")
+            start, goal = self._as_config(options["start"], "start"), self._as_config(options["goal"], "goal")
+        elif self._next_task is not None:
+            start, goal = self._next_task
+        elif self.config["task_split"] == "uniform":
+            starts, goals = self._sample(1, self.np_random)
+            start, goal = starts[0].astype(np.float64), goals[0].astype(np.float64)
+        else:
+            starts, goals = self.tasks(self.config["task_split"])
+            i = int(self.np_random.integers(len(starts)))
+            start, goal = starts[i].astype(np.float64), goals[i].astype(np.float64)
+        self._config_now, self._goal = start.copy(), goal.copy()
+        self._steps, self._collisions = 0, 0
+        return self._obs(), self._info(collision=False)
+
+    def step(self, action: Any):
+        # Round to float32 before the collision check, so the stored position is exactly the checked one.
+        proposed = self.agent_geometry.step(self._config_now, action).astype(np.float32).astype(np.float64)
+        collision = bool(self.segments_collide(self._config_now[None], proposed[None])[0])
+        if collision:
+            self._collisions += 1
+        else:
+            self._config_now = proposed
+        self._steps += 1
+        obs = self._obs()
+        info = self._info(collision=collision)
+        reward = self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
+        terminated = bool(info["distance"] <= self.success_radius)
+        truncated = not terminated and self._steps >= self.max_episode_steps
+        return obs, reward, terminated, truncated, info
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        pos = self._config_now.astype(np.float32)
+        return {
+            "observation": pos.copy(),
+            "achieved_goal": pos.copy(),
+            "desired_goal": self._goal.astype(np.float32),
+        }
+
+    def _info(self, collision: bool) -> dict[str, Any]:
+        distance = float(self.goal_distance(self._config_now, self._goal))
+        return {
+            "collision": collision,
+            "success": bool(distance <= self.success_radius and self._collisions == 0),
+            "num_collisions": self._collisions,
+            "distance": distance,
+        }
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        paths = [] if self._render_path is None else [self._render_path]
+        return render_maze(
+            self, agent=self._config_now, goal=self._goal, paths=paths, size=self.config["render_size"]
+        )
+
+
+def shortest_path_lengths(env: gym.Env, starts: np.ndarray, goals: np.ndarray) -> np.ndarray:
+    """float [N]: exact shortest collision-free path length for each (start, goal); inf if unreachable."""
+    maze = env.unwrapped
+    return maze.agent_geometry.shortest_path_lengths(maze.obstacles, starts, goals)
+
+
+def make_maze_point(**env_config: Any) -> GoalMazeEnv:
+    return GoalMazeEnv(env_config, agent="point")
