@@ -157,7 +157,7 @@ def test_set_task_persists_until_cleared():
         ({"start": [0.1, 0.1]}, "both"),
         ({"start": [0.1, 0.1], "goal": [0.2, 0.2], "speed": 1}, "'speed'"),
         ({"start": [0.1, 0.1, 0.1], "goal": [0.2, 0.2]}, "start"),
-        ({"start": [0.1, 0.1], "goal": [0.5, 0.5]}, "goal .* obstacle"),
+        ({"start": [0.1, 0.1], "goal": [1.5, 0.5]}, "goal .* outside"),
     ],
 )
 def test_bad_reset_options(options, match):
@@ -214,3 +214,18 @@ def test_render_rgb_array_and_render_maze():
     assert image.shape == (64, 64, 3) and image.dtype == np.uint8
     assert (image == 255).any() and (image < 100).any()
     assert make("maze-point").render() is None
+
+
+def test_goal_inside_an_obstacle_is_allowed_but_unreachable():
+    # A planner's sub-goal may land in an obstacle: the sub-task then simply cannot be completed.
+    env = make("maze-point", layout="u-maze")
+    inner = env.unwrapped
+    goal = next(
+        np.array([x, y])
+        for x in np.linspace(0.05, 0.95, 19)
+        for y in np.linspace(0.05, 0.95, 19)
+        if inner.agent_geometry.clearance(inner.obstacles, np.array([[x, y]]))[0] <= 0
+    )
+    starts, _ = inner.tasks("train")
+    obs, _ = env.reset(options={"start": starts[0], "goal": goal})
+    np.testing.assert_allclose(obs["desired_goal"], goal, atol=1e-6)

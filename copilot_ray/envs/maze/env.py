@@ -175,17 +175,19 @@ class GoalMazeEnv(gym.Env):
 
     # --- task control -------------------------------------------------------------------------------
 
-    def _as_config(self, value: Any, key: str) -> np.ndarray:
+    def _as_config(self, value: Any, key: str, must_be_free: bool = True) -> np.ndarray:
         arr = np.asarray(value, dtype=np.float32).astype(np.float64)
         if arr.shape != (self.goal_dim,) or not np.isfinite(arr).all():
             raise ValueError(f"{key} must be {self.goal_dim} finite numbers, got {value!r}")
-        if self.agent_geometry.clearance(self.obstacles, arr[None])[0] <= 0.0:
+        if must_be_free and self.agent_geometry.clearance(self.obstacles, arr[None])[0] <= 0.0:
             raise ValueError(f"{key} {arr.tolist()} lies in an obstacle or outside the maze")
+        if not must_be_free and not self.goal_space.contains(arr.astype(np.float32)):
+            raise ValueError(f"{key} {arr.tolist()} lies outside the goal space")
         return arr
 
     def set_task(self, start: Any, goal: Any) -> None:
         """Use (start, goal) for the next reset and every later one, until changed or cleared."""
-        self._next_task = (self._as_config(start, "start"), self._as_config(goal, "goal"))
+        self._next_task = (self._as_config(start, "start"), self._as_config(goal, "goal", must_be_free=False))
 
     def clear_task(self) -> None:
         """Go back to drawing tasks from `task_split`."""
@@ -208,7 +210,9 @@ class GoalMazeEnv(gym.Env):
         if options:
             if set(options) != {"start", "goal"}:
                 raise ValueError("reset options need both 'start' and 'goal'")
-            start, goal = self._as_config(options["start"], "start"), self._as_config(options["goal"], "goal")
+            # A goal may lie in an obstacle: a planner's sub-goal can, and then it is simply unreachable.
+            start = self._as_config(options["start"], "start")
+            goal = self._as_config(options["goal"], "goal", must_be_free=False)
         elif self._next_task is not None:
             start, goal = self._next_task
         elif self.config["task_split"] == "uniform":

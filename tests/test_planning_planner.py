@@ -1,0 +1,226 @@
+"""The planner pi_p, its PPO update and the top-down construction (Algorithm 1)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from copilot_ray.planning import (
+    SegmentCost,
+    SubgoalPlanner,
+    construct_trees,
+    group_baseline,
+    layer_segments,
+    new_layer_indices,
+    parent_indices,
+    tree_cost,
+)
+
+torch.set_num_threads(1)
+
+
+def _tasks(B, d=2, seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0.1, 0.9, size=(B, d)), rng.uniform(0.1, 0.9, size=(B, d))
+
+
+def test_initial_mean_is_midpoint_and_sampling_fills_layers():
+    planner = SubgoalPlanner(2, 3, low=0.0, high=1.0, seed=0)
+    starts, goals = _tasks(4)
+    mean_trees = planner.sample(starts, goals, deterministic=True)
+    assert mean_trees.shape == (4, 9, 2) and not np.isnan(mean_trees).any()
+    straight = starts[:, None] + (goals - starts)[:, None] * np.linspace(0, 1, 9)[None, :, None]
+    np.testing.assert_allclose(mean_trees, straight, atol=0.02)  # last layer initialised near zero
+    partial = planner.sample(starts, goals, upto_layer=2, rng=np.random.default_rng(0))
+    assert np.isnan(partial[:, new_layer_indices(3, 3)]).all()
+    assert not np.isnan(partial[:, [0, 2, 4, 6, 8]]).any()
+    planner.extend(partial, 3, rng=np.random.default_rng(1))
+    assert not np.isnan(partial).any()
+    with pytest.raises(ValueError, match="needs layers 0..2"):
+        planner.extend(planner.sample(starts, goals, upto_layer=1, rng=0), 3)
+
+
+def test_samples_are_seeded_and_clipped():
+    planner = SubgoalPlanner(2, 2, low=0.0, high=1.0, std=0.5, seed=0)
+    starts = np.zeros((50, 2))
+    goals = np.zeros((50, 2))
+    t1 = planner.sample(starts, goals, rng=np.random.default_rng(3))
+    t2 = planner.sample(starts, goals, rng=np.random.default_rng(3))
+    np.testing.assert_array_equal(t1, t2)
+    assert (t1 >= 0).all() and (t1 <= 1).all() and (t1[:, 1:-1] == 0).any()
+
+
+def test_log_prob_equals_hand_computed_gaussian():
+    std = np.array([0.05, 0.1])
+    planner = SubgoalPlanner(2, 2, low=0.0, high=1.0, std=std, seed=0)
+    starts, goals = _tasks(3, seed=1)
+    trees = planner.sample(starts, goals, rng=np.random.default_rng(0)).astype(np.float64)
+    expected = np.zeros(3)
+    per_layer = {}
+    for k in (1, 2):
+        li, ri = parent_indices(2, k)
+        with torch.no_grad():
+            mu = planner.mean(
+                torch.as_tensor(trees[:, li], dtype=torch.float32),
+                torch.as_tensor(trees[:, ri], dtype=torch.float32),
+                k,
+            ).numpy()
+        x = trees[:, new_layer_indices(2, k)]
+        dens = -0.5 * ((x - mu) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi)
+        per_layer[k] = dens.sum(axis=(1, 2))
+        expected += per_layer[k]
+    np.testing.assert_allclose(planner.log_prob(trees, [1, 2]).detach().numpy(), expected, rtol=1e-4)
+    np.testing.assert_allclose(planner.log_prob(trees, 2).detach().numpy(), expected, rtol=1e-4)
+    np.testing.assert_allclose(planner.log_prob(trees, [2]).detach().numpy(), per_layer[2], rtol=1e-4)
+    # layer 1 of a fresh planner: mean = midpoint, so the density is a plain Gaussian around it
+    mid = (trees[:, 0] + trees[:, 4]) / 2
+    fresh = SubgoalPlanner(2, 2, low=0.0, high=1.0, std=std, last_init_scale=0.0)
+    z = (trees[:, 2] - mid) / std
+    hand = (-0.5 * z**2 - np.log(std) - 0.5 * math.log(2 * math.pi)).sum(1)
+    np.testing.assert_allclose(fresh.log_prob(trees, [1]).detach().numpy(), hand, rtol=1e-4)
+
+
+def test_group_baseline():
+    costs = np.array([1.0, 3.0, 10.0, 20.0, 30.0])
+    np.testing.assert_allclose(group_baseline(costs, np.array([0, 0, 1, 1, 1])), [2, 2, 20, 20, 20])
+    np.testing.assert_allclose(group_baseline(costs, None), np.full(5, 12.8))
+
+
+def test_update_lowers_cost_of_simple_objective_and_reports_stats():
+    # Cost: distance of the layer-1 midpoint from a target point (0.8, 0.2).
+    planner = SubgoalPlanner(2, 1, low=0.0, high=1.0, seed=0)
+    starts, goals = np.tile([0.2, 0.5], (8, 1)), np.tile([0.8, 0.5], (8, 1))
+    rng = np.random.default_rng(0)
+    target = np.array([0.5, 0.3])
+    before = np.linalg.norm(planner.sample(starts[:1], goals[:1], deterministic=True)[0, 1] - target)
+    for _ in range(60):
+        rep_s, rep_g = np.repeat(starts, 8, 0), np.repeat(goals, 8, 0)
+        trees = planner.sample(rep_s, rep_g, rng=rng)
+        costs = np.linalg.norm(trees[:, 1] - target, axis=-1)
+        stats = planner.update(trees, costs, upto_layer=1, group_ids=np.repeat(np.arange(8), 8))
+    after = np.linalg.norm(planner.sample(starts[:1], goals[:1], deterministic=True)[0, 1] - target)
+    assert set(stats) >= {"loss", "cost_mean", "approx_kl", "clip_fraction"}
+    assert 0.0 <= stats["clip_fraction"] <= 1.0 and stats["approx_kl"] >= 0.0
+    assert after < 0.5 * before
+
+
+def test_planner_state_dict_round_trip_includes_optimizer():
+    planner = SubgoalPlanner(2, 2, low=0.0, high=1.0, seed=0)
+    cost = SegmentCost(alpha=1.0)
+    starts, goals = _tasks(4)
+    construct_trees(planner, starts, goals, 2, cost, num_samples=4, rng=0)
+    state = planner.state_dict()
+    assert state["optimizer"]["state"]  # Adam moments exist
+    other = SubgoalPlanner.from_state_dict(state)
+    third = SubgoalPlanner(2, 2, low=0.0, high=1.0, seed=5)
+    third.load_state_dict(state)
+    for p in (other, third):
+        np.testing.assert_allclose(
+            p.sample(starts, goals, deterministic=True), planner.sample(starts, goals, deterministic=True)
+        )
+    # continuing training gives identical parameters, so the optimizer moments were restored
+    construct_trees(planner, starts, goals, 2, cost, num_samples=4, rng=9)
+    construct_trees(third, starts, goals, 2, cost, num_samples=4, rng=9)
+    np.testing.assert_allclose(
+        third.sample(starts, goals, deterministic=True),
+        planner.sample(starts, goals, deterministic=True),
+        rtol=1e-5,
+    )
+
+
+@pytest.mark.parametrize("shared, augment", [(False, False), (True, True)])
+def test_construct_trees_shapes_and_stats(shared, augment):
+    planner = SubgoalPlanner(2, 3, low=0.0, high=1.0, shared_across_layers=shared, augment_reversed=augment)
+    starts, goals = _tasks(5)
+    res = construct_trees(planner, starts, goals, 3, SegmentCost(), num_samples=4, rng=0)
+    assert res.trees.shape == (5, 9, 2) and not np.isnan(res.trees).any()
+    np.testing.assert_allclose(res.trees[:, 0], starts, rtol=1e-6)
+    np.testing.assert_allclose(res.trees[:, -1], goals, rtol=1e-6)
+    assert res.layer_costs.shape == (5, 4)
+    for k in range(4):
+        assert f"cost_layer_{k}" in res.stats
+    for k in range(1, 4):
+        assert {f"train_cost_J{k}", f"loss_layer_{k}", f"approx_kl_layer_{k}"} <= set(res.stats)
+    ev = construct_trees(planner, starts, goals, 3, SegmentCost(), train=False, deterministic=True)
+    ev2 = construct_trees(planner, starts, goals, 3, None, train=False, deterministic=True)
+    np.testing.assert_array_equal(ev.trees, ev2.trees)
+    with pytest.raises(ValueError, match="cost_fn"):
+        construct_trees(planner, starts, goals, 3, None)
+
+
+# ---------------------------------------------------------------- behavioural test: avoid an obstacle
+BOX_LO, BOX_HI = np.array([0.4, 0.4]), np.array([0.6, 0.6])
+
+
+def segment_hits_box(a, b, lo=BOX_LO, hi=BOX_HI):
+    """Exact segment-vs-axis-aligned-box test (slab method), batched over rows of a, b [N, 2]."""
+    a = np.asarray(a, float)
+    d = np.asarray(b, float) - a
+    t0, t1 = np.zeros(len(a)), np.ones(len(a))
+    ok = np.ones(len(a), bool)
+    for i in range(a.shape[1]):
+        par = np.abs(d[:, i]) < 1e-12
+        ok &= ~(par & ((a[:, i] < lo[i]) | (a[:, i] > hi[i])))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta, tb = (lo[i] - a[:, i]) / d[:, i], (hi[i] - a[:, i]) / d[:, i]
+        t0 = np.maximum(t0, np.where(par, -np.inf, np.minimum(ta, tb)))
+        t1 = np.minimum(t1, np.where(par, np.inf, np.maximum(ta, tb)))
+    return ok & (t0 <= t1)
+
+
+def test_segment_hits_box_helper():
+    a = np.array([[0.1, 0.5], [0.1, 0.1], [0.5, 0.5], [0.1, 0.8], [0.39, 0.0]])
+    b = np.array([[0.9, 0.5], [0.9, 0.1], [0.55, 0.55], [0.8, 0.1], [0.39, 1.0]])
+    assert segment_hits_box(a, b).tolist() == [True, False, True, True, False]
+
+
+def _obstacle_run(seed, updates=250):
+    cost = SegmentCost(alpha=1.0, segments_collide=segment_hits_box, collision_penalty=10.0)
+    planner = SubgoalPlanner(2, 1, low=0.0, high=1.0, seed=seed)
+    B = 8
+    starts, goals = np.tile([0.1, 0.5], (B, 1)), np.tile([0.9, 0.5], (B, 1))
+    n_eval = 1000
+    ev_s, ev_g = np.tile([0.1, 0.5], (n_eval, 1)), np.tile([0.9, 0.5], (n_eval, 1))
+
+    def evaluate():
+        trees = planner.sample(ev_s, ev_g, rng=np.random.default_rng(123))
+        layer_costs, _ = tree_cost(trees, 1, 1, cost)
+        collide = segment_hits_box(*layer_segments(trees, 1, 1)).reshape(n_eval, 2).any(1)
+        mean_tree = planner.sample(ev_s[:1], ev_g[:1], deterministic=True)
+        mean_collides = bool(segment_hits_box(*layer_segments(mean_tree, 1, 1)).any())
+        return {
+            "cost": layer_costs[:, 1].mean(),
+            "collide": collide.mean(),
+            "mid": mean_tree[0, 1],
+            "mean_collides": mean_collides,
+        }
+
+    before = evaluate()
+    rng = np.random.default_rng(seed)
+    for _ in range(updates):
+        res = construct_trees(planner, starts, goals, 1, cost, num_samples=16, rng=rng)
+    return before, evaluate(), res
+
+
+def test_planner_learns_to_route_around_an_obstacle():
+    """Start (0.1, 0.5), goal (0.9, 0.5), square obstacle [0.4, 0.6]^2 in between, K = 1, alpha = 1.
+
+    Honest scope: with the paper's indicator penalty (no gradient inside the obstacle) and std 0.05,
+    the symmetric start can break either way. Measured over seeds 0-5 (250 updates each): 4 seeds
+    reach a collision-free layer-1 path (expected cost ~1.0-1.9), 2 seeds settle in the local optimum
+    "midpoint beside the obstacle, one segment still crosses it" (expected cost ~10.9). So every seed
+    must halve the expected cost and move the mean midpoint out of the obstacle; seed 0 must also
+    become collision-free.
+    """
+    for seed in (0, 1, 2):  # seed 2 is one of the runs that stalls with one colliding segment
+        before, after, res = _obstacle_run(seed)
+        assert before["collide"] > 0.9 and before["mean_collides"] and before["cost"] > 15
+        assert after["cost"] < 0.6 * before["cost"], (seed, before["cost"], after["cost"])
+        assert not np.all((after["mid"] >= BOX_LO) & (after["mid"] <= BOX_HI)), (seed, after["mid"])
+        assert res.stats["cost_layer_1"] < 0.6 * before["cost"]
+        if seed == 0:
+            # expected cost drops from ~2 penalties (~20) to about the detour length (~1-2)
+            assert after["cost"] < 0.2 * before["cost"], after
+            assert after["collide"] < 0.25, after  # most stochastic layer-1 paths are collision-free
+            assert not after["mean_collides"], after  # the mean layer-1 path is collision-free
