@@ -1,0 +1,363 @@
+"""CoPilot: CO-PILOT (Algorithm 3 of the paper) as an RLlib Algorithm on the new API stack.
+
+One `training_step` = one task mini-batch, repeated b times:
+
+    tasks <- draw task_batch_size (s0, g) pairs from the env's train set
+    for repetition in 1..b:
+        planner phase   top-down construction (Alg. 1): update pi_p on J^k, sample layer k, k = 1..K
+        agent phase     bottom-up traversal (Alg. 2) on the env runners, SAC updates in between
+        cost model      D_tau += (start, end, steps) of every sub-task; refit tau_hat
+        alpha           the schedule advances one episode
+    every eval_interval iterations: success on held-out test tasks (planned and direct)
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from ray.rllib.algorithms.sac import SAC
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.utils.metrics import (
+    ENV_RUNNER_RESULTS,
+    LEARNER_RESULTS,
+    NUM_AGENT_STEPS_SAMPLED_LIFETIME,
+    NUM_ENV_STEPS_SAMPLED_LIFETIME,
+)
+
+from copilot_ray.algorithms.copilot.agent_updates import make_agent_updater
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env
+from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
+from copilot_ray.planning import (
+    AlphaClock,
+    AlphaSchedule,
+    SegmentCost,
+    SubgoalPlanner,
+    TimeCostModel,
+    construct_trees,
+)
+
+_STATE_KEY = "copilot"
+
+
+def register_traversal_env() -> None:
+    """Makes the traversal env known to Ray Tune's registry (idempotent, cheap)."""
+    from ray.tune.registry import register_env
+
+    register_env(TRAVERSAL_ENV_ID, make_traversal_env)
+
+
+class CoPilot(SAC):
+    @classmethod
+    def get_default_config(cls):
+        from copilot_ray.algorithms.copilot.config import CoPilotConfig
+
+        return CoPilotConfig()
+
+    # ----------------------------------------------------------------------------------- setup
+    def setup(self, config) -> None:
+        register_traversal_env()
+        super().setup(config)
+        cfg = self.config
+        from copilot_ray.envs import make
+
+        # A driver-side copy of the goal env: geometry for the planner's cost, tasks, evaluation.
+        self.goal_env = make(cfg.goal_env, **cfg.goal_env_config)
+        env = self.goal_env.unwrapped
+        seed = 0 if cfg.seed is None else int(cfg.seed)
+        self._rng = np.random.default_rng(seed)
+        torch.manual_seed(seed)
+        low, high = env.goal_space.low, env.goal_space.high
+        p = cfg.planner
+        # tree_depth 0 is plain goal-conditioned SAC on (s0, g): no planner, one sub-task per task.
+        self.planner = None if cfg.tree_depth == 0 else SubgoalPlanner(
+            env.goal_dim,
+            cfg.tree_depth,
+            low,
+            high,
+            hidden=tuple(p["hidden"]),
+            std=p["std"],
+            lr=p["lr"],
+            clip_eps=p["clip"],
+            epochs=p["epochs"],
+            seed=seed,
+        )
+        c = cfg.cost_model
+        self.cost_model = TimeCostModel(
+            env.goal_dim,
+            low,
+            high,
+            hidden=tuple(c["hidden"]),
+            lr=c["lr"],
+            capacity=c["capacity"],
+            step_distance=float(env.nominal_step_distance),
+            seed=seed,
+        )
+        if c["init_euclidean"]:
+            # Paper 4.1: D_tau starts with 50,000 tuples whose cost is the Euclidean distance.
+            self.cost_model.init_euclidean(c["init_euclidean"], low, high, self._rng, env.goal_distance)
+            self.cost_model.fit(c["fit_steps"] * 4, c["batch_size"], self._rng)
+        self.alpha_clock = AlphaClock(AlphaSchedule.from_dict(cfg.alpha_schedule), cfg.repetitions)
+        self.train_starts, self.train_goals = env.tasks("train")
+        self.test_starts, self.test_goals = env.tasks("test")
+        self.agent_updater = make_agent_updater(self)
+        self._artifact_dir: Path | None = None
+
+    # --------------------------------------------------------------------------- training step
+    def training_step(self) -> None:
+        cfg = self.config
+        n_tasks = min(cfg.task_batch_size, len(self.train_starts))
+        idx = self._rng.choice(len(self.train_starts), size=n_tasks, replace=False)
+        starts, goals = self.train_starts[idx], self.train_goals[idx]
+        # Per-repetition figures, averaged over the iteration's b repetitions before logging.
+        stats: dict[str, list[float]] = defaultdict(list)
+        timing = defaultdict(float)
+        for _ in range(cfg.repetitions):
+            alpha = self.alpha_clock.value
+            stats["alpha"].append(alpha)
+
+            t0 = time.perf_counter()
+            trees = self._plan(starts, goals, alpha, stats)
+            t1 = time.perf_counter()
+
+            subtasks = self._traverse(trees, idx)
+            t2 = time.perf_counter()
+
+            if self.planner is not None:
+                # D_tau <- (start, end, steps) of every sub-task, failed ones included (paper 3.4).
+                self.cost_model.add_steps(subtasks["start"], subtasks["end"], subtasks["steps"])
+                stats["cost_model/loss"].append(
+                    self.cost_model.fit(cfg.cost_model["fit_steps"], cfg.cost_model["batch_size"], self._rng)
+                )
+            t3 = time.perf_counter()
+            self.alpha_clock.advance()
+            for key, value in _traversal_stats(subtasks, cfg.tree_depth).items():
+                stats[key].append(value)
+            timing["planner_s"] += t1 - t0
+            timing["agent_s"] += t2 - t1
+            timing["cost_model_s"] += t3 - t2
+
+        for key, values in stats.items():
+            self.metrics.log_value(("copilot", *key.split("/")), float(np.mean(values)), window=1)
+        self.metrics.log_value(("copilot", "dtau", "size"), len(self.cost_model.dataset), window=1)
+        total = sum(timing.values())
+        for key, value in timing.items():
+            self.metrics.log_value(("copilot", "time", key), value, window=1)
+        # The planner and cost-model phases should stay a small share of the iteration.
+        self.metrics.log_value(
+            ("copilot", "time", "planning_share"),
+            (timing["planner_s"] + timing["cost_model_s"]) / max(total, 1e-9),
+            window=1,
+        )
+
+        if cfg.eval_interval and (self.iteration + 1) % cfg.eval_interval == 0:
+            t = time.perf_counter()
+            self._evaluate()
+            self.metrics.log_value(("copilot", "time", "eval_s"), time.perf_counter() - t, window=1)
+
+    # ---------------------------------------------------------------------------- planner phase
+    def _plan(self, starts: np.ndarray, goals: np.ndarray, alpha: float, stats) -> np.ndarray:
+        """Top-down construction (Algorithm 1): trees [B, 2^K + 1, goal_dim]."""
+        cfg = self.config
+        if self.planner is None:
+            return np.stack([starts, goals], axis=1)
+        env = self.goal_env.unwrapped
+        cost = SegmentCost(
+            alpha=alpha,
+            time_cost=self.cost_model.predict,
+            segments_collide=env.segments_collide,
+            distance=env.goal_distance,
+            collision_penalty=cfg.collision_penalty,
+        )
+        built = construct_trees(
+            self.planner,
+            starts,
+            goals,
+            cfg.tree_depth,
+            cost,
+            num_samples=cfg.planner["num_samples"],
+            train=True,
+            rng=self._rng,
+        )
+        for k in range(cfg.tree_depth + 1):
+            stats[f"planner/cost_layer_{k}"].append(built.stats[f"cost_layer_{k}"])
+        return built.trees
+
+    # ------------------------------------------------------------------------------ agent phase
+    def _runner_ids(self) -> list[int]:
+        n = self.env_runner_group.num_remote_env_runners()
+        return list(range(1, n + 1)) if n > 0 else [0]
+
+    def _traverse(self, trees: np.ndarray, task_ids: np.ndarray) -> dict[str, np.ndarray]:
+        """Bottom-up traversal of every tree on the env runners, with SAC updates in between.
+
+        Tasks are split over the runners; each round every runner runs its next
+        `subtasks_per_sample` sub-tasks, then the learner does updates_per_env_step gradient steps
+        per new env step and the runners get the new weights.
+        """
+        cfg = self.config
+        runner_ids = self._runner_ids()
+        local = runner_ids == [0]
+        shares = {rid: np.arange(i, len(trees), len(runner_ids)) for i, rid in enumerate(runner_ids)}
+        plans = {rid: (trees[s], task_ids[s]) for rid, s in shares.items()}
+        depth = cfg.tree_depth
+
+        def load(runner):
+            tr, ids = plans[runner.worker_index]
+            return runner.env.unwrapped.call("load_plan", tr, depth, ids)[0]
+
+        remaining = dict(
+            zip(
+                runner_ids,
+                self.env_runner_group.foreach_env_runner(load, local_env_runner=local),
+                strict=True,
+            )
+        )
+        chunk = cfg.subtasks_per_sample
+        records: list[dict[str, np.ndarray]] = []
+        while any(remaining.values()):
+
+            def sample(runner):
+                left = runner.env.unwrapped.call("remaining")[0]
+                if left == 0:
+                    return [], runner.get_metrics(), 0
+                episodes = runner.sample(num_episodes=min(chunk, left), explore=True)
+                return episodes, runner.get_metrics(), runner.env.unwrapped.call("remaining")[0]
+
+            active = [rid for rid, n in remaining.items() if n > 0]
+            results = self.env_runner_group.foreach_env_runner(
+                sample, local_env_runner=local, remote_worker_ids=None if local else active
+            )
+            episodes = []
+            runner_metrics = []
+            for rid, (eps, metrics, left) in zip(active, results, strict=True):
+                remaining[rid] = left
+                episodes.extend(eps)
+                runner_metrics.append(metrics)
+            self.metrics.aggregate(runner_metrics, key=ENV_RUNNER_RESULTS)
+            episodes = [e for e in episodes if not e.get_infos(-1).get("subtask_idle", False)]
+            if episodes:
+                records.append(_subtask_records(episodes))
+                self._learn(episodes)
+        return {k: np.concatenate([r[k] for r in records]) for k in records[0]}
+
+    def _learn(self, episodes) -> None:
+        new_steps = sum(len(e) for e in episodes)
+        self.agent_updater.add(episodes)
+        lifetime = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
+        if lifetime < self.config.num_steps_sampled_before_learning_starts:
+            return
+        num_updates = int(round(self.config.updates_per_env_step * new_steps))
+        if num_updates == 0:
+            return
+        timesteps = {
+            NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime,
+            NUM_AGENT_STEPS_SAMPLED_LIFETIME: lifetime,
+        }
+        learner_results = self.agent_updater.update(num_updates, timesteps)
+        if learner_results:
+            self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
+        self.env_runner_group.sync_weights(
+            from_worker_or_learner_group=self.learner_group, inference_only=True
+        )
+
+    # ------------------------------------------------------------------------------- evaluation
+    def _evaluate(self) -> None:
+        cfg = self.config
+        n = min(cfg.eval_num_tasks, len(self.test_starts))
+        policy = ModulePolicy(self.get_module(DEFAULT_MODULE_ID))
+        result = evaluate_copilot(
+            goal_env_id=cfg.goal_env,
+            goal_env_config=cfg.goal_env_config,
+            policy=policy,
+            planner=self.planner,
+            starts=self.test_starts[:n],
+            goals=self.test_goals[:n],
+            depth=cfg.tree_depth,
+            tau_max=cfg.tau_max,
+            tree_tasks=min(cfg.eval_tree_tasks, n),
+        )
+        self.metrics.log_value(("copilot", "eval", "success_planned"), result.success_planned, window=1)
+        self.metrics.log_value(("copilot", "eval", "success_direct"), result.success_direct, window=1)
+        self.metrics.log_value(
+            ("copilot", "eval", "planned_collision_free"), result.plan_collision_free, window=1
+        )
+        if result.trees is not None:
+            lifetime = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
+            self._save_tree_artifact(result, lifetime)
+
+    def _save_tree_artifact(self, result, env_steps: int) -> None:
+        """Sub-goal trees of fixed test tasks (all layers) and the agent's steps per sub-task."""
+        directory = Path(self.logdir) / "copilot_trees"
+        directory.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(
+            directory / f"trees_iter{self.iteration + 1:06d}.npz",
+            iteration=self.iteration + 1,
+            env_steps=env_steps,
+            depth=self.config.tree_depth,
+            trees=result.trees,
+            subtask_steps=result.tree_subtask_steps,
+            subtask_reached=result.tree_subtask_reached,
+            layout=np.array(str(self.config.goal_env_config.get("layout", ""))),
+        )
+
+    # ------------------------------------------------------------------------------ checkpoints
+    def get_state(self, components=None, *, not_components=None, **kwargs) -> dict[str, Any]:
+        state = super().get_state(components, not_components=not_components, **kwargs)
+        state[_STATE_KEY] = {
+            "planner": None if self.planner is None else self.planner.state_dict(),
+            "cost_model": self.cost_model.state_dict(),
+            "alpha_clock": self.alpha_clock.state_dict(),
+            "rng": self._rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "agent_updater": self.agent_updater.get_state(),
+        }
+        return state
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        super().set_state(state)
+        own = state.get(_STATE_KEY)
+        if own is None:
+            return
+        if self.planner is not None:
+            self.planner.load_state_dict(own["planner"])
+        self.cost_model.load_state_dict(own["cost_model"])
+        self.alpha_clock.load_state_dict(own["alpha_clock"])
+        self._rng.bit_generator.state = own["rng"]
+        torch.set_rng_state(own["torch_rng"])
+        self.agent_updater.set_state(own["agent_updater"])
+
+
+def _traversal_stats(subtasks: dict[str, np.ndarray], depth: int) -> dict[str, float]:
+    """Per layer: mean steps per sub-task, and how often the layer's traversal reached g."""
+    out = {}
+    layers, reached = subtasks["layer"], subtasks["reached"]
+    for k in range(depth + 1):
+        in_layer = layers == k
+        if not in_layer.any():
+            continue
+        out[f"agent/steps_layer_{k}"] = float(subtasks["steps"][in_layer].mean())
+        # A layer's traversal succeeds when its last sub-task (the final goal g) is reached.
+        last = in_layer & (subtasks["index"] == 2**k)
+        if last.any():
+            out[f"agent/success_layer_{k}"] = float(reached[last].mean())
+        out[f"agent/subtask_success_layer_{k}"] = float(reached[in_layer].mean())
+    return out
+
+
+def _subtask_records(episodes) -> dict[str, np.ndarray]:
+    """(start, end, steps, layer, ...) of every finished sub-task, read off its last info."""
+    infos = [e.get_infos(-1) for e in episodes]
+    return {
+        "start": np.stack([i["subtask_start"] for i in infos]).astype(np.float32),
+        "end": np.stack([i["subtask_end"] for i in infos]).astype(np.float32),
+        "steps": np.array([i["subtask_steps"] for i in infos], np.int64),
+        "layer": np.array([i["subtask_layer"] for i in infos], np.int64),
+        "index": np.array([i["subtask_index"] for i in infos], np.int64),
+        "task": np.array([i["subtask_task"] for i in infos], np.int64),
+        "reached": np.array([i["subtask_reached"] for i in infos], bool),
+    }

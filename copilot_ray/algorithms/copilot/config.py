@@ -1,0 +1,211 @@
+"""CoPilotConfig: RLlib's SACConfig plus CO-PILOT's knobs (`.copilot(...)`).
+
+    config = (
+        CoPilotConfig()
+        .environment("maze-point", env_config={"layout": "four-rooms"})
+        .copilot(tree_depth=5, repetitions=5, alpha_schedule="paper_per_task", tau_max=25)
+    )
+    algo = config.build_algo()
+
+The user names the goal-conditioned env (`maze-point`); `validate()` swaps in the traversal env that
+turns each planned sub-task into one RLlib episode and keeps the goal env's id and config in
+`goal_env` / `goal_env_config`.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from ray.rllib.algorithms.algorithm_config import NotProvided
+from ray.rllib.algorithms.sac import SACConfig
+
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
+from copilot_ray.planning.alpha_schedule import AlphaSchedule
+
+# Paper Section 4.1 and the reference planner (facts.md), where the paper is silent.
+DEFAULT_PLANNER = {
+    "hidden": [20, 20, 20],  # reference code: 3 x 20 tanh, one net per layer
+    "std": 0.05,
+    "lr": 0.005,  # paper 4.1
+    "clip": 0.2,  # paper 4.1 (PPO trust region)
+    "epochs": 4,
+    "num_samples": 16,  # repeated samples per task; their mean cost is the baseline
+}
+DEFAULT_COST_MODEL = {
+    "hidden": [64, 64],
+    "lr": 1e-3,
+    "capacity": 200_000,
+    "init_euclidean": 50_000,  # paper 4.1
+    "fit_steps": 50,
+    "batch_size": 256,
+}
+
+
+class CoPilotConfig(SACConfig):
+    def __init__(self, algo_class=None):
+        from copilot_ray.algorithms.copilot.algorithm import CoPilot
+
+        super().__init__(algo_class=algo_class or CoPilot)
+        # --- CO-PILOT (paper Section 4.1 defaults for the maze) ---
+        self.tree_depth = 5  # K; T = 2^K. K = 0: no planner (plain goal-conditioned SAC on (s0, g))
+        self.repetitions = 5  # b
+        self.alpha_schedule: dict[str, Any] = AlphaSchedule.preset("paper_per_task").to_dict()
+        self.tau_max = 25
+        self.task_batch_size = 30
+        self.collision_penalty = 10.0
+        self.planner: dict[str, Any] = dict(DEFAULT_PLANNER)
+        self.cost_model: dict[str, Any] = dict(DEFAULT_COST_MODEL)
+        self.eval_interval = 1  # iterations between evaluations on held-out test tasks (0: never)
+        self.eval_num_tasks = 100  # test tasks per evaluation (the paper's test set has 100)
+        self.eval_tree_tasks = 3  # fixed test tasks whose sub-goal trees are saved per evaluation
+        self.subtasks_per_sample = 64  # sub-tasks per runner between two learner updates
+        self.fast_learner = True  # our flat-buffer SAC learner; False: RLlib's stock SAC path
+        self.updates_per_env_step = 1.0  # gradient steps per sampled env step (UTD ratio)
+        self.goal_env: str | None = None
+        self.goal_env_config: dict[str, Any] = {}
+
+        # --- RLlib settings CO-PILOT needs ---
+        # One training_step is one task mini-batch x b repetitions: no minimum time or steps.
+        self.min_time_s_per_iteration = 0
+        self.min_sample_timesteps_per_iteration = 0
+        # SB3-like SAC defaults ("we use its default hyperparameters", paper 4.1).
+        self.actor_lr = 3e-4
+        self.critic_lr = 3e-4
+        self.alpha_lr = 3e-4
+        self.gamma = 0.99
+        self.num_steps_sampled_before_learning_starts = 1000
+        self.num_envs_per_env_runner = 1
+        self.num_env_runners = 0
+
+    def copilot(
+        self,
+        *,
+        tree_depth: int = NotProvided,
+        repetitions: int = NotProvided,
+        alpha_schedule: dict | str | AlphaSchedule = NotProvided,
+        tau_max: int = NotProvided,
+        task_batch_size: int = NotProvided,
+        collision_penalty: float = NotProvided,
+        planner: dict = NotProvided,
+        cost_model: dict = NotProvided,
+        eval_interval: int = NotProvided,
+        eval_num_tasks: int = NotProvided,
+        eval_tree_tasks: int = NotProvided,
+        subtasks_per_sample: int = NotProvided,
+        fast_learner: bool = NotProvided,
+        updates_per_env_step: float = NotProvided,
+    ) -> CoPilotConfig:
+        """Sets CO-PILOT's knobs. `planner` and `cost_model` dicts update the defaults key by key.
+
+        alpha_schedule: a preset name ("paper_per_task": 0.9 -> 0.1 over every task's b episodes;
+        "paper_warm_start": 1 -> 0 over the first two episodes), a dict (see AlphaSchedule), or an
+        AlphaSchedule.
+        """
+        if tree_depth is not NotProvided:
+            self.tree_depth = tree_depth
+        if repetitions is not NotProvided:
+            self.repetitions = repetitions
+        if alpha_schedule is not NotProvided:
+            if isinstance(alpha_schedule, str):
+                alpha_schedule = AlphaSchedule.preset(alpha_schedule)
+            if isinstance(alpha_schedule, AlphaSchedule):
+                alpha_schedule = alpha_schedule.to_dict()
+            self.alpha_schedule = dict(alpha_schedule)
+        if tau_max is not NotProvided:
+            self.tau_max = tau_max
+        if task_batch_size is not NotProvided:
+            self.task_batch_size = task_batch_size
+        if collision_penalty is not NotProvided:
+            self.collision_penalty = collision_penalty
+        if planner is not NotProvided:
+            self.planner = {**self.planner, **planner}
+        if cost_model is not NotProvided:
+            self.cost_model = {**self.cost_model, **cost_model}
+        if eval_interval is not NotProvided:
+            self.eval_interval = eval_interval
+        if eval_num_tasks is not NotProvided:
+            self.eval_num_tasks = eval_num_tasks
+        if eval_tree_tasks is not NotProvided:
+            self.eval_tree_tasks = eval_tree_tasks
+        if subtasks_per_sample is not NotProvided:
+            self.subtasks_per_sample = subtasks_per_sample
+        if fast_learner is not NotProvided:
+            self.fast_learner = fast_learner
+        if updates_per_env_step is not NotProvided:
+            self.updates_per_env_step = updates_per_env_step
+        return self
+
+    def validate(self) -> None:
+        self._validate_copilot()
+        # The runners sample the traversal env; remember the goal env the user asked for.
+        if self.env != TRAVERSAL_ENV_ID:
+            self.goal_env = self.env
+            self.goal_env_config = copy.deepcopy(dict(self.env_config or {}))
+            self.env = TRAVERSAL_ENV_ID
+        self.env_config = {
+            "goal_env": self.goal_env,
+            "goal_env_config": self.goal_env_config,
+            "tau_max": self.tau_max,
+        }
+        from copilot_ray.algorithms.copilot.algorithm import register_traversal_env
+
+        register_traversal_env()
+        super().validate()
+
+    def _validate_copilot(self) -> None:
+        def bad(key: str, value: Any, fix: str) -> ValueError:
+            return ValueError(f"CoPilotConfig: {key}={value!r} is invalid: {fix}")
+
+        def positive_int(key: str, value: Any, upper: int | None = None) -> None:
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise bad(key, value, "use an integer >= 1")
+            if upper is not None and value > upper:
+                raise bad(key, value, f"use an integer <= {upper}")
+
+        # 2^K + 1 sub-goals per tree and 2^(K+1) - 1 sub-tasks per traversal: K = 10 already means
+        # 2047 sub-tasks per task; deeper trees are a typo, not an experiment.
+        if isinstance(self.tree_depth, bool) or not isinstance(self.tree_depth, int) or not 0 <= self.tree_depth <= 10:
+            raise bad("tree_depth", self.tree_depth, "use an integer in [0, 10] (0: no planner, plain SAC)")
+        positive_int("repetitions", self.repetitions)
+        positive_int("tau_max", self.tau_max)
+        positive_int("task_batch_size", self.task_batch_size)
+        positive_int("subtasks_per_sample", self.subtasks_per_sample)
+        positive_int("eval_num_tasks", self.eval_num_tasks)
+        if not isinstance(self.eval_interval, int) or self.eval_interval < 0:
+            raise bad("eval_interval", self.eval_interval, "use an integer >= 0 (0 disables evaluation)")
+        if not isinstance(self.eval_tree_tasks, int) or self.eval_tree_tasks < 0:
+            raise bad("eval_tree_tasks", self.eval_tree_tasks, "use an integer >= 0")
+        if not (isinstance(self.collision_penalty, int | float) and self.collision_penalty >= 0):
+            raise bad("collision_penalty", self.collision_penalty, "use a number >= 0 (paper: 10)")
+        if not (isinstance(self.updates_per_env_step, int | float) and self.updates_per_env_step > 0):
+            raise bad("updates_per_env_step", self.updates_per_env_step, "use a number > 0, e.g. 1.0")
+        try:
+            AlphaSchedule.from_dict(self.alpha_schedule)
+        except (ValueError, TypeError) as err:
+            raise bad("alpha_schedule", self.alpha_schedule, str(err)) from err
+        for name, given, known in (
+            ("planner", self.planner, DEFAULT_PLANNER),
+            ("cost_model", self.cost_model, DEFAULT_COST_MODEL),
+        ):
+            unknown = sorted(set(given) - set(known))
+            if unknown:
+                raise bad(f"{name}.{unknown[0]}", given[unknown[0]], f"known keys are {sorted(known)}")
+        for key in ("std", "lr", "clip"):
+            if not self.planner[key] > 0:
+                raise bad(f"planner.{key}", self.planner[key], "use a number > 0")
+        positive_int("planner.num_samples", self.planner["num_samples"])
+        positive_int("planner.epochs", self.planner["epochs"])
+        positive_int("cost_model.capacity", self.cost_model["capacity"])
+        positive_int("cost_model.fit_steps", self.cost_model["fit_steps"])
+        positive_int("cost_model.batch_size", self.cost_model["batch_size"])
+        if not isinstance(self.cost_model["init_euclidean"], int) or self.cost_model["init_euclidean"] < 0:
+            raise bad("cost_model.init_euclidean", self.cost_model["init_euclidean"], "use an integer >= 0")
+        if self.num_envs_per_env_runner != 1:
+            raise bad(
+                "num_envs_per_env_runner",
+                self.num_envs_per_env_runner,
+                "CO-PILOT traverses one sub-task queue per runner; use 1 and scale with num_env_runners",
+            )
+        if self.env is None:
+            raise bad("env", None, 'call .environment("maze-point", env_config={...})')

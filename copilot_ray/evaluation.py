@@ -1,0 +1,144 @@
+"""Success rate on held-out tasks: the agent following the planner's path, and the agent alone.
+
+Rollouts run N copies of the goal env in lockstep on the driver, with one batched policy call per
+step, so evaluating 100 test tasks costs a few seconds and needs no env runner.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from copilot_ray.algorithms.copilot.traversal_env import flat_observation, path_indices
+
+Policy = Callable[[np.ndarray], np.ndarray]
+
+
+class ModulePolicy:
+    """Deterministic actions from an RLlib RLModule (the mode of its action distribution)."""
+
+    def __init__(self, module):
+        self.module = module
+        self.dist_cls = module.get_inference_action_dist_cls()
+
+    @torch.no_grad()
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        out = self.module.forward_inference({"obs": torch.as_tensor(obs, dtype=torch.float32)})
+        dist = self.dist_cls.from_logits(out["action_dist_inputs"]).to_deterministic()
+        return np.clip(dist.sample().numpy(), -1.0, 1.0)
+
+
+@dataclass
+class WaypointRollout:
+    success: np.ndarray  # [N] reached the last waypoint with no collision
+    reached_final: np.ndarray  # [N] reached the last waypoint
+    collided: np.ndarray  # [N]
+    total_steps: np.ndarray  # [N]
+    subtask_steps: np.ndarray  # [N, P-1]
+    subtask_reached: np.ndarray  # [N, P-1]
+
+
+def follow_waypoints(envs: list, policy: Policy, waypoints: np.ndarray, tau_max: int) -> WaypointRollout:
+    """Each env starts at waypoints[i, 0] and heads for waypoints[i, 1], [i, 2], ... in turn.
+
+    A sub-task ends when its waypoint is reached or after tau_max steps; the next one starts from
+    wherever the agent stopped (as in training).
+    """
+    n, p, _ = waypoints.shape
+    obs = np.zeros((n, envs[0].observation_space["observation"].shape[0]), np.float32)
+    pos = waypoints[:, 0].copy()
+    target = np.ones(n, np.int64)
+    steps_in = np.zeros(n, np.int64)
+    sub_steps = np.zeros((n, p - 1), np.int64)
+    sub_reached = np.zeros((n, p - 1), bool)
+    collided = np.zeros(n, bool)
+    total = np.zeros(n, np.int64)
+    for i, env in enumerate(envs):
+        o, _ = env.reset(options={"start": waypoints[i, 0], "goal": waypoints[i, 1]})
+        obs[i] = o["observation"]
+        pos[i] = o["achieved_goal"]
+    active = np.ones(n, bool)
+    while active.any():
+        ids = np.flatnonzero(active)
+        goals = waypoints[ids, target[ids]]
+        actions = policy(flat_observation(obs[ids], goals))
+        for j, i in enumerate(ids):
+            o, _, reached, _, info = envs[i].step(actions[j])
+            obs[i], pos[i] = o["observation"], o["achieved_goal"]
+            collided[i] |= bool(info.get("collision", False))
+            steps_in[i] += 1
+            total[i] += 1
+            if reached or steps_in[i] >= tau_max:
+                t = target[i] - 1
+                sub_steps[i, t], sub_reached[i, t] = steps_in[i], bool(reached)
+                steps_in[i] = 0
+                target[i] += 1
+                if target[i] >= p:
+                    active[i] = False
+                else:
+                    o, _ = envs[i].reset(options={"start": pos[i], "goal": waypoints[i, target[i]]})
+                    obs[i] = o["observation"]
+    reached_final = sub_reached[:, -1]
+    return WaypointRollout(reached_final & ~collided, reached_final, collided, total, sub_steps, sub_reached)
+
+
+@dataclass
+class CopilotEvaluation:
+    success_planned: float
+    success_direct: float
+    plan_collision_free: float
+    trees: np.ndarray | None  # [n_tree, 2^K + 1, d] deterministic trees of the first test tasks
+    tree_subtask_steps: np.ndarray | None  # [n_tree, K + 1, 2^K], -1 where layer k has no sub-task
+    tree_subtask_reached: np.ndarray | None
+
+
+def evaluate_copilot(
+    *,
+    goal_env_id: str,
+    goal_env_config: Mapping[str, Any],
+    policy: Policy,
+    planner,
+    starts: np.ndarray,
+    goals: np.ndarray,
+    depth: int,
+    tau_max: int,
+    tree_tasks: int = 0,
+) -> CopilotEvaluation:
+    from copilot_ray.envs import make
+
+    n = len(starts)
+    envs = [make(goal_env_id, **dict(goal_env_config)) for _ in range(n)]
+    # depth 0: no planner, the "plan" is the task itself.
+    trees = np.stack([starts, goals], axis=1) if planner is None else planner.sample(starts, goals, deterministic=True)
+    planned = follow_waypoints(envs, policy, trees, tau_max)
+    # The agent alone gets the same step budget as the finest plan.
+    direct = follow_waypoints(envs, policy, np.stack([starts, goals], axis=1), tau_max * 2**depth)
+    geometry = envs[0].unwrapped
+    a = trees[:, :-1].reshape(-1, trees.shape[-1])
+    b = trees[:, 1:].reshape(-1, trees.shape[-1])
+    plan_free = ~geometry.segments_collide(a, b).reshape(n, -1).any(axis=1)
+
+    tree_steps = tree_reached = kept = None
+    if tree_tasks:
+        kept = trees[:tree_tasks]
+        tree_steps = -np.ones((tree_tasks, depth + 1, 2**depth), np.int64)
+        tree_reached = np.zeros((tree_tasks, depth + 1, 2**depth), bool)
+        for k in range(depth + 1):
+            path = kept[:, path_indices(depth, k)]
+            r = follow_waypoints(envs[:tree_tasks], policy, path, tau_max)
+            tree_steps[:, k, : 2**k] = r.subtask_steps
+            tree_reached[:, k, : 2**k] = r.subtask_reached
+    for env in envs:
+        env.close()
+    return CopilotEvaluation(
+        success_planned=float(planned.success.mean()),
+        success_direct=float(direct.success.mean()),
+        plan_collision_free=float(plan_free.mean()),
+        trees=kept,
+        tree_subtask_steps=tree_steps,
+        tree_subtask_reached=tree_reached,
+    )

@@ -1,0 +1,100 @@
+"""CoPilot on a local two-core Ray: a tiny run, its metrics, and a checkpoint round trip."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from copilot_ray.algorithms.copilot import CoPilotConfig
+
+pytestmark = pytest.mark.ray
+
+
+def tiny_config(fast_learner: bool = True, num_env_runners: int = 1) -> CoPilotConfig:
+    return (
+        CoPilotConfig()
+        .environment("maze-point", env_config={"layout": "u-maze"})
+        .env_runners(num_env_runners=num_env_runners)
+        .training(num_steps_sampled_before_learning_starts=50, train_batch_size_per_learner=32)
+        .debugging(seed=3)
+        .copilot(
+            tree_depth=2,
+            repetitions=2,
+            task_batch_size=3,
+            tau_max=8,
+            eval_num_tasks=4,
+            eval_tree_tasks=2,
+            updates_per_env_step=0.05,
+            fast_learner=fast_learner,
+            planner={"num_samples": 4},
+            cost_model={"init_euclidean": 500, "fit_steps": 5},
+        )
+    )
+
+
+EXPECTED_METRICS = [
+    ("copilot", "eval", "success_planned"),
+    ("copilot", "eval", "success_direct"),
+    ("copilot", "alpha"),
+    ("copilot", "planner", "cost_layer_0"),
+    ("copilot", "planner", "cost_layer_2"),
+    ("copilot", "agent", "steps_layer_0"),
+    ("copilot", "agent", "steps_layer_2"),
+    ("copilot", "agent", "success_layer_1"),
+    ("copilot", "dtau", "size"),
+    ("copilot", "cost_model", "loss"),
+    ("env_runners", "num_env_steps_sampled_lifetime"),
+]
+
+
+def lookup(result, key):
+    for part in key:
+        result = result[part]
+    return result
+
+
+@pytest.mark.parametrize("fast_learner", [True, False], ids=["fast", "stock"])
+def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_path, fast_learner):
+    algo = tiny_config(fast_learner).build_algo()
+    try:
+        results = [algo.train() for _ in range(2)]
+        for key in EXPECTED_METRICS:
+            assert np.isfinite(lookup(results[-1], key)), key
+        steps = [lookup(r, EXPECTED_METRICS[-1]) for r in results]
+        # 3 tasks x 2 repetitions x (4 + 2 + 1) sub-tasks of at most 8 steps each, per iteration.
+        assert 0 < steps[0] < steps[1] <= 2 * 3 * 2 * 7 * 8
+        # D_tau: the 500 Euclidean tuples plus one per sub-task.
+        assert lookup(results[-1], ("copilot", "dtau", "size")) == 500 + 2 * 2 * 3 * 7
+        assert lookup(results[-1], ("learners", "default_policy", "num_module_steps_trained_lifetime")) > 0
+        # The schedule ran 4 episodes (paper_per_task over b = 2: 0.9, 0.1, 0.9, 0.1).
+        assert algo.alpha_clock.episode == 4
+        assert lookup(results[-1], ("copilot", "alpha")) == pytest.approx(0.5)
+        artefacts = sorted((Path(algo.logdir) / "copilot_trees").glob("*.npz"))
+        assert len(artefacts) == 2
+        with np.load(artefacts[-1]) as art:
+            assert art["trees"].shape == (2, 5, 2)
+            assert art["subtask_steps"].shape == (2, 3, 4)
+            assert (art["subtask_steps"][:, 0, 0] > 0).all() and (art["subtask_steps"][:, 0, 1:] == -1).all()
+
+        path = algo.save_to_path(str(tmp_path / "ckpt"))
+        restored = tiny_config(fast_learner).build_algo()
+        try:
+            restored.restore_from_path(path)
+            want, got = algo.planner.state_dict()["nets"], restored.planner.state_dict()["nets"]
+            for name in want:
+                torch.testing.assert_close(want[name], got[name])
+            assert len(restored.cost_model.dataset) == len(algo.cost_model.dataset)
+            assert restored.alpha_clock.episode == algo.alpha_clock.episode
+            assert restored._rng.bit_generator.state == algo._rng.bit_generator.state
+            assert restored.iteration == algo.iteration == 2
+            # The task sampler continues where it stopped: both draw the same next mini-batch.
+            assert (restored._rng.integers(1 << 30, size=4) == algo._rng.integers(1 << 30, size=4)).all()
+            if fast_learner:
+                assert len(restored.agent_updater.buffer) == len(algo.agent_updater.buffer) > 0
+            result = restored.train()
+            assert lookup(result, EXPECTED_METRICS[-1]) > steps[-1]
+        finally:
+            restored.stop()
+    finally:
+        algo.stop()

@@ -1,0 +1,555 @@
+"""The sweep spec: loading, every rejection (with its key path), trial plans, Optuna define-by-run.
+
+No Ray is started; only `test_build_algorithm_config_*` and `test_tune_search_space` import RLlib/Tune.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib.util
+import inspect
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from copilot_ray.spec import (
+    COPILOT_KNOBS,
+    TIME_ATTR,
+    SpecError,
+    SweepSpec,
+    build_algorithm_config,
+    load_spec,
+    optuna_define_by_run,
+    parse_spec,
+    to_tune_search_space,
+    tune_stop,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+SWEEPS = sorted((ROOT / "sweeps").glob("*.yaml"))
+
+BASE = {
+    "name": "t",
+    "env": {"id": "maze-point", "config": {"layout": "empty"}},
+    "config": {"tree_depth": 2},
+    "search": {"repetitions": {"grid": [1, 2]}},
+    "seeds": [0, 1],
+    "stop": {"env_steps": 1000},
+}
+
+
+def spec_with(**changes) -> dict:
+    data = copy.deepcopy(BASE)
+    for dotted, value in changes.items():
+        node = data
+        *parents, last = dotted.split("__")
+        for p in parents:
+            node = node.setdefault(p, {})
+        if value is _DELETE:
+            node.pop(last)
+        else:
+            node[last] = value
+    return data
+
+
+_DELETE = object()
+
+
+def rejected(data: dict) -> str:
+    with pytest.raises(SpecError) as err:
+        parse_spec(data, "x.yaml")
+    assert isinstance(err.value, ValueError)
+    return str(err.value)
+
+
+# ------------------------------------------------------------------------------------------ shipped specs
+@pytest.mark.parametrize("path", SWEEPS, ids=[p.name for p in SWEEPS])
+def test_every_shipped_spec_loads(path):
+    spec = load_spec(path)
+    assert spec.name == path.stem
+    assert spec.trial_plan()
+    assert "trial(s)" in spec.format_plan()
+
+
+def test_shipped_specs_exist():
+    names = {p.stem for p in SWEEPS}
+    assert {"smoke", "depth_k", "repetitions_b", "alpha_schedule", "hpo", "demo"} <= names
+
+
+def test_trial_plans_of_shipped_specs():
+    depth = load_spec(ROOT / "sweeps/depth_k.yaml").trial_plan()
+    assert len(depth) == 18
+    assert sorted({t["tree_depth"] for t in depth}) == [1, 2, 3, 4, 5, 6]
+    assert depth[:3] == [{"tree_depth": 1, "seed": s} for s in (0, 1, 2)]
+    assert len(load_spec(ROOT / "sweeps/repetitions_b.yaml").trial_plan()) == 4 * 3
+    smoke = load_spec(ROOT / "sweeps/smoke.yaml")
+    assert smoke.trial_plan() == [{"tree_depth": 1, "seed": 0}, {"tree_depth": 2, "seed": 0}]
+    assert smoke.resources.max_concurrent_trials == 1 and smoke.resources.num_env_runners == 0
+    alpha = load_spec(ROOT / "sweeps/alpha_schedule.yaml").trial_plan()
+    assert {"paper_warm_start", "paper_per_task"} <= {
+        t["alpha_schedule"] for t in alpha if isinstance(t["alpha_schedule"], str)
+    }
+    hpo = load_spec(ROOT / "sweeps/hpo.yaml")
+    assert hpo.searcher.type == "optuna" and hpo.searcher.sampler == "tpe"
+    assert len(hpo.trial_plan()) == hpo.searcher.num_samples * len(hpo.seeds)
+    assert hpo.has_conditional_params
+
+
+def test_format_plan_shows_table_and_budget():
+    text = load_spec(ROOT / "sweeps/depth_k.yaml").format_plan()
+    assert "6 configuration(s) x 3 seed(s)" in text
+    assert "18 trial(s)" in text and "5,400,000 env steps" in text
+    assert "tree_depth" in text
+
+
+def test_defaults_experiment_tracking_and_cpus(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    spec = parse_spec(spec_with(resources={"num_env_runners": 2}))
+    assert spec.experiment == "t"
+    assert spec.tracking.uri == f"sqlite:///{tmp_path / 'results' / 't' / 'mlflow.db'}"
+    assert spec.tracking.uri.startswith("sqlite:////")  # absolute path
+    assert spec.resources.cpus_per_trial == 3
+    assert spec.searcher.type == "grid"
+    assert tune_stop(spec) == {TIME_ATTR: 1000}
+
+
+def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
+    path = tmp_path / "s.yaml"
+    data = spec_with(config={"planner.lr": "PLACEHOLDER"})
+    path.write_text(yaml.safe_dump(data).replace("PLACEHOLDER", "1e-3"))
+    assert load_spec(path).config["planner.lr"] == 1e-3
+
+
+# ------------------------------------------------------------------------------------------ rejections
+@pytest.mark.parametrize(
+    "changes, expected",
+    [
+        (
+            {"config__tree_depth": 0},
+            "config.tree_depth: 0 is invalid: tree_depth must be an integer in [1, 10]",
+        ),
+        ({"config__tree_depth": 11}, "too deep for memory"),
+        ({"config__tree_depth": "5"}, "config.tree_depth: '5' is invalid"),
+        ({"config__tree_depth": 5.0}, "config.tree_depth: 5.0 is invalid"),
+        ({"config__tree_depth": True}, "config.tree_depth: True is invalid"),
+        (
+            {"search__repetitions__grid": [1, 0]},
+            "search.repetitions.grid[1]: 0 is invalid: repetitions must be",
+        ),
+        ({"config__alpha_schedule.alpha": 1.5}, "config.alpha_schedule.alpha: 1.5 is invalid"),
+        ({"config__alpha_schedule.values": [1.0, -0.1]}, "config.alpha_schedule.values"),
+        (
+            {"config__alpha_schedule": {"kind": "constant", "alpha": 2.0}},
+            "config.alpha_schedule: {'kind': 'constant', 'alpha': 2.0} is invalid",
+        ),
+        ({"config__alpha_schedule": "paper_per_taks"}, "config.alpha_schedule: 'paper_per_taks' is invalid"),
+        ({"search__repetitions__grid": []}, "search.repetitions.grid: [] is invalid: an empty grid"),
+        ({"search__repetitions__grid": [1, 1]}, "duplicate value 1"),
+        (
+            {"search": {"tree_depth": {"grid": [1, 2, 0]}}, "config": {}},
+            "search.tree_depth.grid[2]: 0 is invalid: tree_depth must be an integer in [1, 10]",
+        ),
+        ({"config": {"tree_depth": 2, "planner.std": 0.0}}, "config.planner.std: 0.0 is invalid"),
+        ({"config__tree_deph": 3}, "config.tree_deph: unknown key; did you mean 'tree_depth'?"),
+        ({"config__planner.sdt": 3}, "did you mean 'planner.std'?"),
+        (
+            {"search": {"tree_deph": {"grid": [1]}}},
+            "search.tree_deph: unknown key; did you mean 'tree_depth'?",
+        ),
+        (
+            {"search__repetitions": {"gird": [1]}},
+            "search.repetitions.gird: unknown key; did you mean 'grid'?",
+        ),
+        ({"search__repetitions": {"grid": [1], "int": [1, 2]}}, "search.repetitions: give exactly one of"),
+        ({"envv": {}}, "envv: unknown key; did you mean 'env'?"),
+        (
+            {"env__id": "maze-pont"},
+            "env.id: 'maze-pont' is invalid: unknown env id; did you mean 'maze-point'?",
+        ),
+        ({"env__config__layot": "empty"}, "env.config.layot"),
+        ({"env__config__layout": "no-such-layout"}, "env.config.layout: 'no-such-layout' is invalid"),
+        ({"env__config__speed": -1.0}, "env.config.speed: -1.0 is invalid"),
+        ({"seeds": [0, 1, 0]}, "seeds: [0, 1, 0] is invalid: duplicate seed 0"),
+        ({"seeds": []}, "seeds: [] is invalid"),
+        ({"seeds": ["0"]}, "seeds[0]: '0' is invalid"),
+        ({"stop": {}}, "stop: give env_steps and/or iterations"),
+        ({"stop": {"env_steps": 0}}, "stop.env_steps: 0 is invalid"),
+        ({"name": _DELETE}, "name: required key is missing"),
+        ({"name": "a b/c"}, "name: 'a b/c' is invalid"),
+        (
+            {"resources": {"num_env_runners": 2, "cpus_per_trial": 2}},
+            "resources.cpus_per_trial: 2 is invalid",
+        ),
+        ({"resources": {"max_concurrent_trials": 0}}, "resources.max_concurrent_trials: 0 is invalid"),
+        ({"resources": {"num_env_runners": -1}}, "resources.num_env_runners: -1 is invalid"),
+        (
+            {"algorithm": "copliot"},
+            "algorithm: 'copliot' is invalid: unknown algorithm; did you mean 'copilot'?",
+        ),
+        ({"config__seed": 3}, "config.seed"),
+        (
+            {"search": {"tree_depth": {"grid": [1, 2]}}},
+            "search.tree_depth: tree_depth is also fixed in config",
+        ),
+        (
+            {"searcher": {"type": "grid", "metric": "copilot/eval/sucess_planned", "mode": "max"}},
+            "searcher.metric: 'copilot/eval/sucess_planned' is invalid: copilot does not log this metric; did you mean 'copilot/eval/success_planned'?",
+        ),
+        ({"searcher": {"type": "bayes"}}, "searcher.type: 'bayes' is invalid"),
+    ],
+)
+def test_rejections_name_key_path_and_value(changes, expected):
+    message = rejected(spec_with(**changes))
+    assert message.startswith("x.yaml: ")
+    assert expected in message, message
+
+
+@pytest.mark.parametrize(
+    "domain, expected",
+    [
+        ({"int": [5, 1]}, "search.p.int: [5, 1] is invalid: low 5 > high 1"),
+        ({"float": [0.5, 0.1]}, "low 0.5 > high 0.1"),
+        ({"float": [0.0, 0.1], "log": True}, "a log range needs low > 0"),
+        ({"int": [0, 4], "log": True}, "a log range needs low > 0"),
+        ({"float": [0.1]}, "float takes [low, high]"),
+        ({"float": ["a", "b"]}, "search.p.float[0]: 'a' is invalid"),
+        ({"int": [1, 4], "step": 0}, "search.p.step: 0 is invalid"),
+        ({"categorical": []}, "an empty categorical"),
+        ({"grid": [1, 2], "log": True}, "log and step apply to int and float ranges only"),
+    ],
+)
+def test_range_rejections(domain, expected):
+    key = "planner.num_samples" if "int" in domain else "planner.std"
+    data = spec_with(search={key: domain}, searcher=_optuna())
+    message = rejected(data).replace(f"search.{key}", "search.p")
+    assert expected in message, message
+
+
+def _optuna(**kw):
+    return {"type": "optuna", "metric": "copilot/eval/success_planned", "mode": "max", "num_samples": 4, **kw}
+
+
+def test_range_ends_follow_the_keys_rule():
+    message = rejected(spec_with(search={"alpha_schedule.alpha": {"float": [0.0, 1.5]}}, searcher=_optuna()))
+    assert (
+        "search.alpha_schedule.alpha.float[1]: 1.5 is invalid: alpha_schedule.alpha must be a number in [0, 1]"
+        in message
+    )
+    message = rejected(spec_with(search={"repetitions": {"float": [1.0, 3.0]}}, searcher=_optuna()))
+    assert "search.repetitions.float: [1.0, 3.0] is invalid: repetitions is an integer: use int" in message
+
+
+def test_searcher_and_domain_must_agree():
+    message = rejected(spec_with(search={"planner.std": {"float": [0.01, 0.1]}}))
+    assert "search.planner.std: 'float' is invalid: a grid searcher needs every domain to be grid" in message
+    message = rejected(spec_with(searcher=_optuna()))
+    assert "search.repetitions: 'grid' is invalid: an optuna searcher samples; use categorical" in message
+
+
+def test_searcher_and_scheduler_rules():
+    assert "searcher.metric" in rejected(
+        spec_with(searcher={"type": "optuna", "mode": "max", "num_samples": 2})
+    )
+    assert "searcher.num_samples: 0 is invalid" in rejected(
+        spec_with(search={"planner.std": {"float": [0.01, 0.1]}}, searcher=_optuna(num_samples=0))
+    )
+    assert "searcher.sampler: 'grid' is invalid" in rejected(
+        spec_with(search={"planner.std": {"float": [0.01, 0.1]}}, searcher=_optuna(sampler="grid"))
+    )
+    assert "scheduler: 'asha' is invalid: a scheduler needs searcher.metric" in rejected(
+        spec_with(scheduler={"type": "asha", "max_t": 1000})
+    )
+    searcher = {"type": "grid", "metric": "copilot/planner/cost_layer_3", "mode": "min"}
+    message = rejected(
+        spec_with(searcher=searcher, scheduler={"type": "asha", "max_t": 100, "grace_period": 200})
+    )
+    assert "scheduler.grace_period: 200 is invalid: must be <= max_t (100)" in message
+    message = rejected(spec_with(searcher=searcher, scheduler={"type": "median_stopping", "max_t": 100}))
+    assert "scheduler.max_t: 100 is invalid: does not apply to type median_stopping" in message
+    assert "searcher.metric: 'copilot/planner/cost_layer_11'" in rejected(
+        spec_with(searcher={**searcher, "metric": "copilot/planner/cost_layer_11"})
+    )
+    ok = parse_spec(
+        spec_with(searcher=searcher, scheduler={"type": "asha", "max_t": 1000, "grace_period": 100})
+    )
+    assert ok.scheduler.reduction_factor == 3.0
+
+
+def test_several_problems_are_reported_together():
+    message = rejected(spec_with(config={"tree_depth": 0, "repetitions": 0}, seeds=[1, 1]))
+    lines = message.splitlines()
+    assert any("config.tree_depth: 0" in line for line in lines)
+    assert any("config.repetitions: 0" in line for line in lines)
+    assert any("duplicate seed 1" in line for line in lines)
+
+
+def test_alpha_schedule_keys_must_form_a_schedule():
+    # linear on the global clock needs a duration
+    data = spec_with(
+        config={"tree_depth": 2, "alpha_schedule.kind": "linear", "alpha_schedule.clock": "global"}
+    )
+    assert "config: " in rejected(data) and "duration is required" in rejected(data)
+    # a field the kind does not use
+    data = spec_with(config={"tree_depth": 2, "alpha_schedule.kind": "constant", "alpha_schedule.start": 0.5})
+    assert "does not apply to kind='constant'" in rejected(data)
+    data = spec_with(config={"tree_depth": 2, "alpha_schedule": "euclidean", "alpha_schedule.kind": "linear"})
+    assert "config.alpha_schedule.kind" in rejected(data)
+    # conditional branch missing a needed field: exponential on the per-task clock is fine without one,
+    # but a kind that does not use a sampled field is caught
+    search = {
+        "alpha_schedule.kind": {
+            "categorical": ["constant", "linear"],
+            "when": {"constant": {"alpha_schedule.start": {"float": [0.1, 0.2]}}},
+        }
+    }
+    data = spec_with(search=search, searcher=_optuna(), config={"alpha_schedule.clock": "per_task"})
+    assert "search: " in rejected(data) and "does not apply to kind='constant'" in rejected(data)
+
+
+def test_when_needs_known_choices_and_categorical():
+    search = {"alpha_schedule.kind": {"categorical": ["constant"], "when": {"constnt": {}}}}
+    message = rejected(spec_with(search=search, searcher=_optuna()))
+    assert (
+        "search.alpha_schedule.kind.when.constnt: 'constnt' is invalid: not one of the categorical values"
+        in message
+    )
+    search = {"alpha_schedule.kind": {"grid": ["constant"], "when": {"constant": {}}}}
+    assert "search.alpha_schedule.kind.when: conditional parameters need a categorical domain" in rejected(
+        spec_with(search=search)
+    )
+    search = {
+        "alpha_schedule.kind": {
+            "categorical": ["constant"],
+            "when": {"constant": {"alpha_schedule.alpha": {"float": [0.0, 2.0]}}},
+        }
+    }
+    message = rejected(spec_with(search=search, searcher=_optuna()))
+    assert "search.alpha_schedule.kind.when.constant.alpha_schedule.alpha.float[1]: 2.0 is invalid" in message
+
+
+def test_yaml_syntax_error_names_file_and_line(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: x\nenv: {id: maze-point\nstop: {env_steps: 5}\n")
+    with pytest.raises(SpecError) as err:
+        load_spec(path)
+    assert str(err.value).startswith(f"{path}:3:") and "YAML syntax error" in str(err.value)
+
+
+def test_yaml_duplicate_key_is_an_error(tmp_path):
+    path = tmp_path / "dup.yaml"
+    path.write_text("name: x\nseeds: [0]\nseeds: [1]\n")
+    with pytest.raises(SpecError) as err:
+        load_spec(path)
+    assert f"{path}:3:" in str(err.value) and "duplicate key 'seeds'" in str(err.value)
+
+
+def test_missing_file_and_non_mapping(tmp_path):
+    with pytest.raises(SpecError, match="cannot read"):
+        load_spec(tmp_path / "nope.yaml")
+    path = tmp_path / "list.yaml"
+    path.write_text("- 1\n- 2\n")
+    with pytest.raises(SpecError, match="must be a mapping"):
+        load_spec(path)
+
+
+def test_bad_layout_file_names_file_line_column(tmp_path):
+    layout = tmp_path / "maze.txt"
+    layout.write_text("....\n..x.\n")
+    message = rejected(spec_with(env__config={"layout": str(layout)}))
+    assert "env.config.layout" in message and f"{layout}:2:3" in message
+
+
+def test_rejected_spec_imports_no_ray(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(spec_with(config__tree_depth=0)))
+    code = (
+        "import sys\n"
+        "from copilot_ray.spec import load_spec, SpecError\n"
+        f"try:\n    load_spec({str(path)!r})\nexcept SpecError as e:\n    print('REJECTED', e)\n"
+        f"load_spec({str(ROOT / 'sweeps/hpo.yaml')!r})\n"
+        "assert 'ray' not in sys.modules, 'ray was imported'\n"
+        "print('NO RAY')\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )
+    assert out.returncode == 0, out.stderr
+    assert "REJECTED" in out.stdout and "config.tree_depth: 0 is invalid" in out.stdout
+    assert "NO RAY" in out.stdout
+
+
+# ------------------------------------------------------------------------------------------ optuna
+def test_define_by_run_suggests_only_the_chosen_kinds_parameters():
+    optuna = pytest.importorskip("optuna")
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    spec = load_spec(ROOT / "sweeps/hpo.yaml")
+    fn = optuna_define_by_run(spec)
+    study = optuna.create_study(direction="maximize", sampler=optuna.samplers.RandomSampler(seed=0))
+    expected = {
+        "constant": {"alpha_schedule.alpha"},
+        "linear": {"alpha_schedule.start", "alpha_schedule.end"},
+        "exponential": {"alpha_schedule.start", "alpha_schedule.end", "alpha_schedule.decay"},
+    }
+    seen = set()
+    for _ in range(30):
+        trial = study.ask()
+        flat = fn(trial)
+        kind = flat["alpha_schedule.kind"]
+        seen.add(kind)
+        schedule_keys = {k for k in flat if k.startswith("alpha_schedule.") and k != "alpha_schedule.kind"}
+        assert schedule_keys == expected[kind]
+        assert set(trial.params) == set(flat)
+        assert 0.01 <= flat["planner.std"] <= 0.2 and 4 <= flat["planner.num_samples"] <= 32
+        study.tell(trial, 0.0)
+    assert seen == set(expected)
+
+
+def test_define_by_run_decodes_non_scalar_categoricals():
+    optuna = pytest.importorskip("optuna")
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    choices = ["paper_per_task", {"kind": "constant", "alpha": 0.5}]
+    spec = parse_spec(spec_with(search={"alpha_schedule": {"categorical": choices}}, searcher=_optuna()))
+    study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=1))
+    drawn = [optuna_define_by_run(spec)(study.ask())["alpha_schedule"] for _ in range(20)]
+    assert all(d in choices for d in drawn) and {str(d) for d in drawn} == {str(c) for c in choices}
+
+
+# ------------------------------------------------------------------------------------------ Tune / RLlib
+def _has(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+@pytest.mark.skipif(not _has("ray"), reason="ray is not installed")
+def test_tune_search_space():
+    from ray.tune.search.sample import Categorical, Float, Integer
+
+    space = to_tune_search_space(load_spec(ROOT / "sweeps/depth_k.yaml"))
+    assert space["tree_depth"] == {"grid_search": [1, 2, 3, 4, 5, 6]}
+    assert space["seed"] == {"grid_search": [0, 1, 2]}
+    spec = parse_spec(
+        spec_with(
+            search={
+                "planner.std": {"float": [0.01, 0.1], "log": True},
+                "planner.num_samples": {"int": [4, 8]},
+                "planner.epochs": {"int": [2, 8], "step": 2},
+                "updates_per_env_step": {"categorical": [0.5, 1.0]},
+            },
+            searcher=_optuna(),
+        )
+    )
+    space = to_tune_search_space(spec)
+    assert "seed" not in space
+    assert isinstance(space["planner.std"], Float) and isinstance(space["updates_per_env_step"], Categorical)
+    ints = space["planner.num_samples"]
+    assert isinstance(ints, Integer) and (ints.lower, ints.upper) == (4, 9)  # high inclusive in the spec
+    with pytest.raises(ValueError, match="optuna_define_by_run"):
+        to_tune_search_space(load_spec(ROOT / "sweeps/hpo.yaml"))
+
+
+def _copilot_importable() -> str | None:
+    try:
+        import copilot_ray.algorithms.copilot  # noqa: F401
+    except Exception as err:  # noqa: BLE001
+        return f"copilot_ray.algorithms.copilot does not import: {type(err).__name__}: {err}"
+    return None
+
+
+def test_build_algorithm_config_applies_dotted_keys():
+    reason = _copilot_importable()
+    if reason:
+        pytest.skip(reason)
+    spec = load_spec(ROOT / "sweeps/hpo.yaml")
+    flat = {
+        "planner.std": 0.1,
+        "planner.num_samples": 8,
+        "cost_model.lr": 0.002,
+        "actor_lr": 1e-3,
+        "critic_lr": 2e-3,
+        "updates_per_env_step": 0.5,
+        "alpha_schedule.kind": "exponential",
+        "alpha_schedule.start": 0.8,
+        "alpha_schedule.end": 0.1,
+        "alpha_schedule.decay": 0.5,
+        "seed": 7,
+    }
+    config = build_algorithm_config(flat, spec)
+    assert config.tree_depth == 5 and config.repetitions == 5  # fixed config
+    assert config.planner["std"] == 0.1 and config.planner["num_samples"] == 8
+    assert config.planner["lr"] == 0.005  # untouched default survives the merge
+    assert config.cost_model["lr"] == 0.002
+    assert config.actor_lr == 1e-3 and config.critic_lr == 2e-3 and config.updates_per_env_step == 0.5
+    assert config.alpha_schedule == {
+        "kind": "exponential",
+        "clock": "per_task",
+        "start": 0.8,
+        "end": 0.1,
+        "decay": 0.5,
+    }
+    assert config.seed == 7 and config.env == "maze-point" and config.env_config == {"layout": "four-rooms"}
+    config.copy(copy_frozen=False).validate()
+    smoke = load_spec(ROOT / "sweeps/smoke.yaml")
+    for trial in smoke.trial_plan():
+        cfg = build_algorithm_config(trial, smoke)
+        assert cfg.tree_depth == trial["tree_depth"] and cfg.task_batch_size == 4 and cfg.tau_max == 10
+        assert cfg.cost_model["init_euclidean"] == 5000 and cfg.num_env_runners == 0
+    # dotted fields without a kind override the preset
+    alpha = load_spec(ROOT / "sweeps/alpha_schedule.yaml")
+    cfg = build_algorithm_config({"alpha_schedule": "paper_warm_start", "seed": 0}, alpha)
+    assert cfg.alpha_schedule["clock"] == "global" and cfg.alpha_schedule["duration"] == 2
+    with pytest.raises(SpecError, match=r"trial.tree_deph: .*did you mean 'tree_depth'"):
+        build_algorithm_config({"tree_deph": 3}, smoke)
+    with pytest.raises(SpecError, match=r"trial.tree_depth: 0 is invalid"):
+        build_algorithm_config({"tree_depth": 0}, smoke)
+
+
+def test_knob_table_matches_copilot_config():
+    reason = _copilot_importable()
+    if reason:
+        pytest.skip(reason)
+    from copilot_ray.algorithms.copilot.config import DEFAULT_COST_MODEL, DEFAULT_PLANNER, CoPilotConfig
+
+    copilot_args = set(inspect.signature(CoPilotConfig.copilot).parameters) - {"self"}
+    training_args = set(inspect.signature(CoPilotConfig.training).parameters) - {"self"}
+    for key, knob in COPILOT_KNOBS.items():
+        if knob.target == "copilot":
+            assert key in copilot_args, key
+        elif knob.target == "training":
+            assert key in training_args or hasattr(CoPilotConfig(), key), key
+    assert {k.split(".", 1)[1] for k, kb in COPILOT_KNOBS.items() if kb.target == "planner"} == set(
+        DEFAULT_PLANNER
+    )
+    assert {k.split(".", 1)[1] for k, kb in COPILOT_KNOBS.items() if kb.target == "cost_model"} == set(
+        DEFAULT_COST_MODEL
+    )
+
+
+def test_alpha_knobs_match_the_schedule_module():
+    from dataclasses import fields
+
+    from copilot_ray.planning.alpha_schedule import CLOCKS, KINDS, PRESETS, AlphaSchedule
+
+    assert {k.split(".", 1)[1] for k in COPILOT_KNOBS if k.startswith("alpha_schedule.")} == {
+        f.name for f in fields(AlphaSchedule)
+    }
+    from copilot_ray import spec as spec_module
+
+    assert spec_module._ALPHA_KINDS == KINDS and spec_module._ALPHA_CLOCKS == CLOCKS
+    assert set(spec_module._ALPHA_PRESETS) == set(PRESETS)
+
+
+def test_spec_is_a_pydantic_model():
+    spec = load_spec(ROOT / "sweeps/smoke.yaml")
+    assert isinstance(spec, SweepSpec)
+    again = parse_spec(spec.model_dump(by_alias=True, exclude_none=True))
+    assert again.trial_plan() == spec.trial_plan()

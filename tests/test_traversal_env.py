@@ -1,0 +1,103 @@
+"""The traversal env turns a sub-goal tree into RLlib episodes, one per sub-task (Algorithm 2)."""
+
+import numpy as np
+import pytest
+
+from copilot_ray.algorithms.copilot.traversal_env import TraversalEnv, traversal_queue
+
+S0 = np.array([0.1, 0.1], np.float32)
+G = np.array([0.9, 0.1], np.float32)
+
+
+def straight_tree(depth: int) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, 2**depth + 1)[:, None]
+    return (S0 + t * (G - S0)).astype(np.float32)
+
+
+def make_env(tau_max=50, speed=0.01):
+    return TraversalEnv(
+        {"goal_env": "maze-point", "goal_env_config": {"layout": "empty", "speed": speed}, "tau_max": tau_max}
+    )
+
+
+def test_queue_order_is_bottom_up_layer_by_layer():
+    depth = 2
+    queue = traversal_queue(straight_tree(depth)[None], depth, np.array([7]))
+    assert [(s.layer, s.index) for s in queue] == [(2, 1), (2, 2), (2, 3), (2, 4), (1, 1), (1, 2), (0, 1)]
+    assert all(s.task_id == 7 for s in queue)
+    # The first sub-task of each layer starts from s0; the others continue where the agent is.
+    assert [s.start is not None for s in queue] == [True, False, False, False, True, False, True]
+    np.testing.assert_allclose(queue[-1].goal, G)
+    np.testing.assert_allclose(queue[0].goal, straight_tree(depth)[1])
+
+
+def drive_to_goal(env, obs):
+    """A scripted agent heading straight for its sub-goal (obs = [position, sub-goal])."""
+    pos, goal = obs[:2], obs[2:]
+    d = goal - pos
+    return np.clip(d / max(np.linalg.norm(d), 1e-9), -1, 1).astype(np.float32)
+
+
+def test_rewards_are_scaled_per_layer_and_traversal_records_subtasks():
+    depth = 2
+    env = make_env(tau_max=100)  # layer 0 needs ~78 steps at speed 0.01
+    n = env.load_plan(straight_tree(depth)[None], depth, np.array([0]))
+    assert n == 7
+    finals = []
+    returns = []
+    while env.remaining():
+        obs, _ = env.reset()
+        total, done = 0.0, False
+        while not done:
+            obs, r, term, trunc, info = env.step(drive_to_goal(env, obs))
+            total += r
+            done = term or trunc
+        finals.append(info)
+        returns.append(total)
+    layers = [i["subtask_layer"] for i in finals]
+    assert layers == [2, 2, 2, 2, 1, 1, 0]
+    assert all(i["subtask_reached"] for i in finals)
+    # R / 2^k for a reached sub-task of layer k (R = 1 by default).
+    np.testing.assert_allclose(returns, [0.25] * 4 + [0.5] * 2 + [1.0])
+    # Each layer's first sub-task starts at s0.
+    np.testing.assert_allclose(finals[0]["subtask_start"], S0, atol=1e-6)
+    np.testing.assert_allclose(finals[4]["subtask_start"], S0, atol=1e-6)
+    # A sub-task's steps are what it took: 0.2 of distance at speed 0.01 -> about 18 steps.
+    assert 15 <= finals[0]["subtask_steps"] <= 20
+
+
+def test_failed_subtask_truncates_at_tau_max_and_next_continues_in_place():
+    depth = 1
+    env = make_env(tau_max=5)
+    env.load_plan(straight_tree(depth)[None], depth, np.array([0]))
+    obs, _ = env.reset()
+    steps = 0
+    while True:
+        obs, r, term, trunc, info = env.step(drive_to_goal(env, obs))
+        steps += 1
+        if term or trunc:
+            break
+    assert trunc and not term and steps == 5 and r == 0.0
+    assert info["subtask_reached"] is False
+    end = info["subtask_end"]
+    obs, _ = env.reset()  # second sub-task of layer 1: starts where the first one stopped
+    np.testing.assert_allclose(obs[:2], end, atol=1e-6)
+    obs, _ = env.reset()  # layer 0 starts from s0 again
+    np.testing.assert_allclose(obs[:2], S0, atol=1e-6)
+    np.testing.assert_allclose(obs[2:], G, atol=1e-6)
+
+
+def test_reset_without_plan_gives_idle_episode():
+    env = make_env(tau_max=3)
+    env.reset()
+    for _ in range(3):
+        _, _, term, trunc, info = env.step(np.zeros(2, np.float32))
+    assert trunc and info["subtask_idle"] is True
+
+
+@pytest.mark.parametrize("depth", [1, 3])
+def test_observation_space_contains_observations(depth):
+    env = make_env()
+    env.load_plan(straight_tree(depth)[None], depth, np.array([0]))
+    obs, _ = env.reset()
+    assert env.observation_space.contains(obs)
