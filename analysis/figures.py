@@ -1,0 +1,205 @@
+"""PNG figures: success against environment steps, final success per configuration (paper Fig. 2b when
+the axis is K), and the evolution of one task's sub-goal tree over training (paper Fig. 4d)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; never a display (the report runs on headless machines)
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .aggregate import ConfigSummary  # noqa: E402
+from .load import SUCCESS_DIRECT, SUCCESS_PLANNED, TreeSnapshot  # noqa: E402
+
+TITLES = {
+    SUCCESS_PLANNED: "agent following the planner's finest path",
+    SUCCESS_DIRECT: "agent alone (no planner)",
+}
+MAX_CURVES = 12  # more lines than this are unreadable; the best ones by final planned success are kept
+DPI = 120
+
+
+def _colors(n: int):
+    cmap = plt.get_cmap("tab10" if n <= 10 else "tab20")
+    return [cmap(i % cmap.N) for i in range(n)]
+
+
+def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
+    if len(configs) <= MAX_CURVES:
+        return configs, 0
+
+    def score(c):
+        m = c.metrics.get(SUCCESS_PLANNED)
+        return m.final_iqm if m and np.isfinite(m.final_iqm) else -1.0
+
+    keep = set(id(c) for c in sorted(configs, key=score, reverse=True)[:MAX_CURVES])
+    return [c for c in configs if id(c) in keep], len(configs) - MAX_CURVES
+
+
+def success_curves(configs: list[ConfigSummary], axis_name: str, path: Path) -> Path:
+    """Two panels (planned, direct): IQM over seeds and its 95 % bootstrap band, one colour per
+    configuration. Solid where every seed of the configuration has data, dashed where only some do
+    (seeds are never extrapolated past their last evaluation)."""
+    shown, dropped = _select(configs)
+    colors = _colors(len(shown))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
+    for ax, metric in zip(axes, (SUCCESS_PLANNED, SUCCESS_DIRECT), strict=True):
+        for c, color in zip(shown, colors, strict=True):
+            m = c.metrics.get(metric)
+            if m is None or m.curve is None:
+                continue
+            cv = m.curve
+            label = f"{c.label} (n={cv.n_seeds})"
+            if cv.single_point:
+                err = np.array([[cv.iqm[0] - cv.low[0]], [cv.high[0] - cv.iqm[0]]])
+                ax.errorbar(
+                    [cv.point_step],
+                    cv.iqm,
+                    yerr=np.clip(err, 0, None),
+                    fmt="o",
+                    color=color,
+                    capsize=4,
+                    label=label + ", 1 eval",
+                )
+                continue
+            some = cv.coverage > 0
+            full = cv.coverage == cv.n_seeds
+            ax.fill_between(cv.grid, cv.low, cv.high, where=some, color=color, alpha=0.18, linewidth=0)
+            ax.plot(
+                cv.grid, np.where(some, cv.iqm, np.nan), color=color, linestyle="--", linewidth=1, alpha=0.7
+            )
+            ax.plot(cv.grid, np.where(full, cv.iqm, np.nan), color=color, linewidth=2, label=label)
+        ax.set_title(f"{metric.split('/')[-1]}: {TITLES[metric]}", fontsize=10)
+        ax.set_xlabel("environment steps")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
+    axes[0].set_ylabel("success rate on held-out tasks")
+    handles, labels = axes[0].get_legend_handles_labels()
+    if not handles:
+        handles, labels = axes[1].get_legend_handles_labels()
+    if handles:
+        fig.legend(
+            handles, labels, loc="center left", bbox_to_anchor=(0.83, 0.5), fontsize=8, title=axis_name
+        )
+    note = "IQM over seeds, shaded: 95% stratified bootstrap CI; dashed: not all seeds have reached this step"
+    if dropped:
+        note += f"; {dropped} more configurations not drawn"
+    fig.suptitle(f"Success against environment steps, by {axis_name}\n{note}", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 0.83 if handles else 1, 1))
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def final_success(configs: list[ConfigSummary], axis_name: str, path: Path) -> Path:
+    """Grouped bars (planned, direct) of final success with 95 % CIs, and each seed as a dot."""
+    shown, dropped = _select(configs)
+    x = np.arange(len(shown))
+    width = 0.38
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(shown) + 3), 4.5))
+    for offset, metric, color in (
+        (-width / 2, SUCCESS_PLANNED, "tab:blue"),
+        (width / 2, SUCCESS_DIRECT, "tab:orange"),
+    ):
+        vals, lo, hi = [], [], []
+        for c in shown:
+            m = c.metrics.get(metric)
+            vals.append(m.final_iqm if m else np.nan)
+            lo.append(m.final_low if m else np.nan)
+            hi.append(m.final_high if m else np.nan)
+        vals, lo, hi = map(np.asarray, (vals, lo, hi))
+        err = np.clip(np.nan_to_num(np.stack([vals - lo, hi - vals])), 0, None)
+        ax.bar(
+            x + offset,
+            np.nan_to_num(vals),
+            width,
+            yerr=err,
+            capsize=4,
+            color=color,
+            alpha=0.8,
+            label=metric.split("/")[-1],
+        )
+        for i, c in enumerate(shown):
+            seeds = [t.curves[metric][1][-1] for t in c.trials if metric in t.curves]
+            # dots beside the error bar, not on it, so both stay readable
+            ax.scatter(np.full(len(seeds), x[i] + offset + width * 0.3), seeds, s=10, color="black", zorder=3)
+    ax.set_xticks(
+        x,
+        [c.label for c in shown],
+        rotation=30 if len(shown) > 6 else 0,
+        ha="right" if len(shown) > 6 else "center",
+    )
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("final success rate (last evaluation)")
+    ax.set_xlabel(axis_name)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    paper = " (paper Fig. 2b)" if axis_name == "K" else ""
+    extra = f"; {dropped} more configurations not drawn" if dropped else ""
+    ax.set_title(
+        f"Final success by {axis_name}{paper}\nIQM over seeds, 95% bootstrap CI, dots: seeds{extra}",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str, path: Path) -> Path:
+    """Paper Fig. 4d: rows = layers 2..K (1..K when K < 2), columns = training stages; each panel shows
+    the layer's planned path for one fixed test task over the maze (start red, goal blue) and, above it,
+    the agent's measured steps per sub-task along that path (grey = sub-task not reached)."""
+    from copilot_ray.envs.maze import load_layout, render_maze
+
+    depth = snapshots[0].depth
+    layers = list(range(2, depth + 1)) if depth >= 2 else list(range(1, depth + 1))
+    layout_name = snapshots[0].layout or "four-rooms"
+    try:
+        layout = load_layout(layout_name)
+    except (ValueError, OSError):  # a user's layout file not present here: draw the paths on an empty square
+        layout = load_layout("empty")
+        title += f" (layout {layout_name!r} not found here; drawn without walls)"
+    ymax = max(
+        1, max(int(s.subtask_steps[task, k, : 2**k].max(initial=0)) for s in snapshots for k in layers)
+    )
+    rows, cols = len(layers), len(snapshots)
+    fig = plt.figure(figsize=(2.6 * cols + 0.6, 3.4 * rows + 0.8))
+    gs = fig.add_gridspec(2 * rows, cols, height_ratios=[1, 3] * rows, hspace=0.35, wspace=0.1)
+    for r, k in enumerate(layers):
+        for c, snap in enumerate(snapshots):
+            steps = snap.subtask_steps[task, k, : 2**k]
+            reached = snap.subtask_reached[task, k, : 2**k]
+            ax_h = fig.add_subplot(gs[2 * r, c])
+            ax_h.bar(
+                np.arange(len(steps)),
+                np.clip(steps, 0, None),
+                color=np.where(reached, "tab:green", "0.6"),
+                width=0.85,
+            )
+            ax_h.set_ylim(0, ymax * 1.05)
+            ax_h.set_xticks([])
+            ax_h.tick_params(labelsize=6)
+            if c:
+                ax_h.set_yticklabels([])
+            if r == 0:
+                ax_h.set_title(f"iter {snap.iteration}\n{snap.env_steps:,} env steps", fontsize=8)
+            ax_m = fig.add_subplot(gs[2 * r + 1, c])
+            pts = snap.layer_path(task, k)
+            img = render_maze(layout, paths=[pts], agent=pts[0], goal=pts[-1], size=240)
+            ax_m.imshow(img, extent=(0, 1, 0, 1), interpolation="nearest")
+            ax_m.set_xticks([])
+            ax_m.set_yticks([])
+            if c == 0:
+                ax_m.set_ylabel(f"layer {k}\n({2**k} sub-tasks)", fontsize=9)
+    fig.suptitle(
+        f"{title}\nsub-goal paths of test task {task}; bars: agent steps per sub-task (grey: not reached)",
+        fontsize=9,
+    )
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return path

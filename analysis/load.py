@@ -1,0 +1,275 @@
+"""MLflow -> plain Python/numpy structures for one sweep.
+
+The layout read here is the sweep runner's contract (DESIGN.md section 7 and `copilot_ray.sweep`): one
+parent run per sweep (tag `copilot.role=sweep`), one child run per trial (tags `mlflow.parentRunId`,
+`copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `K`, `b`,
+`alpha_schedule`), success metrics logged with `step` = environment steps, and sub-goal tree snapshots as
+`copilot_trees/trees_iterNNNNNN.npz` artifacts.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+SUCCESS_PLANNED = "copilot/eval/success_planned"
+SUCCESS_DIRECT = "copilot/eval/success_direct"
+SUCCESS_METRICS = (SUCCESS_PLANNED, SUCCESS_DIRECT)
+WALL_TIME = "time_total_s"
+ENV_STEPS = "env_runners/num_env_steps_sampled_lifetime"
+TREES_DIR = "copilot_trees"
+# Tags that name a sweep axis, in the order they are shown in labels.
+AXIS_TAGS = ("algorithm", "env", "K", "b", "alpha_schedule")
+# Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
+# KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
+USABLE_STATUSES = ("FINISHED", "RUNNING")
+
+
+class AnalysisError(Exception):
+    """Bad input that the CLI reports as one clear line and exit status 2."""
+
+
+@dataclass
+class Trial:
+    """One child run: its identity, tags, and the curves the report needs."""
+
+    run_id: str
+    run_name: str
+    status: str
+    config_key: str
+    seed: str
+    tags: dict[str, str]
+    # metric key -> (env steps, values), sorted by step
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    wall_time_s: float = float("nan")
+    tree_artifacts: list[str] = field(default_factory=list)
+
+    @property
+    def usable(self) -> bool:
+        return self.status in USABLE_STATUSES
+
+    @property
+    def has_eval(self) -> bool:
+        return any(len(self.curves.get(k, ((), ()))[0]) for k in SUCCESS_METRICS)
+
+
+@dataclass
+class Sweep:
+    tracking_uri: str
+    experiment: str
+    experiment_id: str
+    parent_run_id: str | None
+    sweep_name: str
+    trials: list[Trial]
+    other_parent_ids: list[str] = field(default_factory=list)
+
+    def axes(self) -> list[str]:
+        """The axis tags that take more than one value among the child runs; `config_key` when none of the
+        named ones does but the configurations still differ (e.g. an HPO sweep over planner knobs)."""
+        varying = [t for t in AXIS_TAGS if len({tr.tags.get(t, "") for tr in self.trials}) > 1]
+        keys = {tr.config_key for tr in self.trials}
+        labels = {tuple(tr.tags.get(t, "") for t in varying) for tr in self.trials}
+        # The named axes must tell the configurations apart (a K x lr grid varies an untagged knob too).
+        if len(keys) > 1 and len(labels) < len(keys):
+            varying = ["config_key"]
+        return varying
+
+
+# ---------------------------------------------------------------------------------------------- store
+
+
+def resolve_tracking_uri(arg: str | None, cwd: str | Path = ".", experiment: str | None = None) -> str:
+    """`--tracking-uri`, else `$MLFLOW_TRACKING_URI`, else an existing SQLite store that holds the
+    experiment: `./mlflow.db` (DESIGN.md section 8) or `./results/*/mlflow.db` (the sweep spec's default
+    `tracking.storage`). Never a fresh empty store: MLflow would create one silently and then report that
+    the experiment does not exist, which hides the real mistake (a wrong directory).
+    """
+    if arg:
+        return arg
+    if os.environ.get("MLFLOW_TRACKING_URI"):
+        return os.environ["MLFLOW_TRACKING_URI"]
+    cwd = Path(cwd).resolve()
+    candidates = [cwd / "mlflow.db", *sorted((cwd / "results").glob("*/mlflow.db"))]
+    existing = [p for p in candidates if p.is_file()]
+    holding = [p for p in existing if experiment is None or experiment in _sqlite_experiment_names(p)]
+    if holding:
+        return f"sqlite:///{holding[0]}"
+    searched = ", ".join(str(p) for p in candidates[:1]) + f", {cwd / 'results'}/*/mlflow.db"
+    raise AnalysisError(
+        f"no MLflow store given and none found holding experiment {experiment!r} (searched {searched}); "
+        "pass --tracking-uri URI or set MLFLOW_TRACKING_URI"
+    )
+
+
+def _sqlite_experiment_names(path: Path) -> set[str]:
+    # Read-only peek so that looking for the right store never migrates or creates one.
+    try:
+        con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        try:
+            return {row[0] for row in con.execute("SELECT name FROM experiments")}
+        finally:
+            con.close()
+    except sqlite3.Error:
+        return set()
+
+
+def _client(uri: str):
+    import mlflow
+
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
+    return mlflow.MlflowClient(tracking_uri=uri)
+
+
+def _all_runs(client, experiment_id: str, filter_string: str = "") -> list:
+    runs, token = [], None
+    while True:
+        page = client.search_runs([experiment_id], filter_string, max_results=1000, page_token=token)
+        runs.extend(page)
+        token = page.token
+        if not token:
+            return runs
+
+
+# ---------------------------------------------------------------------------------------------- sweep
+
+
+def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = None) -> Sweep:
+    """All child runs of one sweep with their success curves and wall time.
+
+    With several sweep (parent) runs in the experiment, the newest is used unless `parent_run_id` says
+    otherwise; the others are reported. Without any parent run, every trial run in the experiment is used.
+    """
+    client = _client(tracking_uri)
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None:
+        names = sorted(e.name for e in client.search_experiments(max_results=1000))
+        raise AnalysisError(
+            f"experiment {experiment!r} not found at {tracking_uri}; experiments there: "
+            + (", ".join(repr(n) for n in names) if names else "(none)")
+        )
+    runs = _all_runs(client, exp.experiment_id)
+    parents = sorted(
+        (r for r in runs if r.data.tags.get("copilot.role") == "sweep"),
+        key=lambda r: r.info.start_time or 0,
+        reverse=True,
+    )
+    if parent_run_id is not None:
+        chosen = [p for p in parents if p.info.run_id == parent_run_id]
+        if not chosen:
+            raise AnalysisError(
+                f"--parent-run {parent_run_id!r} is not a sweep run of experiment {experiment!r}; sweep runs: "
+                + (", ".join(p.info.run_id for p in parents) or "(none)")
+            )
+        parent = chosen[0]
+    else:
+        parent = parents[0] if parents else None
+
+    if parent is not None:
+        children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == parent.info.run_id]
+    else:
+        children = [r for r in runs if r.data.tags.get("copilot.role") == "trial"]
+    if not children:
+        where = f"sweep run {parent.info.run_id}" if parent else f"experiment {experiment!r}"
+        raise AnalysisError(f"{where} has no child (trial) runs at {tracking_uri}")
+
+    trials = [_trial(client, r) for r in children]
+    trials.sort(key=lambda t: (t.config_key, natural_key(t.seed), t.run_id))
+    sweep_name = (parent.data.tags.get("copilot.sweep") if parent else None) or (
+        children[0].data.tags.get("copilot.sweep", experiment)
+    )
+    return Sweep(
+        tracking_uri=tracking_uri,
+        experiment=experiment,
+        experiment_id=exp.experiment_id,
+        parent_run_id=parent.info.run_id if parent else None,
+        sweep_name=sweep_name,
+        trials=trials,
+        other_parent_ids=[
+            p.info.run_id for p in parents if parent is None or p.info.run_id != parent.info.run_id
+        ],
+    )
+
+
+def _trial(client, run) -> Trial:
+    tags = dict(run.data.tags)
+    trial = Trial(
+        run_id=run.info.run_id,
+        run_name=run.info.run_name or run.info.run_id[:8],
+        status=run.info.status,
+        config_key=tags.get("copilot.config_key", "default"),
+        seed=tags.get("seed", run.data.params.get("seed", "?")),
+        tags=tags,
+    )
+    for key in SUCCESS_METRICS:
+        if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
+            hist = client.get_metric_history(run.info.run_id, key)
+            steps = np.array([m.step for m in hist], dtype=np.float64)
+            values = np.array([m.value for m in hist], dtype=np.float64)
+            order = np.argsort(steps, kind="stable")
+            trial.curves[key] = (steps[order], values[order])
+    trial.wall_time_s = float(run.data.metrics.get(WALL_TIME, float("nan")))
+    try:
+        trial.tree_artifacts = sorted(
+            f.path for f in client.list_artifacts(run.info.run_id, TREES_DIR) if f.path.endswith(".npz")
+        )
+    except Exception:  # an unreachable artifact store must not cost the whole report its tables
+        trial.tree_artifacts = []
+    return trial
+
+
+def natural_key(value: str):
+    try:
+        return (0, float(value), "")
+    except (TypeError, ValueError):
+        return (1, 0.0, str(value))
+
+
+# ---------------------------------------------------------------------------------------------- trees
+
+
+@dataclass
+class TreeSnapshot:
+    """One `trees_iterNNNNNN.npz`: the deterministic sub-goal trees of the fixed test tasks."""
+
+    iteration: int
+    env_steps: int
+    depth: int
+    trees: np.ndarray  # [n_tasks, 2^K + 1, goal_dim]
+    subtask_steps: np.ndarray  # [n_tasks, K + 1, 2^K], -1 beyond 2^k entries
+    subtask_reached: np.ndarray  # bool, same shape
+    layout: str
+
+    def layer_path(self, task: int, k: int) -> np.ndarray:
+        """Layer k's path: tree indices j * 2^(K-k), j = 0..2^k."""
+        return self.trees[task, :: 2 ** (self.depth - k)]
+
+
+def load_tree_snapshots(tracking_uri: str, run_id: str, paths: list[str]) -> list[TreeSnapshot]:
+    """Download only the named npz artifacts (a long run has one per evaluation) and parse them."""
+    client = _client(tracking_uri)
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for path in paths:
+            local = client.download_artifacts(run_id, path, tmp)
+            with np.load(local, allow_pickle=False) as z:
+                out.append(
+                    TreeSnapshot(
+                        iteration=int(z["iteration"]),
+                        env_steps=int(z["env_steps"]),
+                        depth=int(z["depth"]),
+                        trees=np.asarray(z["trees"], dtype=np.float64),
+                        subtask_steps=np.asarray(z["subtask_steps"]),
+                        subtask_reached=np.asarray(z["subtask_reached"], dtype=bool),
+                        layout=str(z["layout"]) if "layout" in z.files else "",
+                    )
+                )
+    return out
+
+
+def log_report_artifacts(tracking_uri: str, parent_run_id: str, out_dir: Path, artifact_path: str = "report"):
+    _client(tracking_uri).log_artifacts(parent_run_id, str(out_dir), artifact_path)

@@ -1,0 +1,290 @@
+"""`python -m analysis.report [EXPERIMENT] [--experiment NAME] [--tracking-uri URI] [--out DIR]`
+
+Reads one sweep from MLflow and writes, under --out (default `results/<experiment>/report`):
+  success_vs_env_steps.png   success (planned, direct) against env steps, IQM + 95 % bootstrap band
+  final_success.png          final success per configuration with 95 % CIs (paper Fig. 2b for K)
+  subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
+  summary.csv, summary.md    per-configuration table
+  report.md, report.html     all of the above on one page, missing/failed runs listed first
+and logs the folder to the sweep's parent MLflow run under `report/`.
+
+Tracking store: --tracking-uri, else $MLFLOW_TRACKING_URI, else an existing ./mlflow.db or
+./results/*/mlflow.db that holds the experiment (see `load.resolve_tracking_uri`).
+
+Exit status: 0 written (possibly with missing runs listed), 1 written but logging to MLflow failed,
+2 bad input (no store, unknown experiment, no child runs, unknown parent run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import html
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import figures, stats, tables
+from .aggregate import ConfigSummary, Missing, summarise
+from .load import (
+    SUCCESS_PLANNED,
+    AnalysisError,
+    Sweep,
+    Trial,
+    load_sweep,
+    load_tree_snapshots,
+    log_report_artifacts,
+    resolve_tracking_uri,
+)
+
+MAX_TREE_FIGURES = 8
+OWNED = ("*.png", "report.md", "report.html", "summary.csv", "summary.md")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m analysis.report", description=__doc__.split("\n\n")[0])
+    p.add_argument("experiment_pos", nargs="?", metavar="EXPERIMENT", help="MLflow experiment name")
+    p.add_argument("--experiment", help="MLflow experiment name (same as the positional argument)")
+    p.add_argument(
+        "--tracking-uri", help="MLflow tracking URI (default: $MLFLOW_TRACKING_URI or a found store)"
+    )
+    p.add_argument("--out", type=Path, help="output folder (default: results/<experiment>/report)")
+    p.add_argument("--parent-run", help="sweep (parent) run id when the experiment holds several sweeps")
+    p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
+    p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
+    p.add_argument("--bootstrap-reps", type=int, default=stats.DEFAULT_REPS)
+    p.add_argument("--seed", type=int, default=0, help="bootstrap seed (the report is reproducible)")
+    p.add_argument("--no-log", action="store_true", help="do not log the report to the parent MLflow run")
+    args = p.parse_args(argv)
+    if args.experiment and args.experiment_pos and args.experiment != args.experiment_pos:
+        p.error(f"two different experiments given: {args.experiment_pos!r} and {args.experiment!r}")
+    args.experiment = args.experiment or args.experiment_pos
+    if not args.experiment:
+        p.error("an experiment name is required (positional or --experiment)")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        uri = resolve_tracking_uri(args.tracking_uri, experiment=args.experiment)
+        sweep = load_sweep(uri, args.experiment, args.parent_run)
+    except AnalysisError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+    out = args.out or Path("results") / _slug(args.experiment) / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    for pattern in OWNED:  # stale figures of an earlier report must not be logged as current
+        for f in out.glob(pattern):
+            f.unlink()
+
+    configs, missing = summarise(sweep, reps=args.bootstrap_reps, seed=args.seed)
+    _print_status(sweep, configs, missing)
+    axis_name = ", ".join(sweep.axes()) or "configuration"
+
+    figs: list[tuple[str, Path]] = []
+    notes: list[str] = []
+    if any(c.metrics for c in configs):
+        figs.append(
+            (
+                "Success against environment steps",
+                figures.success_curves(configs, axis_name, out / "success_vs_env_steps.png"),
+            )
+        )
+        figs.append(("Final success", figures.final_success(configs, axis_name, out / "final_success.png")))
+    else:
+        notes.append("No run has evaluation metrics yet: no success figures.")
+    tree_figs = _tree_figures(sweep, configs, args, out, notes)
+
+    frame = tables.summary_frame(configs)
+    tables.write_csv(frame, out / "summary.csv")
+    table_md = tables.markdown(frame)
+    (out / "summary.md").write_text(table_md)
+
+    log_to = None if args.no_log else sweep.parent_run_id
+    if not args.no_log and sweep.parent_run_id is None:
+        msg = "no sweep (parent) run in this experiment: the report is not logged to MLflow"
+        notes.append(msg)
+        print(f"note: {msg}")
+    doc = _document(sweep, configs, missing, axis_name, figs, tree_figs, table_md, frame, notes, log_to)
+    (out / "report.md").write_text(_to_markdown(doc))
+    (out / "report.html").write_text(_to_html(doc, sweep.experiment))
+    print(f"report: {out / 'report.md'}")
+
+    if log_to:
+        try:
+            log_report_artifacts(sweep.tracking_uri, log_to, out)
+        except Exception as e:  # the files are written; say clearly that the MLflow copy is not
+            print(f"error: could not log the report to run {log_to}: {e}", file=sys.stderr)
+            return 1
+        print(f"logged to MLflow run {log_to} under report/")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------- trees
+
+
+def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, notes: list[str]):
+    """One Fig. 4d per configuration (the best few when there are many), from its lowest-seed run that
+    has tree snapshots; only the snapshots drawn are downloaded."""
+    candidates = [c for c in configs if any(t.tree_artifacts for t in c.all_trials)]
+    if len(candidates) > MAX_TREE_FIGURES:
+
+        def score(c):
+            m = c.metrics.get(SUCCESS_PLANNED)
+            return m.final_iqm if m and np.isfinite(m.final_iqm) else -1.0
+
+        best = {c.key for c in sorted(candidates, key=score, reverse=True)[:MAX_TREE_FIGURES]}
+        notes.append(
+            f"Sub-goal trees drawn for the {MAX_TREE_FIGURES} best of {len(candidates)} configurations."
+        )
+        candidates = [c for c in candidates if c.key in best]
+    if not candidates:
+        notes.append("No run has sub-goal tree snapshots (copilot_trees/*.npz): no tree figure.")
+    result = []
+    for c in candidates:
+        trial = _tree_trial(c)
+        files = trial.tree_artifacts
+        picks = sorted({int(round(i)) for i in np.linspace(0, len(files) - 1, max(1, args.stages))})
+        try:
+            snaps = load_tree_snapshots(sweep.tracking_uri, trial.run_id, [files[i] for i in picks])
+            n_tasks = snaps[0].trees.shape[0]
+            if not 0 <= args.task < n_tasks:
+                notes.append(
+                    f"--task {args.task} out of range for {c.label} ({n_tasks} test tasks): drew task 0"
+                )
+            task = args.task if 0 <= args.task < n_tasks else 0
+            title = f"{c.label}: run {trial.run_name}, seed {trial.seed}, K={snaps[0].depth}"
+            path = figures.subgoal_tree_evolution(
+                snaps, task, title, out / f"subgoal_tree_{_slug(c.label)}.png"
+            )
+            result.append((f"Sub-goal tree, {c.label}", path))
+        except Exception as e:  # one malformed snapshot must not sink the rest of the report
+            msg = f"tree figure for {c.label} (run {trial.run_id}) failed: {type(e).__name__}: {e}"
+            notes.append(msg)
+            print(f"warning: {msg}", file=sys.stderr)
+    return result
+
+
+def _tree_trial(c: ConfigSummary) -> Trial:
+    with_trees = [t for t in c.all_trials if t.tree_artifacts]
+    finished = [t for t in with_trees if t.status == "FINISHED"]
+    return (finished or with_trees)[0]  # all_trials is sorted by seed
+
+
+# ---------------------------------------------------------------------------------------------- document
+# The page is a short list of blocks rendered twice: Markdown (report.md) and HTML (report.html, which
+# the MLflow UI previews).
+
+
+def _document(sweep, configs, missing: Missing, axis_name, figs, tree_figs, table_md, frame, notes, log_to):
+    statuses: dict[str, int] = {}
+    for t in sweep.trials:
+        statuses[t.status] = statuses.get(t.status, 0) + 1
+    commits = sorted({t.tags.get("git_commit", "")[:10] for t in sweep.trials} - {""})
+    doc: list[tuple] = [("h1", f"Sweep report: {sweep.experiment}")]
+    doc.append(
+        (
+            "ul",
+            [
+                f"sweep: {sweep.sweep_name}; parent run: {sweep.parent_run_id or '(none)'}",
+                f"tracking URI: {sweep.tracking_uri}",
+                f"trials: {len(sweep.trials)} ({', '.join(f'{n} {s}' for s, n in sorted(statuses.items()))}); "
+                f"configurations: {len(configs)}; varying axis: {axis_name}",
+                f"git commits: {', '.join(commits) or '(not tagged)'}",
+                f"generated {_dt.datetime.now().isoformat(timespec='seconds')}"
+                + (f"; logged to run {log_to} under report/" if log_to else ""),
+            ],
+        )
+    )
+    if sweep.other_parent_ids:
+        notes.append(
+            "Other sweep runs in this experiment (use --parent-run): " + ", ".join(sweep.other_parent_ids)
+        )
+    doc.append(("h2", "Missing or incomplete"))
+    doc.append(
+        ("ul", missing.lines() + notes)
+        if not missing.empty() or notes
+        else ("p", "Nothing missing: every trial finished with evaluations.")
+    )
+    doc.append(("h2", "Summary"))
+    doc.append(
+        (
+            "p",
+            "Final = each seed's last evaluation; IQM = inter-quartile mean over seeds (plain mean "
+            "for 3 seeds or fewer); 95% CI = percentile bootstrap over seeds. Steps to a threshold = "
+            "first evaluation at or above it, IQM over seeds counting a seed that never got there as "
+            "infinitely late, so 'not reached' means the IQM is infinite (with 4 or more seeds: over a "
+            "quarter never got there; with 3 or fewer: at least one); "
+            "(k/n) = seeds that reached it. FAILED/KILLED runs are excluded; RUNNING runs count "
+            "with what they have so far.",
+        )
+    )
+    doc.append(("table", table_md, frame))
+    for title, path in figs + tree_figs:
+        doc.append(("h2", title))
+        doc.append(("img", path.name, title))
+    return doc
+
+
+def _to_markdown(doc) -> str:
+    out = []
+    for block in doc:
+        kind = block[0]
+        if kind == "h1":
+            out.append(f"# {block[1]}\n")
+        elif kind == "h2":
+            out.append(f"## {block[1]}\n")
+        elif kind == "p":
+            out.append(block[1] + "\n")
+        elif kind == "ul":
+            out.append("\n".join(f"- {item}" for item in block[1]) + "\n")
+        elif kind == "table":
+            out.append(block[1])
+        elif kind == "img":
+            out.append(f"![{block[2]}]({block[1]})\n")
+    return "\n".join(out)
+
+
+def _to_html(doc, title: str) -> str:
+    body = []
+    for block in doc:
+        kind = block[0]
+        if kind in ("h1", "h2", "p"):
+            body.append(f"<{kind}>{html.escape(block[1])}</{kind}>")
+        elif kind == "ul":
+            body.append("<ul>" + "".join(f"<li>{html.escape(i)}</li>" for i in block[1]) + "</ul>")
+        elif kind == "table":
+            body.append(block[2].to_html(index=False, na_rep="-", float_format=lambda x: f"{x:.4g}"))
+        elif kind == "img":
+            body.append(
+                f'<img src="{html.escape(block[1])}" alt="{html.escape(block[2])}" style="max-width:100%">'
+            )
+    style = (
+        "body{font-family:sans-serif;max-width:1200px;margin:auto}table{border-collapse:collapse;font-size:12px}"
+        "td,th{border:1px solid #ccc;padding:3px 6px}"
+    )
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{style}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
+
+
+def _print_status(sweep: Sweep, configs, missing: Missing) -> None:
+    print(
+        f"experiment {sweep.experiment!r}: {len(sweep.trials)} trials, {len(configs)} configurations, "
+        f"parent run {sweep.parent_run_id or '(none)'}"
+    )
+    for line in missing.lines():
+        print(f"missing: {line}")
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).strip("_") or "config"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

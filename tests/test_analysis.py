@@ -1,0 +1,355 @@
+"""analysis.report against a small real MLflow store built by hand (no Ray, a few seconds)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis import stats
+from analysis.report import main
+
+EXP = "copilot-test-sweep"
+STEPS = [1000, 2000, 3000, 4000]
+# config tree_depth=2: four seeds, hand-chosen planned success per evaluation; direct = planned / 2
+A_PLANNED = {
+    "0": [0.1, 0.3, 0.6, 0.8],
+    "1": [0.2, 0.5, 0.7, 0.9],
+    "2": [0.0, 0.2, 0.4, 0.45],
+    "3": [0.3, 0.6, 0.9, 1.0],
+}
+A_WALL = {"0": 10.0, "1": 20.0, "2": 30.0, "3": 40.0}
+# config tree_depth=3: seeds 0-2 finish, seed 3 FAILED (its 0.0 must not count)
+B_PLANNED = {"0": [0.1, 0.2, 0.3, 0.4], "1": [0.2, 0.3, 0.4, 0.5], "2": [0.5, 0.6, 0.8, 0.9]}
+B_FAILED = [0.0, 0.0]
+
+
+def _metrics(client, run_id, planned, steps, wall=None, direct_scale=0.5):
+    from mlflow.entities import Metric
+
+    now = int(time.time() * 1000)
+    ms = []
+    for s, v in zip(steps, planned, strict=True):
+        ms += [
+            Metric("copilot/eval/success_planned", v, now, s),
+            Metric("copilot/eval/success_direct", v * direct_scale, now, s),
+            Metric("env_runners/num_env_steps_sampled_lifetime", s, now, s),
+        ]
+    if wall is not None:
+        ms.append(Metric("time_total_s", wall, now, steps[-1]))
+    client.log_batch(run_id, metrics=ms)
+
+
+def _child(client, exp_id, parent_id, key, k, seed):
+    tags = {
+        "mlflow.parentRunId": parent_id,
+        "copilot.role": "trial",
+        "copilot.sweep": "test_sweep",
+        "copilot.trial_id": f"{key}-{seed}",
+        "copilot.config_key": key,
+        "algorithm": "copilot",
+        "env": "maze-point",
+        "K": str(k),
+        "b": "5",
+        "alpha_schedule": "paper_per_task",
+        "seed": seed,
+        "git_commit": "abcdef1234567",
+    }
+    return client.create_run(exp_id, run_name=f"{key}_s{seed}", tags=tags).info.run_id
+
+
+def _tree_npz(path: Path, iteration: int, rng) -> None:
+    k_depth, n_tasks = 3, 2
+    trees = rng.uniform(0.05, 0.95, size=(n_tasks, 2**k_depth + 1, 2))
+    steps = np.full((n_tasks, k_depth + 1, 2**k_depth), -1, dtype=np.int64)
+    reached = np.zeros_like(steps, dtype=bool)
+    for k in range(k_depth + 1):
+        steps[:, k, : 2**k] = rng.integers(1, 26, size=(n_tasks, 2**k))
+        reached[:, k, : 2**k] = rng.random((n_tasks, 2**k)) < 0.7
+    np.savez(
+        path,
+        iteration=iteration,
+        env_steps=iteration * 200,
+        depth=k_depth,
+        trees=trees,
+        subtask_steps=steps,
+        subtask_reached=reached,
+        layout="u-maze",
+    )
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    import mlflow
+
+    root = tmp_path_factory.mktemp("mlflow")
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment(EXP, artifact_location=(root / "artifacts").as_uri())
+    parent = client.create_run(
+        exp_id, run_name="sweep", tags={"copilot.role": "sweep", "copilot.sweep": "test_sweep"}
+    )
+    pid = parent.info.run_id
+    ids = {}
+    for seed, vals in A_PLANNED.items():
+        rid = _child(client, exp_id, pid, "tree_depth=2", 2, seed)
+        _metrics(client, rid, vals, STEPS, A_WALL[seed])
+        client.set_terminated(rid, "FINISHED")
+    for seed, vals in B_PLANNED.items():
+        rid = ids[f"B{seed}"] = _child(client, exp_id, pid, "tree_depth=3", 3, seed)
+        _metrics(client, rid, vals, STEPS, 100.0)
+        client.set_terminated(rid, "FINISHED")
+    rid = ids["failed"] = _child(client, exp_id, pid, "tree_depth=3", 3, "3")
+    _metrics(client, rid, B_FAILED, STEPS[:2], 5.0)
+    client.set_terminated(rid, "FAILED")
+    # config tree_depth=4: a single evaluation per seed; seed 1 still running, seed 2 running, no evals yet
+    rid = _child(client, exp_id, pid, "tree_depth=4", 4, "0")
+    _metrics(client, rid, [0.7], [1500], 7.0)
+    client.set_terminated(rid, "FINISHED")
+    rid = ids["running"] = _child(client, exp_id, pid, "tree_depth=4", 4, "1")
+    _metrics(client, rid, [0.5], [1600], 7.0)
+    ids["no_eval"] = _child(client, exp_id, pid, "tree_depth=4", 4, "2")
+    # tree snapshots for config tree_depth=3, seed 0
+    rng = np.random.default_rng(3)
+    tree_dir = root / "npz" / "copilot_trees"
+    tree_dir.mkdir(parents=True)
+    for it in (5, 10, 15, 20):
+        _tree_npz(tree_dir / f"trees_iter{it:06d}.npz", it, rng)
+    client.log_artifacts(ids["B0"], str(tree_dir), "copilot_trees")
+
+    # an experiment with a parent but no children, and one with children but no parent
+    empty_id = client.create_experiment("empty-sweep", artifact_location=(root / "a2").as_uri())
+    client.create_run(empty_id, tags={"copilot.role": "sweep"})
+    orphan_id = client.create_experiment("orphans", artifact_location=(root / "a3").as_uri())
+    rid = client.create_run(
+        orphan_id, tags={"copilot.role": "trial", "copilot.config_key": "default", "seed": "0"}
+    ).info.run_id
+    _metrics(client, rid, [0.2, 0.4], STEPS[:2], 3.0)
+    client.set_terminated(rid, "FINISHED")
+
+    out = root / "report"
+    rc = main(["--experiment", EXP, "--tracking-uri", uri, "--out", str(out)])
+    return {"uri": uri, "client": client, "parent": pid, "ids": ids, "out": out, "rc": rc, "root": root}
+
+
+@pytest.fixture(scope="module")
+def table(store):
+    return pd.read_csv(store["out"] / "summary.csv").set_index("config_key")
+
+
+def _iqm4(x):
+    s = sorted(x)
+    return (s[1] + s[2]) / 2  # n = 4: trim one from each end, average the middle two
+
+
+def _boot_ci(x, reps=2000, seed=0):
+    # independent of analysis.stats: same documented draws, IQM by sorting each row by hand
+    x = np.asarray(x, dtype=float)
+    n = len(x)
+    idx = np.random.default_rng(seed).integers(0, n, size=(reps, n))
+    s = np.sort(x[idx], axis=1)
+    g = int(np.floor(0.25 * n))
+    boots = s[:, g : n - g].mean(axis=1)
+    return np.percentile(boots, [2.5, 97.5])
+
+
+def test_report_succeeds(store):
+    assert store["rc"] == 0
+
+
+def test_table_final_success_iqm_and_ci(table):
+    finals = [v[-1] for v in A_PLANNED.values()]
+    row = table.loc["tree_depth=2"]
+    assert row["n_seeds"] == 4
+    assert row["planned_final_iqm"] == pytest.approx(_iqm4(finals)) == pytest.approx(0.85)
+    lo, hi = _boot_ci(finals)
+    assert row["planned_final_ci_low"] == pytest.approx(lo)
+    assert row["planned_final_ci_high"] == pytest.approx(hi)
+    assert lo <= row["planned_final_iqm"] <= hi
+    assert row["direct_final_iqm"] == pytest.approx(0.85 / 2)
+    assert row["wall_time_s_mean"] == pytest.approx(25.0)
+
+
+def test_failed_run_is_excluded_from_numbers(table):
+    row = table.loc["tree_depth=3"]
+    assert row["n_seeds"] == 3  # the FAILED seed does not count
+    assert row["planned_final_iqm"] == pytest.approx(np.mean([0.4, 0.5, 0.9]))  # n = 3: IQM is the mean
+    assert row["wall_time_s_mean"] == pytest.approx(100.0)
+
+
+def test_steps_to_threshold(table):
+    row = table.loc["tree_depth=2"]
+    # to 0.5: seeds reach at 3000, 2000, never, 2000 -> sorted 2000, 2000, 3000, inf -> IQM 2500
+    assert float(row["planned_steps_to_0.5"]) == pytest.approx(2500.0)
+    assert row["planned_seeds_reaching_0.5"] == 3
+    # to 0.9: never, 4000, never, 3000 -> the middle two are 4000 and inf -> not reached
+    assert row["planned_steps_to_0.9"] == "not reached"
+    assert row["planned_seeds_reaching_0.9"] == 2
+    # direct success (= planned / 2) reaches 0.5 only for seed 3 at 4000: IQM 'not reached', 1/4
+    assert row["direct_steps_to_0.5"] == "not reached"
+    assert row["direct_seeds_reaching_0.5"] == 1
+
+
+def test_single_evaluation_config(table, store):
+    row = table.loc["tree_depth=4"]
+    assert row["n_seeds"] == 2  # FINISHED and RUNNING with one evaluation each; the one without evals not
+    assert row["planned_final_iqm"] == pytest.approx(0.6)
+    report = (store["out"] / "report.md").read_text()
+    assert "tree_depth=4" in report or "K=4" in report
+    assert "single evaluation" in report
+
+
+def test_pngs_exist_and_are_not_blank(store):
+    pngs = sorted(store["out"].glob("*.png"))
+    names = {p.name for p in pngs}
+    assert {"success_vs_env_steps.png", "final_success.png", "subgoal_tree_K_3.png"} <= names
+    for p in pngs:
+        img = mpimg.imread(p)
+        assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100
+        assert img[..., :3].std() > 0.02, f"{p.name} looks blank"
+
+
+def test_report_references_every_png(store):
+    report = (store["out"] / "report.md").read_text()
+    for p in store["out"].glob("*.png"):
+        assert f"]({p.name})" in report
+    assert "| K=2 |" in report  # the Markdown table, labelled by the varying axis
+    assert (store["out"] / "report.html").is_file()
+
+
+def test_missing_runs_listed(store, capsys):
+    report = (store["out"] / "report.md").read_text()
+    missing = report.split("## Missing or incomplete")[1].split("## Summary")[0]
+    ids = store["ids"]
+    assert "failed run" in missing and ids["failed"] in missing
+    assert "still running" in missing and ids["running"] in missing
+    assert "no evaluation metrics yet" in missing and ids["no_eval"] in missing
+    assert "K=3 lacks seeds 3" in missing
+    assert "K=4 lacks seeds 2, 3" in missing
+
+
+def test_terminal_lists_missing(store, tmp_path, capsys):
+    rc = main(
+        [
+            EXP,
+            "--tracking-uri",
+            store["uri"],
+            "--out",
+            str(tmp_path / "r"),
+            "--no-log",
+            "--bootstrap-reps",
+            "200",
+        ]
+    )
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert store["ids"]["failed"] in out and "still running" in out
+
+
+def test_parent_run_got_the_artifacts(store):
+    client = store["client"]
+    names = {Path(f.path).name for f in client.list_artifacts(store["parent"], "report")}
+    assert {
+        "report.md",
+        "report.html",
+        "summary.csv",
+        "summary.md",
+        "success_vs_env_steps.png",
+        "final_success.png",
+        "subgoal_tree_K_3.png",
+    } <= names
+
+
+def test_missing_experiment_exit_2_names_it(store):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "analysis.report",
+            "--experiment",
+            "no-such-sweep",
+            "--tracking-uri",
+            store["uri"],
+        ],
+        capture_output=True,
+        text=True,
+        cwd=Path(__file__).resolve().parent.parent,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    assert "no-such-sweep" in proc.stderr and EXP in proc.stderr  # names it and lists what exists
+
+
+def test_experiment_without_children_exit_2(store, tmp_path, capsys):
+    assert main(["empty-sweep", "--tracking-uri", store["uri"], "--out", str(tmp_path)]) == 2
+    assert "no child" in capsys.readouterr().err
+
+
+def test_no_parent_run_reports_and_skips_logging(store, tmp_path, capsys):
+    assert main(["orphans", "--tracking-uri", store["uri"], "--out", str(tmp_path)]) == 0
+    assert "not logged" in capsys.readouterr().out
+    assert "not logged" in (tmp_path / "report.md").read_text()
+
+
+def test_no_store_found_exit_2(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["anything"]) == 2
+    assert "--tracking-uri" in capsys.readouterr().err
+    assert not (tmp_path / "mlflow.db").exists()  # never creates an empty store
+
+
+# ---------------------------------------------------------------------------------------------- stats
+
+
+def test_iqm_matches_scipy_trim_mean():
+    from scipy.stats import trim_mean
+
+    rng = np.random.default_rng(0)
+    for n in range(1, 12):
+        x = rng.normal(size=(n, 7))
+        np.testing.assert_allclose(stats.iqm(x), trim_mean(x, 0.25, axis=0))
+
+
+def test_bootstrap_ci_contains_iqm_and_collapses_for_identical_seeds():
+    x = np.array([0.2, 0.4, 0.5, 0.9, 0.3])
+    lo, hi = stats.bootstrap_ci(x)
+    assert lo <= stats.iqm(x) <= hi and lo < hi
+    lo, hi = stats.bootstrap_ci(np.full(5, 0.7))
+    assert lo == pytest.approx(0.7) and hi == pytest.approx(0.7)
+    # curves: per grid column, and NaN (no data) columns stay NaN
+    mat = np.array([[0.1, 0.5, np.nan], [0.3, 0.7, np.nan], [0.2, 0.6, np.nan]])
+    lo, hi = stats.bootstrap_ci(mat, reps=300)
+    mid = stats.iqm(mat)
+    assert np.all(lo[:2] <= mid[:2]) and np.all(mid[:2] <= hi[:2]) and np.isnan(lo[2])
+
+
+def test_interpolate_never_extrapolates():
+    out = stats.interpolate([10, 20], [0.0, 1.0], [5, 10, 15, 20, 25])
+    np.testing.assert_allclose(out[1:4], [0.0, 0.5, 1.0])
+    assert np.isnan(out[0]) and np.isnan(out[4])
+
+
+def test_steps_to_threshold_and_inf_iqm():
+    assert stats.steps_to_threshold([1, 2, 3], [0.1, 0.5, 0.9], 0.5) == 2
+    assert stats.steps_to_threshold([1, 2, 3], [0.1, 0.2, 0.3], 0.5) == np.inf
+    assert stats.iqm(np.array([1.0, 2.0, 3.0, np.inf])) == 2.5  # one laggard is trimmed
+    assert stats.iqm(np.array([1.0, 2.0, np.inf, np.inf])) == np.inf
+
+
+def test_axes_fall_back_to_config_key_when_tags_do_not_separate_configs():
+    from analysis.load import Sweep, Trial
+
+    def trial(key, k):
+        return Trial("r", "r", "FINISHED", key, "0", {"K": k, "b": "5"})
+
+    sweep = Sweep("uri", "e", "1", None, "s", [trial("tree_depth=2", "2"), trial("tree_depth=3", "3")])
+    assert sweep.axes() == ["K"]
+    sweep.trials = [trial("K=2,lr=1", "2"), trial("K=2,lr=2", "2"), trial("K=3,lr=1", "3")]
+    assert sweep.axes() == ["config_key"]
