@@ -17,6 +17,8 @@ from ray.rllib.utils.metrics import ALL_MODULES, TD_ERROR_KEY
 from ray.rllib.utils.numpy import convert_to_numpy
 from ray.rllib.utils.replay_buffers.utils import update_priorities_in_episode_replay_buffer
 
+from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer
+
 
 class StockSACUpdater:
     def __init__(self, algo):
@@ -54,12 +56,39 @@ class StockSACUpdater:
         return {}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        pass
+        """Nothing of ours to restore (see get_state)."""
+
+
+class FastSACUpdater:
+    """Flat transition buffer -> N gradient steps in one `learner_group.update(batch=...)` call."""
+
+    def __init__(self, algo):
+        self.algo = algo
+        capacity = int(algo.config.replay_buffer_config.get("capacity", 1_000_000))
+        self.buffer = FlatTransitionBuffer(capacity)
+        seed = 0 if algo.config.seed is None else int(algo.config.seed)
+        self.rng = np.random.default_rng([seed, 1])  # its own stream: buffer sampling
+
+    def add(self, episodes) -> None:
+        self.buffer.add_episodes(episodes)
+
+    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
+        return update_from_buffer(
+            self.algo.learner_group,
+            self.buffer,
+            num_updates,
+            self.algo.config.train_batch_size_per_learner,
+            self.rng,
+            timesteps,
+        )
+
+    def get_state(self) -> dict[str, Any]:
+        return {"buffer": self.buffer.get_state(), "rng": self.rng.bit_generator.state}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.buffer.set_state(state["buffer"])
+        self.rng.bit_generator.state = state["rng"]
 
 
 def make_agent_updater(algo):
-    if algo.config.fast_learner:
-        from copilot_ray.algorithms.copilot.fast_updater import FastSACUpdater
-
-        return FastSACUpdater(algo)
-    return StockSACUpdater(algo)
+    return FastSACUpdater(algo) if algo.config.fast_learner else StockSACUpdater(algo)

@@ -21,6 +21,7 @@ from ray.rllib.algorithms.algorithm_config import NotProvided
 from ray.rllib.algorithms.sac import SACConfig
 
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
+from copilot_ray.algorithms.gc_sac import is_fast_gc_sac, use_fast_gc_sac
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
 
 # Paper Section 4.1 and the reference planner (facts.md), where the paper is silent.
@@ -148,6 +149,8 @@ class CoPilotConfig(SACConfig):
             "goal_env_config": self.goal_env_config,
             "tau_max": self.tau_max,
         }
+        if self.fast_learner and not is_fast_gc_sac(self):
+            use_fast_gc_sac(self, updates_per_env_step=self.updates_per_env_step)
         from copilot_ray.algorithms.copilot.algorithm import register_traversal_env
 
         register_traversal_env()

@@ -1,0 +1,297 @@
+"""SAC learner speed: RLlib's stock SAC learner vs. copilot_ray's fast GC-SAC learner vs. SB3 SAC.
+
+All three train 256x256 networks on batches of 256 transitions from the same replay data, collected
+with random actions on a goal-conditioned point env (`copilot_ray.envs.make("maze-point")` with its
+Dict observation flattened to concat(observation, desired_goal); a tiny numpy point env if that
+package is not importable). Everything runs in one process with the same torch thread count.
+
+    (a) stock: RLlib 2.60 default SAC module + `SACTorchLearner`, its default training path:
+        `PrioritizedEpisodeReplayBuffer.sample(...)` -> `learner_group.update(episodes=...)`
+        (learner connector included), one gradient step per call. Priority updates are left out
+        (they would only make it slower).
+    (b) ours: `use_fast_gc_sac(SACConfig())` + `FlatTransitionBuffer` + `update_from_buffer` with
+        `--steps-per-call` gradient steps per `learner_group.update(batch=...)` call.
+    (c) SB3: `SAC("MlpPolicy", ...)` with net_arch [256, 256], `model.train(gradient_steps=1,
+        batch_size=256)` per update, i.e. SB3's default `train_freq=1, gradient_steps=1` loop.
+
+Usage (from the repository root):
+
+    PYTHONPATH=. RAY_AUTH_MODE=disabled .venv/bin/python benchmarks/learner_speed.py \
+        --updates 256 --stock-updates 16 --repeats 7
+
+Prints updates/s per system and repeat, medians, ratios ours/SB3 and ours/stock, and as the last
+line `ratio_vs_sb3=<x>`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from collections.abc import Callable
+
+os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+BATCH_SIZE = 256
+HIDDEN = (256, 256)
+
+
+# ----------------------------------------------------------------------------------------- envs
+class FlattenGoalObs(gym.ObservationWrapper):
+    """Dict(observation, achieved_goal, desired_goal) -> Box concat(observation, desired_goal)."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        spaces = env.observation_space.spaces
+        low = np.concatenate([spaces["observation"].low, spaces["desired_goal"].low]).astype(np.float32)
+        high = np.concatenate([spaces["observation"].high, spaces["desired_goal"].high]).astype(np.float32)
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+
+    def observation(self, obs):
+        return np.concatenate([obs["observation"], obs["desired_goal"]]).astype(np.float32)
+
+
+class TinyPointGoalEnv(gym.Env):
+    """Fallback: point in [0, 1]^2, obs = (position, goal), action = step in [-1, 1]^2 * 0.05."""
+
+    def __init__(self):
+        self.observation_space = gym.spaces.Box(0.0, 1.0, (4,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._pos, self._goal = self.np_random.uniform(0, 1, (2, 2))
+        return self._obs(), {}
+
+    def _obs(self):
+        return np.concatenate([self._pos, self._goal]).astype(np.float32)
+
+    def step(self, action):
+        self._pos = np.clip(self._pos + 0.05 * np.clip(action, -1, 1), 0.0, 1.0)
+        success = bool(np.linalg.norm(self._pos - self._goal) < 0.05)
+        return self._obs(), (0.0 if success else -1.0), success, False, {"success": success}
+
+
+def make_env(max_steps: int = 50) -> tuple[gym.Env, str]:
+    try:
+        from copilot_ray.envs import make
+
+        env, name = FlattenGoalObs(make("maze-point")), "maze-point (flattened)"
+    except Exception as exc:  # the env package is built in parallel; fall back if it is not there
+        print(f"copilot_ray.envs.make('maze-point') unavailable ({exc!r}); using TinyPointGoalEnv")
+        env, name = TinyPointGoalEnv(), "TinyPointGoalEnv"
+    return gym.wrappers.TimeLimit(env, max_episode_steps=max_steps), name
+
+
+def collect_random_episodes(env: gym.Env, num_steps: int, seed: int = 0):
+    """Random-action rollouts -> list of (obs[T+1], actions[T], rewards[T], terminated, truncated)."""
+    rng = np.random.default_rng(seed)
+    episodes, steps = [], 0
+    obs, _ = env.reset(seed=seed)
+    env.action_space.seed(seed)
+    while steps < num_steps:
+        obs_l, act_l, rew_l = [obs], [], []
+        term = trunc = False
+        while not (term or trunc):
+            a = rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32)
+            obs, r, term, trunc, _ = env.step(a)
+            obs_l.append(obs), act_l.append(a), rew_l.append(float(r))
+            steps += 1
+        episodes.append((np.asarray(obs_l), np.asarray(act_l), np.asarray(rew_l, np.float32), term, trunc))
+        obs, _ = env.reset()
+    return episodes
+
+
+def to_rllib_episodes(raw, observation_space, action_space):
+    from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+
+    out = []
+    for obs, acts, rews, term, trunc in raw:
+        ep = SingleAgentEpisode(observation_space=observation_space, action_space=action_space)
+        ep.add_env_reset(observation=obs[0], infos={})
+        for t in range(len(acts)):
+            last = t == len(acts) - 1
+            ep.add_env_step(
+                observation=obs[t + 1],
+                action=acts[t],
+                reward=float(rews[t]),
+                infos={},
+                terminated=bool(term and last),
+                truncated=bool(trunc and last),
+            )
+        out.append(ep.to_numpy())
+    return out
+
+
+# ------------------------------------------------------------------------------------ systems
+def timed(fn: Callable[[], None], num_updates: int) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return num_updates / (time.perf_counter() - t0)
+
+
+def build_stock(obs_space, act_space, episodes):
+    """RLlib's default SAC learner group plus its default prioritized episode replay buffer."""
+    from ray.rllib.algorithms.sac import SACConfig
+    from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+    from ray.rllib.utils.replay_buffers import PrioritizedEpisodeReplayBuffer
+
+    config = SACConfig().environment(observation_space=obs_space, action_space=act_space)
+    config.rl_module(model_config={"fcnet_hiddens": list(HIDDEN)})
+    lg = config.build_learner_group()
+    rb_cfg = config.replay_buffer_config
+    buffer = PrioritizedEpisodeReplayBuffer(capacity=rb_cfg["capacity"], alpha=rb_cfg["alpha"])
+    buffer.add(episodes)
+    timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: buffer.get_num_timesteps()}
+
+    def run(n: int) -> None:
+        for _ in range(n):
+            eps = buffer.sample(
+                num_items=BATCH_SIZE,
+                n_step=config.n_step,
+                gamma=config.gamma,
+                beta=rb_cfg["beta"],
+                sample_episodes=True,
+            )
+            lg.update(episodes=eps, timesteps=timesteps)
+
+    return run, lg
+
+
+def build_ours(obs_space, act_space, episodes, steps_per_call: int, torch_threads: int):
+    from ray.rllib.algorithms.sac import SACConfig
+    from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer, use_fast_gc_sac
+
+    config = use_fast_gc_sac(
+        SACConfig().environment(observation_space=obs_space, action_space=act_space),
+        hidden=HIDDEN,
+        torch_threads=torch_threads,
+    )
+    lg = config.build_learner_group()
+    buffer = FlatTransitionBuffer(1_000_000)
+    buffer.add_episodes(episodes)
+    rng = np.random.default_rng(0)
+    timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: buffer.num_added}
+
+    def run(n: int) -> None:
+        done = 0
+        while done < n:
+            k = min(steps_per_call, n - done)
+            update_from_buffer(lg, buffer, k, BATCH_SIZE, rng, timesteps)
+            done += k
+
+    return run, lg
+
+
+def build_sb3(env: gym.Env, raw):
+    from stable_baselines3 import SAC
+
+    model = SAC(
+        "MlpPolicy",
+        env,
+        batch_size=BATCH_SIZE,
+        learning_starts=0,
+        buffer_size=1_000_000,
+        policy_kwargs={"net_arch": list(HIDDEN)},
+        device="cpu",
+        seed=0,
+        verbose=0,
+    )
+    from stable_baselines3.common.logger import configure
+
+    model.set_logger(configure(None, []))
+    rb = model.replay_buffer
+    for obs, acts, rews, term, _trunc in raw:
+        t = len(acts)
+        dones = np.zeros(t, dtype=np.float32)
+        dones[-1] = float(term)
+        for i in range(t):
+            rb.add(obs[i][None], obs[i + 1][None], acts[i][None], rews[i : i + 1], dones[i : i + 1], [{}])
+
+    def run(n: int) -> None:
+        for _ in range(n):
+            model.train(gradient_steps=1, batch_size=BATCH_SIZE)
+
+    return run, model
+
+
+def env_steps_per_second_end_to_end(*args, **kwargs) -> float | None:
+    """Hook for the CO-PILOT algorithm's author: env steps/s of the whole CO-PILOT loop (sampling,
+    buffer, updates at the configured update-to-data ratio, weight sync). Not measured here yet."""
+    return None
+
+
+# --------------------------------------------------------------------------------------- main
+def main(argv: list[str] | None = None) -> float:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--updates", type=int, default=256, help="gradient updates timed per repeat (ours, SB3)")
+    p.add_argument("--stock-updates", type=int, default=16, help="updates timed per repeat for stock RLlib")
+    p.add_argument("--warmup", type=int, default=32, help="untimed warm-up updates per system")
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--steps-per-call", type=int, default=16, help="gradient steps per learner call (ours)")
+    p.add_argument("--torch-threads", type=int, default=2)
+    p.add_argument("--data-steps", type=int, default=20_000, help="random env steps put into the buffers")
+    p.add_argument("--skip-stock", action="store_true")
+    p.add_argument("--skip-sb3", action="store_true")
+    args = p.parse_args(argv)
+
+    torch.set_num_threads(args.torch_threads)
+    env, env_name = make_env()
+    obs_space, act_space = env.observation_space, env.action_space
+    raw = collect_random_episodes(env, args.data_steps)
+    episodes = to_rllib_episodes(raw, obs_space, act_space)
+    print(
+        f"env={env_name} obs_dim={obs_space.shape[0]} act_dim={act_space.shape[0]} "
+        f"transitions={sum(len(e) for e in episodes)} batch={BATCH_SIZE} hidden={list(HIDDEN)} "
+        f"torch_threads={args.torch_threads} steps_per_call={args.steps_per_call}"
+    )
+
+    systems: dict[str, tuple[Callable[[int], None], int]] = {}
+    ours_run, _ = build_ours(obs_space, act_space, episodes, args.steps_per_call, args.torch_threads)
+    systems["ours"] = (ours_run, args.updates)
+    if not args.skip_sb3:
+        sb3_run, _ = build_sb3(env, raw)
+        systems["sb3"] = (sb3_run, args.updates)
+    if not args.skip_stock:
+        stock_run, _ = build_stock(obs_space, act_space, episodes)
+        systems["stock"] = (stock_run, args.stock_updates)
+    torch.set_num_threads(args.torch_threads)  # learners may have set it; keep all systems equal
+
+    for run, _ in systems.values():
+        run(args.warmup)
+
+    rates: dict[str, list[float]] = {name: [] for name in systems}
+    for rep in range(args.repeats):  # interleaved, so load drift hits every system alike
+        for name, (run, n) in systems.items():
+            rate = timed(lambda run=run, n=n: run(n), n)
+            rates[name].append(rate)
+        print(f"repeat {rep}: " + "  ".join(f"{k}={v[-1]:.1f}" for k, v in rates.items()) + " updates/s")
+
+    med = {name: statistics.median(v) for name, v in rates.items()}
+    print("median updates/s: " + ", ".join(f"{k}={v:.1f}" for k, v in med.items()))
+    # Paired ratios (same repeat, timed back to back) are more robust to a shared machine's load
+    # bursts than ratios of medians; both are printed, the paired median is the headline.
+    for other in ("stock", "sb3"):
+        if other in med:
+            paired = statistics.median(o / x for o, x in zip(rates["ours"], rates[other], strict=True))
+            print(
+                f"ours/{other}: paired median={paired:.2f}  ratio of medians={med['ours'] / med[other]:.2f}"
+            )
+    ratio_sb3 = (
+        statistics.median(o / x for o, x in zip(rates["ours"], rates["sb3"], strict=True))
+        if "sb3" in med
+        else float("nan")
+    )
+    print(f"ratio_vs_sb3={ratio_sb3:.3f}")
+    return ratio_sb3
+
+
+if __name__ == "__main__":
+    main()

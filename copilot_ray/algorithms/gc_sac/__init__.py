@@ -1,0 +1,52 @@
+"""Fast goal-conditioned SAC on RLlib's new API stack (SB3-speed updates, still an RLlib Learner).
+
+Pieces:
+  * `GCSACCatalog` / `GCSACTorchRLModule`: SB3-shaped actor and twin critics (critic = MLP on
+    concat(obs, action)).
+  * `GCSACTorchLearner`: one backward pass, per-gradient-step target updates, NaN guard.
+  * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
+  * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
+  * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
+  * `use_fast_gc_sac(config)`: switch a SACConfig to all of the above.
+"""
+
+from copilot_ray.algorithms.gc_sac.catalog import (
+    SB3_MODEL_CONFIG,
+    ConcatObsActionMLPEncoder,
+    ConcatObsActionMLPEncoderConfig,
+    GCSACCatalog,
+    GCSACTorchRLModule,
+    count_parameters,
+)
+from copilot_ray.algorithms.gc_sac.config import is_fast_gc_sac, use_fast_gc_sac
+from copilot_ray.algorithms.gc_sac.learner import (
+    GC_SAC_KEY,
+    NONFINITE_SKIPPED_KEY,
+    GCSACTorchLearner,
+    bellman_target,
+    gc_sac_settings,
+)
+from copilot_ray.algorithms.gc_sac.replay_buffer import COLUMNS, TRAIN_COLUMNS, FlatTransitionBuffer
+from copilot_ray.algorithms.gc_sac.updater import GradientStepSchedule, make_train_batch, update_from_buffer
+
+__all__ = [
+    "COLUMNS",
+    "GC_SAC_KEY",
+    "NONFINITE_SKIPPED_KEY",
+    "SB3_MODEL_CONFIG",
+    "TRAIN_COLUMNS",
+    "ConcatObsActionMLPEncoder",
+    "ConcatObsActionMLPEncoderConfig",
+    "FlatTransitionBuffer",
+    "GCSACCatalog",
+    "GCSACTorchLearner",
+    "GCSACTorchRLModule",
+    "GradientStepSchedule",
+    "bellman_target",
+    "count_parameters",
+    "gc_sac_settings",
+    "is_fast_gc_sac",
+    "make_train_batch",
+    "update_from_buffer",
+    "use_fast_gc_sac",
+]

@@ -1,0 +1,109 @@
+"""Driving a (GC-)SAC `LearnerGroup` from a `FlatTransitionBuffer` with one call per iteration."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
+from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS, FlatTransitionBuffer
+
+
+def make_train_batch(
+    columns: dict[str, np.ndarray],
+    *,
+    module_id: str = DEFAULT_MODULE_ID,
+    with_weights_and_n_step: bool = False,
+) -> MultiAgentBatch:
+    """Wraps flat transition columns into the `MultiAgentBatch` a Learner takes via `update(batch=...)`.
+
+    A ready batch skips the learner connector. `GCSACTorchLearner` needs only obs, new_obs, actions,
+    rewards, terminateds; RLlib's stock `SACTorchLearner` also reads `weights` and `n_step` columns:
+    pass `with_weights_and_n_step=True` for it (columns of ones).
+    """
+    cols = dict(columns)
+    n = len(cols[TRAIN_COLUMNS[0]])
+    if with_weights_and_n_step:
+        cols.setdefault("weights", np.ones(n, dtype=np.float32))
+        cols.setdefault("n_step", np.ones(n, dtype=np.float32))
+    return MultiAgentBatch({module_id: SampleBatch(cols)}, env_steps=n)
+
+
+def update_from_buffer(
+    learner_group,
+    buffer: FlatTransitionBuffer,
+    num_gradient_steps: int,
+    batch_size: int,
+    rng: np.random.Generator,
+    timesteps: dict[str, Any] | int | None = None,
+    *,
+    module_id: str = DEFAULT_MODULE_ID,
+    with_weights_and_n_step: bool = False,
+) -> list[dict[str, Any]]:
+    """`num_gradient_steps` SAC gradient steps of `batch_size` uniform samples, in one learner call.
+
+    Samples `num_gradient_steps * batch_size` transitions at once and calls
+    `learner_group.update(batch=..., minibatch_size=batch_size, num_epochs=1,
+    shuffle_batch_per_epoch=False, timesteps=...)`, which runs one gradient step per minibatch.
+    `timesteps` is RLlib's timesteps dict (an int is taken as `num_env_steps_sampled_lifetime`); it
+    drives lr schedules. Returns the learner group's results (a list with one dict per learner,
+    as `LearnerGroup.update` returns), or [] when nothing was done.
+    """
+    n = int(num_gradient_steps)
+    if n <= 0 or len(buffer) == 0:
+        return []
+    if isinstance(timesteps, int | np.integer):
+        timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: int(timesteps)}
+    cols = buffer.sample(n * int(batch_size), rng, columns=TRAIN_COLUMNS)
+    batch = make_train_batch(cols, module_id=module_id, with_weights_and_n_step=with_weights_and_n_step)
+    return learner_group.update(
+        batch=batch,
+        minibatch_size=int(batch_size),
+        num_epochs=1,
+        shuffle_batch_per_epoch=False,
+        timesteps=timesteps or {},
+    )
+
+
+class GradientStepSchedule:
+    """Turns an update-to-data ratio into integer gradient steps per iteration, keeping the fraction.
+
+    `steps = schedule.on_env_steps(new_env_steps)` returns round-down(ratio * steps + carry) and carries
+    the remainder, so the long-run ratio is exact (ratio 0.25 with 1 new step per call gives one
+    gradient step every fourth call). `learning_starts` env steps must be collected first (steps
+    before that earn no updates, like SB3's `learning_starts`).
+    """
+
+    def __init__(self, updates_per_env_step: float = 1.0, learning_starts: int = 0):
+        if updates_per_env_step < 0:
+            raise ValueError(f"updates_per_env_step must be >= 0, got {updates_per_env_step}")
+        self.updates_per_env_step = float(updates_per_env_step)
+        self.learning_starts = int(learning_starts)
+        self._env_steps = 0
+        self._carry = 0.0
+
+    def on_env_steps(self, new_env_steps: int) -> int:
+        before = self._env_steps
+        self._env_steps += int(new_env_steps)
+        eligible = max(0, self._env_steps - max(before, self.learning_starts))
+        credit = self._carry + self.updates_per_env_step * eligible
+        steps = int(np.floor(credit + 1e-9))
+        self._carry = credit - steps
+        return steps
+
+    def get_state(self) -> dict[str, Any]:
+        return {
+            "updates_per_env_step": self.updates_per_env_step,
+            "learning_starts": self.learning_starts,
+            "env_steps": self._env_steps,
+            "carry": self._carry,
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.updates_per_env_step = float(state["updates_per_env_step"])
+        self.learning_starts = int(state["learning_starts"])
+        self._env_steps = int(state["env_steps"])
+        self._carry = float(state["carry"])
