@@ -74,17 +74,21 @@ class CoPilot(SAC):
         low, high = env.goal_space.low, env.goal_space.high
         p = cfg.planner
         # tree_depth 0 is plain goal-conditioned SAC on (s0, g): no planner, one sub-task per task.
-        self.planner = None if cfg.tree_depth == 0 else SubgoalPlanner(
-            env.goal_dim,
-            cfg.tree_depth,
-            low,
-            high,
-            hidden=tuple(p["hidden"]),
-            std=p["std"],
-            lr=p["lr"],
-            clip_eps=p["clip"],
-            epochs=p["epochs"],
-            seed=seed,
+        self.planner = (
+            None
+            if cfg.tree_depth == 0
+            else SubgoalPlanner(
+                env.goal_dim,
+                cfg.tree_depth,
+                low,
+                high,
+                hidden=tuple(p["hidden"]),
+                std=p["std"],
+                lr=p["lr"],
+                clip_eps=p["clip"],
+                epochs=p["epochs"],
+                seed=seed,
+            )
         )
         c = cfg.cost_model
         self.cost_model = TimeCostModel(

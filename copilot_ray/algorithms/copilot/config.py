@@ -103,38 +103,19 @@ class CoPilotConfig(SACConfig):
         "paper_warm_start": 1 -> 0 over the first two episodes), a dict (see AlphaSchedule), or an
         AlphaSchedule.
         """
-        if tree_depth is not NotProvided:
-            self.tree_depth = tree_depth
-        if repetitions is not NotProvided:
-            self.repetitions = repetitions
-        if alpha_schedule is not NotProvided:
-            if isinstance(alpha_schedule, str):
-                alpha_schedule = AlphaSchedule.preset(alpha_schedule)
-            if isinstance(alpha_schedule, AlphaSchedule):
-                alpha_schedule = alpha_schedule.to_dict()
-            self.alpha_schedule = dict(alpha_schedule)
-        if tau_max is not NotProvided:
-            self.tau_max = tau_max
-        if task_batch_size is not NotProvided:
-            self.task_batch_size = task_batch_size
-        if collision_penalty is not NotProvided:
-            self.collision_penalty = collision_penalty
-        if planner is not NotProvided:
-            self.planner = {**self.planner, **planner}
-        if cost_model is not NotProvided:
-            self.cost_model = {**self.cost_model, **cost_model}
-        if eval_interval is not NotProvided:
-            self.eval_interval = eval_interval
-        if eval_num_tasks is not NotProvided:
-            self.eval_num_tasks = eval_num_tasks
-        if eval_tree_tasks is not NotProvided:
-            self.eval_tree_tasks = eval_tree_tasks
-        if subtasks_per_sample is not NotProvided:
-            self.subtasks_per_sample = subtasks_per_sample
-        if fast_learner is not NotProvided:
-            self.fast_learner = fast_learner
-        if updates_per_env_step is not NotProvided:
-            self.updates_per_env_step = updates_per_env_step
+        given = {k: v for k, v in locals().items() if k != "self" and v is not NotProvided}
+        if "alpha_schedule" in given:
+            schedule = given["alpha_schedule"]
+            if isinstance(schedule, str):
+                schedule = AlphaSchedule.preset(schedule)
+            if isinstance(schedule, AlphaSchedule):
+                schedule = schedule.to_dict()
+            given["alpha_schedule"] = dict(schedule)
+        for name in ("planner", "cost_model"):
+            if name in given:
+                given[name] = {**getattr(self, name), **given[name]}
+        for key, value in given.items():
+            setattr(self, key, value)
         return self
 
     def validate(self) -> None:
@@ -168,7 +149,11 @@ class CoPilotConfig(SACConfig):
 
         # 2^K + 1 sub-goals per tree and 2^(K+1) - 1 sub-tasks per traversal: K = 10 already means
         # 2047 sub-tasks per task; deeper trees are a typo, not an experiment.
-        if isinstance(self.tree_depth, bool) or not isinstance(self.tree_depth, int) or not 0 <= self.tree_depth <= 10:
+        if (
+            isinstance(self.tree_depth, bool)
+            or not isinstance(self.tree_depth, int)
+            or not 0 <= self.tree_depth <= 10
+        ):
             raise bad("tree_depth", self.tree_depth, "use an integer in [0, 10] (0: no planner, plain SAC)")
         positive_int("repetitions", self.repetitions)
         positive_int("tau_max", self.tau_max)

@@ -42,14 +42,17 @@ def update_from_buffer(
     *,
     module_id: str = DEFAULT_MODULE_ID,
     with_weights_and_n_step: bool = False,
+    steps_per_call: int = 16,
 ) -> list[dict[str, Any]]:
-    """`num_gradient_steps` SAC gradient steps of `batch_size` uniform samples, in one learner call.
+    """`num_gradient_steps` SAC gradient steps of `batch_size` uniform samples.
 
-    Samples `num_gradient_steps * batch_size` transitions at once and calls
-    `learner_group.update(batch=..., minibatch_size=batch_size, num_epochs=1,
+    Every `steps_per_call` gradient steps are one learner call: sample `steps_per_call * batch_size`
+    transitions at once and `learner_group.update(batch=..., minibatch_size=batch_size, num_epochs=1,
     shuffle_batch_per_epoch=False, timesteps=...)`, which runs one gradient step per minibatch.
+    Why chunks: RLlib's minibatch iterator slices the whole batch for every minibatch, so the cost
+    per step grows with the batch (measured: 118 updates/s at 16 steps per call, 32 at 256, 11 at 1024).
     `timesteps` is RLlib's timesteps dict (an int is taken as `num_env_steps_sampled_lifetime`); it
-    drives lr schedules. Returns the learner group's results (a list with one dict per learner,
+    drives lr schedules. Returns the learner group's results of every call (one dict per learner and call,
     as `LearnerGroup.update` returns), or [] when nothing was done.
     """
     n = int(num_gradient_steps)
@@ -57,15 +60,19 @@ def update_from_buffer(
         return []
     if isinstance(timesteps, int | np.integer):
         timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: int(timesteps)}
-    cols = buffer.sample(n * int(batch_size), rng, columns=TRAIN_COLUMNS)
-    batch = make_train_batch(cols, module_id=module_id, with_weights_and_n_step=with_weights_and_n_step)
-    return learner_group.update(
-        batch=batch,
-        minibatch_size=int(batch_size),
-        num_epochs=1,
-        shuffle_batch_per_epoch=False,
-        timesteps=timesteps or {},
-    )
+    results: list[dict[str, Any]] = []
+    for start in range(0, n, int(steps_per_call)):
+        k = min(int(steps_per_call), n - start)
+        cols = buffer.sample(k * int(batch_size), rng, columns=TRAIN_COLUMNS)
+        batch = make_train_batch(cols, module_id=module_id, with_weights_and_n_step=with_weights_and_n_step)
+        results += learner_group.update(
+            batch=batch,
+            minibatch_size=int(batch_size),
+            num_epochs=1,
+            shuffle_batch_per_epoch=False,
+            timesteps=timesteps or {},
+        )
+    return results
 
 
 class GradientStepSchedule:

@@ -1,0 +1,59 @@
+"""CoPilotConfig: the builder sets CO-PILOT's knobs and validate() names the bad key and value."""
+
+import pytest
+
+from copilot_ray.algorithms.copilot import CoPilotConfig
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
+
+
+def config(**copilot):
+    return CoPilotConfig().environment("maze-point", env_config={"layout": "u-maze"}).copilot(**copilot)
+
+
+def test_builder_merges_dicts_and_resolves_presets():
+    c = config(tree_depth=3, planner={"std": 0.1}, alpha_schedule="paper_warm_start")
+    assert c.tree_depth == 3
+    assert c.planner["std"] == 0.1 and c.planner["lr"] == 0.005  # other keys keep their defaults
+    assert c.alpha_schedule == {
+        "kind": "linear",
+        "clock": "global",
+        "start": 1.0,
+        "end": 0.0,
+        "duration": 2.0,
+    }
+
+
+def test_validate_swaps_in_the_traversal_env_and_the_fast_learner():
+    c = config(tree_depth=2, tau_max=7)
+    c.validate()
+    assert c.env == TRAVERSAL_ENV_ID and c.goal_env == "maze-point"
+    assert c.env_config == {"goal_env": "maze-point", "goal_env_config": {"layout": "u-maze"}, "tau_max": 7}
+    assert "gc_sac" in c.learner_config_dict
+    c.validate()  # idempotent: validating twice keeps the goal env
+    assert c.goal_env == "maze-point"
+
+
+@pytest.mark.parametrize(
+    ("knobs", "match"),
+    [
+        ({"tree_depth": 11}, r"tree_depth=11"),
+        ({"tree_depth": -1}, r"tree_depth=-1"),
+        ({"repetitions": 0}, r"repetitions=0"),
+        ({"tau_max": 2.5}, r"tau_max=2.5"),
+        ({"collision_penalty": -1}, r"collision_penalty=-1"),
+        ({"updates_per_env_step": 0}, r"updates_per_env_step=0"),
+        ({"alpha_schedule": {"kind": "constant", "alpha": 1.5}}, r"alpha_schedule=.*1\.5"),
+        ({"planner": {"stdd": 0.1}}, r"planner\.stdd=0\.1.*known keys"),
+        ({"planner": {"std": 0}}, r"planner\.std=0"),
+        ({"cost_model": {"fit_steps": 0}}, r"cost_model\.fit_steps=0"),
+    ],
+)
+def test_bad_values_are_rejected_with_key_and_value(knobs, match):
+    with pytest.raises(ValueError, match=match):
+        config(**knobs).validate()
+
+
+def test_vectorised_runners_are_rejected():
+    c = config().env_runners(num_envs_per_env_runner=4)
+    with pytest.raises(ValueError, match="num_envs_per_env_runner=4"):
+        c.validate()
