@@ -113,7 +113,11 @@ def evaluate_copilot(
     n = len(starts)
     envs = [make(goal_env_id, **dict(goal_env_config)) for _ in range(n)]
     # depth 0: no planner, the "plan" is the task itself.
-    trees = np.stack([starts, goals], axis=1) if planner is None else planner.sample(starts, goals, deterministic=True)
+    trees = (
+        np.stack([starts, goals], axis=1)
+        if planner is None
+        else planner.sample(starts, goals, deterministic=True)
+    )
     planned = follow_waypoints(envs, policy, trees, tau_max)
     # The agent alone gets the same step budget as the finest plan.
     direct = follow_waypoints(envs, policy, np.stack([starts, goals], axis=1), tau_max * 2**depth)

@@ -400,6 +400,9 @@ def _build_copilot_config(flat: dict[str, Any], spec: SweepSpec) -> Any:
         CoPilotConfig()
         .environment(spec.env.id, env_config=dict(spec.env.config))
         .env_runners(num_env_runners=spec.resources.num_env_runners)
+        # The trial's own process (sampling when there are no runners, and the learner) gets the CPUs
+        # not taken by runners; CoPilotConfig sizes torch's thread pool from it.
+        .resources(num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners)
         .debugging(seed=seed)
         .copilot(**copilot)
     )

@@ -106,3 +106,481 @@ class MlflowRun:
 
     def end(self, status: str = "FINISHED") -> None:
         self.client.set_terminated(self.run_id, status=status)
+
+
+# ================================================================================================ sweeps
+# What a sweep writes to MLflow (copilot_ray.sweep), in one place:
+#
+#   parent run (one per sweep)   tags  copilot.sweep=<name>, copilot.role=sweep, copilot.tune_path,
+#                                      git_commit, mlflow.runName=<name>
+#                                params  the sweep's shape (algorithm, env, searcher, seeds, trials, stop)
+#                                artifacts  spec.yaml (as given), spec.resolved.yaml (what ran), summary.md
+#   child run (one per trial)    tags  mlflow.parentRunId, copilot.role=trial, copilot.sweep,
+#                                      copilot.trial_id, copilot.config_key, algorithm, env, K, b,
+#                                      alpha_schedule, seed, git_commit
+#                                params  every knob of the algorithm at its effective value, seed, env.*
+#                                metrics  metrics_from_result + time_total_s + training_iteration,
+#                                         step = env steps (ENV_STEPS_KEY)
+#                                artifacts  config.yaml, checkpoint/ (final), copilot_trees/*.npz
+
+SWEEP_TAG = "copilot.sweep"
+ROLE_TAG = "copilot.role"
+TRIAL_ID_TAG = "copilot.trial_id"
+CONFIG_KEY_TAG = "copilot.config_key"
+TUNE_PATH_TAG = "copilot.tune_path"
+PARENT_TAG = "mlflow.parentRunId"
+SPEC_PATH_KEY = "_spec_path"  # the fixed Tune param naming the (resolved) spec a trial belongs to
+
+
+def _client(tracking_uri: str):
+    import mlflow
+
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
+    return mlflow.MlflowClient(tracking_uri)
+
+
+def ensure_experiment(client, name: str, artifact_location: str | None = None) -> str:
+    """The experiment's id, creating it (with ``artifact_location`` for a local store) if needed."""
+    exp = client.get_experiment_by_name(name)
+    if exp is not None:
+        if exp.lifecycle_stage == "deleted":
+            client.restore_experiment(exp.experiment_id)
+        return exp.experiment_id
+    return client.create_experiment(name, artifact_location=artifact_location)
+
+
+def local_artifact_location(tracking_uri: str, directory: str | Path) -> str | None:
+    """A file: artifact root next to a local (sqlite / file) store; None for a tracking server.
+
+    MLflow's default artifact root for a sqlite store is ``./mlruns`` relative to the working directory
+    of whoever creates the experiment; pinning it keeps a sweep's artifacts in its own folder.
+    """
+    if tracking_uri.startswith(("sqlite:", "file:")) or "://" not in tracking_uri:
+        return Path(directory).resolve().as_uri()
+    return None
+
+
+def _quote(value: str) -> str:
+    return "'" + str(value).replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+def find_runs(client, experiment_id: str, tags: Mapping[str, str]) -> list:
+    """Runs of the experiment carrying all ``tags`` (oldest first)."""
+    filt = " and ".join(f"tags.`{k}` = {_quote(v)}" for k, v in tags.items())
+    runs, token = [], None
+    while True:
+        page = client.search_runs(
+            [experiment_id],
+            filter_string=filt,
+            max_results=1000,
+            page_token=token,
+            order_by=["attributes.start_time ASC"],
+        )
+        runs.extend(page)
+        token = page.token
+        if not token:
+            return runs
+
+
+def open_sweep_run(
+    tracking_uri: str,
+    experiment: str,
+    sweep: str,
+    *,
+    resume: bool,
+    tags: Mapping[str, str] = (),
+    params: Mapping[str, Any] = (),
+    artifact_location: str | None = None,
+) -> tuple[str, str, bool]:
+    """The sweep's parent run: ``(experiment_id, run_id, reused)``.
+
+    ``resume``: reuse the newest parent run tagged ``copilot.sweep=<sweep>, copilot.role=sweep`` (set
+    back to RUNNING); a new one is created when there is none. Otherwise always a new parent run.
+    """
+    client = _client(tracking_uri)
+    exp_id = ensure_experiment(client, experiment, artifact_location)
+    if resume:
+        found = find_runs(client, exp_id, {SWEEP_TAG: sweep, ROLE_TAG: "sweep"})
+        if found:
+            run_id = found[-1].info.run_id
+            client.update_run(run_id, status="RUNNING")
+            return exp_id, run_id, True
+    run = client.create_run(
+        exp_id, run_name=sweep, tags={SWEEP_TAG: sweep, ROLE_TAG: "sweep", "git_commit": git_commit(), **tags}
+    )
+    run_id = run.info.run_id
+    if params:
+        _log_params(client, run_id, params_for_mlflow(dict(params)))
+    return exp_id, run_id, False
+
+
+def end_sweep_run(tracking_uri: str, run_id: str, status: str, summary_md: str | None = None) -> None:
+    client = _client(tracking_uri)
+    if summary_md is not None:
+        client.log_text(run_id, summary_md, "summary.md")
+    client.set_terminated(run_id, status=status)
+
+
+def log_sweep_files(tracking_uri: str, run_id: str, files: Mapping[str, str | Path]) -> None:
+    """``{artifact name: local file}`` onto the parent run (overwrites on resume)."""
+    client = _client(tracking_uri)
+    for name, path in files.items():
+        client.log_text(run_id, Path(path).read_text(), name)
+
+
+def _log_params(client, run_id: str, params: Mapping[str, str]) -> None:
+    from mlflow.entities import Param
+
+    items = [Param(k, v) for k, v in params.items()]
+    for i in range(0, len(items), 100):
+        client.log_batch(run_id, params=items[i : i + 100])
+
+
+# ------------------------------------------------------------------------------- what a trial is
+def _load_spec_cached(path: str):
+    from copilot_ray.spec import load_spec
+
+    spec = _SPEC_CACHE.get(path)
+    if spec is None:
+        spec = _SPEC_CACHE[path] = load_spec(path)
+    return spec
+
+
+_SPEC_CACHE: dict[str, Any] = {}
+
+
+def trial_flat(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A Tune trial config without the fixed bookkeeping keys: searched dotted params + seed."""
+    return {k: v for k, v in config.items() if not str(k).startswith("_")}
+
+
+def _fmt_value(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, Mapping):
+        return "{" + ",".join(f"{k}:{_fmt_value(v)}" for k, v in value.items()) + "}"
+    return str(value)
+
+
+def config_key(flat: Mapping[str, Any]) -> str:
+    """Names a configuration without its seed: sorted ``key=value`` of the searched params, or ``default``."""
+    items = sorted((k, v) for k, v in flat.items() if k != "seed")
+    return ",".join(f"{k}={_fmt_value(v)}" for k, v in items) or "default"
+
+
+def alpha_schedule_label(merged: Mapping[str, Any]) -> str:
+    """The preset name or kind of the alpha schedule a trial uses."""
+    from copilot_ray.spec import DEFAULT_ALPHA_PRESET
+
+    whole = merged.get("alpha_schedule")
+    dotted = sorted(k.split(".", 1)[1] for k in merged if str(k).startswith("alpha_schedule."))
+    if "kind" in dotted:
+        return str(merged["alpha_schedule.kind"])
+    if isinstance(whole, Mapping):
+        base = str(whole.get("preset") or whole.get("kind", "custom"))
+    elif whole is not None:
+        base = str(whole)
+    else:
+        base = DEFAULT_ALPHA_PRESET
+    return base + ("*" if dotted else "")  # '*': preset with some fields overridden
+
+
+def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
+    """Everything the progress lines and the MLflow tags say about one trial (built on the driver)."""
+    from copilot_ray.spec import build_algorithm_config
+
+    spec = _load_spec_cached(str(config[SPEC_PATH_KEY]))
+    flat = trial_flat(config)
+    algo_config = build_algorithm_config(flat, spec)
+    merged = {**spec.config, **{k: v for k, v in flat.items() if k != "seed"}}
+    seed = flat.get("seed", spec.seeds[0])
+    return {
+        "spec": spec,
+        "flat": flat,
+        "algo_config": algo_config,
+        "config_key": config_key(flat),
+        "algorithm": spec.algorithm,
+        "env": spec.env.id,
+        "K": getattr(algo_config, "tree_depth", None),
+        "b": getattr(algo_config, "repetitions", None),
+        "alpha_schedule": alpha_schedule_label(merged),
+        "seed": seed,
+        "knobs": effective_knobs(algo_config, spec),
+    }
+
+
+def effective_knobs(algo_config: Any, spec: Any) -> dict[str, Any]:
+    """Every settable key of the spec's algorithm (spec.ALGORITHMS knobs) at the value the run uses."""
+    from copilot_ray.spec import ALGORITHMS
+
+    out: dict[str, Any] = {}
+    for key, knob in ALGORITHMS[spec.algorithm].knobs.items():
+        try:
+            if knob.target in ("copilot", "training"):
+                if key == "alpha_schedule":
+                    continue  # its fields follow as alpha_schedule.<field>
+                out[key] = getattr(algo_config, key)
+            else:
+                field = key.split(".", 1)[1]
+                container = getattr(algo_config, knob.target)
+                if field in container:
+                    out[key] = container[field]
+        except (AttributeError, TypeError, IndexError):
+            continue
+    return out
+
+
+def _plain(value: Any) -> Any:
+    """A YAML-safe copy (classes, callables and the like become their repr)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [_plain(v) for v in value]
+    if value is None or type(value) in (bool, int, float, str):
+        return value
+    import enum
+
+    if isinstance(value, enum.Enum):
+        return _plain(value.value)
+    if isinstance(value, bool | int | float | str):  # subclasses of the scalars
+        return _base_scalar(value)
+    try:
+        import numpy as np
+
+        if isinstance(value, np.generic):
+            return value.item()
+    except ImportError:  # pragma: no cover
+        pass
+    return repr(value)
+
+
+def _base_scalar(value: Any) -> Any:
+    for base in (bool, int, float, str):
+        if isinstance(value, base):
+            return base(value)
+    return repr(value)
+
+
+def trial_config_yaml(info: Mapping[str, Any]) -> str:
+    import yaml
+
+    spec = info["spec"]
+    try:
+        algo = info["algo_config"].to_dict()
+    except Exception as err:  # noqa: BLE001 - the artifact must not fail the sweep
+        algo = f"<to_dict failed: {err}>"
+    doc = {
+        "sweep": spec.name,
+        "spec": spec.source,
+        "trial": info["flat"],
+        "seed": info["seed"],
+        "config_key": info["config_key"],
+        "env": {"id": spec.env.id, "config": dict(spec.env.config)},
+        "knobs": info["knobs"],
+        "algorithm": spec.algorithm,
+        "algorithm_config": algo,
+    }
+    return yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=120)
+
+
+# ------------------------------------------------------------------------------- the Tune callback
+def _tune_callback_base():
+    from ray.tune import Callback
+
+    return Callback
+
+
+def __getattr__(name: str):  # PEP 562: a ray.tune.Callback subclass only when asked for (no Ray import)
+    if name == "MlflowSweepCallback":
+        return mlflow_callback_class()
+    raise AttributeError(name)
+
+
+def mlflow_callback_class():
+    """``MlflowSweepCallback`` (built once, so that pickling by reference finds the same class)."""
+    cls = globals().get("MlflowSweepCallback")
+    if cls is None:
+        cls = globals()["MlflowSweepCallback"] = _make_mlflow_callback()
+    return cls
+
+
+def _make_mlflow_callback():
+    Callback = _tune_callback_base()
+
+    class MlflowSweepCallback(Callback):
+        """One MLflow child run per Tune trial under the sweep's parent run (see the table above).
+
+        Stateless across a resume: a trial's run is found again by its ``copilot.trial_id`` tag, and
+        metric rows whose step (env steps) is <= the largest step already logged for that run are
+        skipped (a trial restored from a checkpoint replays the iterations after it).
+        """
+
+        def __init__(self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str):
+            self.tracking_uri = tracking_uri
+            self.experiment_id = experiment_id
+            self.sweep = sweep
+            self.parent_run_id = parent_run_id
+            self._reset()
+
+        def _reset(self) -> None:
+            self._client_obj = None
+            self._runs: dict[str, str] = {}  # tune trial id -> mlflow run id
+            self._last_step: dict[str, int] = {}  # mlflow run id -> largest step logged
+            self._commit: str | None = None
+
+        def __getstate__(self):
+            return {k: self.__dict__[k] for k in ("tracking_uri", "experiment_id", "sweep", "parent_run_id")}
+
+        def __setstate__(self, state):
+            self.__dict__.update(state)
+            self._reset()
+
+        @property
+        def _client(self):
+            if self._client_obj is None:
+                self._client_obj = _client(self.tracking_uri)
+            return self._client_obj
+
+        # ------------------------------------------------------------------ runs
+        def run_id(self, trial) -> str:
+            run_id = self._runs.get(trial.trial_id)
+            if run_id is not None:
+                return run_id
+            client = self._client
+            found = find_runs(
+                client,
+                self.experiment_id,
+                {PARENT_TAG: self.parent_run_id, TRIAL_ID_TAG: trial.trial_id},
+            )
+            if found:
+                run_id = found[0].info.run_id
+                if found[0].info.status != "RUNNING":
+                    client.update_run(run_id, status="RUNNING")
+                history = client.get_metric_history(run_id, "training_iteration")
+                self._last_step[run_id] = max((m.step for m in history), default=-1)
+            else:
+                run_id = self._create_run(trial)
+                self._last_step[run_id] = -1
+            self._runs[trial.trial_id] = run_id
+            return run_id
+
+        def _create_run(self, trial) -> str:
+            info = describe_trial(trial.config)
+            if self._commit is None:
+                self._commit = git_commit()
+            tags = {
+                PARENT_TAG: self.parent_run_id,
+                ROLE_TAG: "trial",
+                SWEEP_TAG: self.sweep,
+                TRIAL_ID_TAG: trial.trial_id,
+                CONFIG_KEY_TAG: info["config_key"],
+                "algorithm": info["algorithm"],
+                "env": info["env"],
+                "K": str(info["K"]),
+                "b": str(info["b"]),
+                "alpha_schedule": info["alpha_schedule"],
+                "seed": str(info["seed"]),
+                "git_commit": self._commit,
+            }
+            name = f"{info['config_key']}-seed{info['seed']}"
+            run = self._client.create_run(self.experiment_id, run_name=name, tags=tags)
+            run_id = run.info.run_id
+            spec = info["spec"]
+            params = {
+                **info["knobs"],
+                "seed": info["seed"],
+                "env.id": spec.env.id,
+                **{f"env.config.{k}": v for k, v in spec.env.config.items()},
+            }
+            _log_params(self._client, run_id, params_for_mlflow(params))
+            self._client.log_text(run_id, trial_config_yaml(info), "config.yaml")
+            return run_id
+
+        # ------------------------------------------------------------------ Tune hooks
+        def on_trial_start(self, iteration, trials, trial, **info):
+            self.run_id(trial)
+
+        def on_trial_result(self, iteration, trials, trial, result, **info):
+            import time
+
+            from mlflow.entities import Metric
+
+            run_id = self.run_id(trial)
+            step = int(_get(result, ENV_STEPS_KEY, 0))
+            if step <= self._last_step.get(run_id, -1):
+                return  # already logged before a restore from an earlier checkpoint
+            metrics = metrics_from_result(result)
+            for key in ("time_total_s", "training_iteration"):
+                if isinstance(result.get(key), int | float):
+                    metrics[key] = float(result[key])
+            now = int(time.time() * 1000)
+            items = [Metric(k, v, now, step) for k, v in metrics.items()]
+            for i in range(0, len(items), 500):
+                self._client.log_batch(run_id, metrics=items[i : i + 500])
+            self._last_step[run_id] = step
+
+        def on_trial_complete(self, iteration, trials, trial, **info):
+            self._finish(trial, "FINISHED")
+
+        def on_trial_error(self, iteration, trials, trial, **info):
+            self._finish(trial, "FAILED")
+
+        def on_experiment_end(self, trials, **info):
+            # Interrupted (Ctrl-C / SIGTERM): runs of unfinished trials wait, KILLED, for --resume.
+            for trial in trials:
+                run_id = self._runs.get(trial.trial_id)
+                done = trial.status == "ERROR" or (trial.last_result or {}).get("done")
+                if run_id is not None and not done:  # (cleanup marks stopped trials TERMINATED)
+                    self._client.set_terminated(run_id, status="KILLED")
+
+        def _finish(self, trial, status: str) -> None:
+            run_id = self.run_id(trial)
+            client = self._client
+            try:
+                checkpoint = trial.checkpoint
+                if checkpoint is not None and Path(checkpoint.path).is_dir():
+                    client.log_artifacts(run_id, checkpoint.path, "checkpoint")
+                for tree_dir in _tree_dirs(trial):
+                    client.log_artifacts(run_id, str(tree_dir), "copilot_trees")
+                    break
+                error_file = getattr(trial, "error_file", None)
+                if status == "FAILED" and error_file and Path(error_file).is_file():
+                    client.log_artifact(run_id, error_file, "error")
+            finally:
+                client.set_terminated(run_id, status=status)
+                self._runs.pop(trial.trial_id, None)
+
+    MlflowSweepCallback.__module__ = __name__
+    MlflowSweepCallback.__qualname__ = "MlflowSweepCallback"
+    return MlflowSweepCallback
+
+
+def _get(result: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
+    """``result['a/b/c']`` from a nested or flattened result."""
+    if dotted in result:
+        return result[dotted]
+    node: Any = result
+    for part in dotted.split("/"):
+        if not isinstance(node, Mapping) or part not in node:
+            return default
+        node = node[part]
+    return node
+
+
+def _tree_dirs(trial) -> list[Path]:
+    """Where a trial's ``copilot_trees/`` can be: the synced trial dir, or the local working dir.
+
+    ``Algorithm.logdir`` of a Tune trial is Tune's per-trial *working directory* under the Ray session
+    (``/tmp/ray/session_*/artifacts/<time>/<experiment>/working_dirs/<trial>``); the sweep syncs it into
+    the trial folder (``SyncConfig(sync_artifacts=True)``) on every checkpoint.
+    """
+    out = []
+    candidates = [trial.path]
+    try:
+        candidates.append(trial.storage.trial_working_directory)
+    except Exception:  # noqa: BLE001 - no storage context: nothing to look at
+        pass
+    for base in candidates:
+        if base and (Path(base) / "copilot_trees").is_dir() and any((Path(base) / "copilot_trees").iterdir()):
+            out.append(Path(base) / "copilot_trees")
+    return out

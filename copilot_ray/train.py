@@ -54,6 +54,9 @@ def build_config(args: argparse.Namespace):
         CoPilotConfig()
         .environment(args.env, env_config=env_config)
         .env_runners(num_env_runners=args.num_env_runners)
+        # Sampling (without runners) and the learner share this process: give it the cores the
+        # runners leave free; CoPilotConfig sizes torch's thread pool from this.
+        .resources(num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners))
         .debugging(seed=args.seed)
         .copilot(
             tree_depth=args.tree_depth,
@@ -99,7 +102,11 @@ def main(argv: list[str] | None = None) -> int:
     from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
 
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
-    ray.init(num_cpus=max(2, args.num_env_runners + 1), include_dashboard=False, log_to_driver=False)
+    ray.init(
+        num_cpus=max(os.cpu_count() or 1, args.num_env_runners + 1),
+        include_dashboard=False,
+        log_to_driver=False,
+    )
     run = None
     if args.tracking_uri:
         run = MlflowRun(

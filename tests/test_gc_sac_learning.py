@@ -4,12 +4,10 @@ The env runner samples episodes, `FlatTransitionBuffer.add_episodes` stores them
 trains, and the runner gets the learner's weights back: the same calls CO-PILOT's training_step makes.
 """
 
-import os
 import time
 
 import gymnasium as gym
 import numpy as np
-import pytest
 import torch
 from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.core import COMPONENT_RL_MODULE, DEFAULT_MODULE_ID
@@ -84,7 +82,17 @@ def _train(fast: bool, env_steps: int, seed: int = 0):
         sampled += new
         n = schedule.on_env_steps(new)
         if n:
-            update_from_buffer(learner_group, buffer, n, 64, rng, sampled, with_weights_and_n_step=not fast)
+            # The stock learner moves its targets once per call: one gradient step per call for it.
+            update_from_buffer(
+                learner_group,
+                buffer,
+                n,
+                64,
+                rng,
+                sampled,
+                with_weights_and_n_step=not fast,
+                steps_per_call=16 if fast else 1,
+            )
             # Weight sync learner -> env runner (what `env_runner_group.sync_weights` does).
             state = learner_group.get_state(components="learner/rl_module", inference_only=True)["learner"]
             runner.set_state({COMPONENT_RL_MODULE: state[COMPONENT_RL_MODULE]})
@@ -100,12 +108,6 @@ def test_env_runner_to_buffer_to_learner_to_env_runner_round_trip():
         torch.testing.assert_close(value, learned[name])
 
 
-SLOW = pytest.mark.skipif(
-    not os.environ.get("COPILOT_SLOW_TESTS"), reason="slow (30-60 s): set COPILOT_SLOW_TESTS=1"
-)
-
-
-@SLOW
 def test_fast_gc_sac_learns_to_reach_goals():
     t0 = time.perf_counter()
     module, runner_module, _ = _train(fast=True, env_steps=8000)
@@ -113,15 +115,3 @@ def test_fast_gc_sac_learns_to_reach_goals():
     print(f"fast GC-SAC: success {rate:.2f} after 8000 env steps in {time.perf_counter() - t0:.1f} s")
     assert rate >= 0.7  # random actions: about 0.1; 1.0 seen in a trial run
     assert _success_rate(runner_module) >= 0.7  # the env runner got the trained weights
-
-
-@pytest.mark.skipif(
-    not os.environ.get("COPILOT_SLOW_TESTS"), reason="slow (~minutes): set COPILOT_SLOW_TESTS=1"
-)
-def test_stock_sac_learns_to_reach_goals_too():
-    t0 = time.perf_counter()
-    rate, _ = _train(fast=False, env_steps=8000)
-    print(
-        f"stock SAC (flat batches): success {rate:.2f} after 8000 env steps in {time.perf_counter() - t0:.1f} s"
-    )
-    assert rate >= 0.6

@@ -131,7 +131,10 @@ class CoPilotConfig(SACConfig):
             "tau_max": self.tau_max,
         }
         if self.fast_learner and not is_fast_gc_sac(self):
-            use_fast_gc_sac(self, updates_per_env_step=self.updates_per_env_step)
+            # One torch thread per CPU this process holds: more threads than cores make OpenMP spin
+            # against other trials and runners (measured 10-20x slower SAC updates on 2 busy cores).
+            threads = max(1, int(self.num_cpus_for_main_process or 1))
+            use_fast_gc_sac(self, updates_per_env_step=self.updates_per_env_step, torch_threads=threads)
         from copilot_ray.algorithms.copilot.algorithm import register_traversal_env
 
         register_traversal_env()

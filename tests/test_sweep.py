@@ -1,0 +1,169 @@
+"""`python -m copilot_ray.sweep`: spec checks from the CLI, the smoke sweep tracked in MLflow, resume.
+
+The Ray runs use a cheaper copy of sweeps/smoke.yaml (130 env steps per trial instead of 1500: before SAC starts learning at 256) with its
+storage in tmp_path: the wiring is what is tested here, not learning.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+SWEEPS = sorted((ROOT / "sweeps").glob("*.yaml"))
+STEPS = "env_runners/num_env_steps_sampled_lifetime"
+
+
+def _smoke_copy(tmp_path: Path, env_steps: int = 130) -> Path:
+    data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
+    data["tracking"] = {"storage": str(tmp_path / "results")}
+    data["stop"] = {"env_steps": env_steps}
+    path = tmp_path / "smoke.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def _runs(spec):
+    import mlflow
+
+    client = mlflow.MlflowClient(spec.tracking.uri)
+    exp = client.get_experiment_by_name(spec.experiment)
+    runs = client.search_runs([exp.experiment_id], max_results=1000)
+    parents = [r for r in runs if r.data.tags.get("copilot.role") == "sweep"]
+    children = [r for r in runs if r.data.tags.get("copilot.role") == "trial"]
+    return client, parents, children
+
+
+# ------------------------------------------------------------------------------------- no Ray at all
+def test_cli_bad_spec_exits_2_naming_the_key_without_ray(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        "name: bad\nenv: {id: maze-point, config: {layout: u-maze}}\n"
+        "search: {tree_depth: {grid: [1, 99]}}\nstop: {env_steps: 100}\n"
+    )
+    wrapper = (
+        "import runpy, sys\n"
+        f"sys.argv = ['copilot_ray.sweep', {str(bad)!r}]\n"
+        "try:\n    runpy.run_module('copilot_ray.sweep', run_name='__main__')\n"
+        "except SystemExit as e:\n    code = e.code\n"
+        "print('RAY_IMPORTED', 'ray' in sys.modules)\n"
+        "sys.exit(code)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-c", wrapper], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert "search.tree_depth.grid[1]" in proc.stderr and "99" in proc.stderr
+    assert "RAY_IMPORTED False" in proc.stdout
+
+
+@pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
+def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
+    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep import main
+
+    assert main([str(path), "--check"]) == 0
+    out = capsys.readouterr().out
+    assert f"{len(load_spec(path).trial_plan())} trial(s)" in out
+
+
+def test_existing_results_need_resume(tmp_path):
+    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep import SweepError, run_sweep
+
+    spec = load_spec(_smoke_copy(tmp_path))
+    (Path(spec.tracking.storage) / spec.name / "tune" / spec.name).mkdir(parents=True)
+    with pytest.raises(SweepError, match="--resume"):
+        run_sweep(spec)
+
+
+# ------------------------------------------------------------------------------------- on Ray
+def test_smoke_sweep_is_tracked_in_mlflow(ray_session, tmp_path):
+    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep import run_sweep
+
+    spec = load_spec(_smoke_copy(tmp_path))
+    outcome = run_sweep(spec)
+    assert outcome.status == "finished" and outcome.exit_code == 0
+    assert ray_session.is_initialized()  # a Ray it did not start is left running
+    assert [r.config_key for r in outcome.rows] == ["tree_depth=1", "tree_depth=2"]
+
+    client, parents, children = _runs(spec)
+    assert len(parents) == 1 and len(children) == 2
+    parent = parents[0]
+    assert parent.data.tags["copilot.sweep"] == "smoke" and parent.info.status == "FINISHED"
+    assert {a.path for a in client.list_artifacts(parent.info.run_id)} >= {"spec.yaml", "summary.md"}
+    by_depth = {}
+    for run in children:
+        tags, params = run.data.tags, run.data.params
+        assert tags["mlflow.parentRunId"] == parent.info.run_id
+        assert tags["copilot.sweep"] == "smoke" and tags["seed"] == "0" and tags["b"] == "1"
+        assert tags["K"] == params["tree_depth"] and tags["copilot.config_key"] == f"tree_depth={tags['K']}"
+        assert tags["git_commit"] and tags["alpha_schedule"] == "paper_per_task"
+        assert run.info.status == "FINISHED"
+        success = client.get_metric_history(run.info.run_id, "copilot/eval/success_planned")
+        steps = client.get_metric_history(run.info.run_id, STEPS)
+        assert success and [m.step for m in success] == [int(m.value) for m in steps]
+        got = [m.step for m in success]
+        assert got == sorted(set(got))  # strictly increasing env steps
+        assert success[-1].step >= 130
+        arts = {a.path for a in client.list_artifacts(run.info.run_id)}
+        assert {"config.yaml", "checkpoint", "copilot_trees"} <= arts
+        assert client.list_artifacts(run.info.run_id, "checkpoint")
+        by_depth[params["tree_depth"]] = run
+    assert set(by_depth) == {"1", "2"}
+
+
+class _InterruptAfterFirstTrial:
+    """Sends this process SIGINT (as Ctrl-C does) when the second trial starts (the first is done)."""
+
+    armed = True
+
+
+def _interrupt_callback():
+    from ray import tune
+
+    class InterruptAfterFirstTrial(tune.Callback):
+        def on_trial_start(self, iteration, trials, trial, **info):
+            # The first trial is done and the second one has started: interrupt it mid-way.
+            if _InterruptAfterFirstTrial.armed and any(t.status == "TERMINATED" for t in trials):
+                _InterruptAfterFirstTrial.armed = False
+                os.kill(os.getpid(), signal.SIGINT)
+
+    InterruptAfterFirstTrial.__qualname__ = "InterruptAfterFirstTrial"
+    globals()["InterruptAfterFirstTrial"] = InterruptAfterFirstTrial
+    return InterruptAfterFirstTrial
+
+
+def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path):
+    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep import run_sweep
+
+    spec = load_spec(_smoke_copy(tmp_path))
+    _InterruptAfterFirstTrial.armed = True
+    first = run_sweep(spec, extra_callbacks=[_interrupt_callback()()])
+    assert first.status == "interrupted" and first.exit_code == 130
+    assert [r.status for r in first.rows].count("finished") == 1
+    _, parents, children = _runs(spec)
+    assert len(parents) == 1 and parents[0].info.status == "KILLED"
+    assert sorted(c.info.status for c in children) == ["FINISHED", "KILLED"]
+    assert [r.status for r in first.rows] == ["finished", "unfinished"]
+
+    second = run_sweep(spec, resume=True)
+    assert second.status == "finished", second.summary
+    assert second.parent_run_id == first.parent_run_id
+    client, parents, children = _runs(spec)
+    assert len(parents) == 1 and parents[0].info.status == "FINISHED"
+    assert len(children) == 2
+    assert len({c.data.tags["copilot.trial_id"] for c in children}) == 2
+    for run in children:
+        assert run.info.status == "FINISHED"
+        steps = [m.step for m in client.get_metric_history(run.info.run_id, "training_iteration")]
+        assert steps and len(steps) == len(set(steps)) and steps == sorted(steps)
