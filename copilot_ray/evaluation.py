@@ -19,17 +19,20 @@ Policy = Callable[[np.ndarray], np.ndarray]
 
 
 class ModulePolicy:
-    """Deterministic actions from an RLlib RLModule (the mode of its action distribution)."""
+    """Deterministic actions of a SAC RLModule: the tanh-squashed mean of its Gaussian.
+
+    Not `dist.to_deterministic()`: for RLlib's TorchSquashedGaussian that returns the *unsquashed*
+    mean, which clipped to [-1, 1] turns every confident action into a full-speed one.
+    """
 
     def __init__(self, module):
         self.module = module
-        self.dist_cls = module.get_inference_action_dist_cls()
 
     @torch.no_grad()
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         out = self.module.forward_inference({"obs": torch.as_tensor(obs, dtype=torch.float32)})
-        dist = self.dist_cls.from_logits(out["action_dist_inputs"]).to_deterministic()
-        return np.clip(dist.sample().numpy(), -1.0, 1.0)
+        mean, _ = out["action_dist_inputs"].chunk(2, dim=-1)
+        return torch.tanh(mean).numpy()
 
 
 @dataclass

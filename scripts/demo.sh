@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
-# Installs everything (idempotent) and runs the main job on its embedded defaults: a short CO-PILOT
-# run on local Ray, tracked in an embedded SQLite MLflow store under results/demo/.
+# Installs everything (idempotent) and runs the main job on its embedded defaults: the demo sweep
+# (sweeps/demo.yaml) on a local Ray, tracked in MLflow in results/demo/mlflow.db, then the analysis
+# report of it. A second run continues (or just re-reports) the same sweep instead of starting over.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup_env.sh
 export RAY_AUTH_MODE=disabled
-mkdir -p results/demo
-exec .venv/bin/python -m copilot_ray.train \
-  --env maze-point --layout u-maze --tree-depth 3 --repetitions 2 --task-batch-size 10 \
-  --stop-env-steps 30000 --eval-tasks 50 --seed 0 \
-  --checkpoint-dir results/demo/checkpoint \
-  --tracking-uri "sqlite:///$PWD/results/demo/mlflow.db" --experiment copilot-demo "$@"
+resume=()
+if [ -d results/demo/tune ]; then
+  resume=(--resume)
+fi
+.venv/bin/python -m copilot_ray.sweep sweeps/demo.yaml "${resume[@]}" "$@"
+.venv/bin/python -m analysis.report demo --tracking-uri "sqlite:///$PWD/results/demo/mlflow.db" \
+  --out results/demo/report
