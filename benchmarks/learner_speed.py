@@ -222,10 +222,39 @@ def build_sb3(env: gym.Env, raw):
     return run, model
 
 
-def env_steps_per_second_end_to_end(*args, **kwargs) -> float | None:
-    """Hook for the CO-PILOT algorithm's author: env steps/s of the whole CO-PILOT loop (sampling,
-    buffer, updates at the configured update-to-data ratio, weight sync). Not measured here yet."""
-    return None
+def copilot_end_to_end(iterations: int = 2) -> dict[str, float]:
+    """Env steps/s of the whole CO-PILOT loop (planner, traversal sampling, buffer, one SAC update per
+    env step, weight sync, cost-model fit) on the default maze with K = 5, and the share of wall time
+    in the planner and cost-model phases. Evaluation is off; the first iteration is warm-up."""
+    import ray
+
+    from copilot_ray.algorithms.copilot import CoPilotConfig
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        algo = (
+            CoPilotConfig()
+            .environment("maze-point")
+            .resources(num_cpus_for_main_process=2)
+            .training(num_steps_sampled_before_learning_starts=256)
+            .copilot(tree_depth=5, repetitions=1, task_batch_size=2, eval_interval=0)
+            .build_algo()
+        )
+        out = {}
+        for _ in range(iterations):
+            t0 = time.perf_counter()
+            before = algo.metrics.peek(("env_runners", "num_env_steps_sampled_lifetime"), default=0)
+            result = algo.train()
+            steps = result["env_runners"]["num_env_steps_sampled_lifetime"] - before
+            out = {
+                "env_steps_per_s": steps / (time.perf_counter() - t0),
+                "planning_share": float(result["copilot"]["time"]["planning_share"]),
+                "env_steps": float(steps),
+            }
+        algo.stop()
+        return out
+    finally:
+        ray.shutdown()
 
 
 # --------------------------------------------------------------------------------------- main
@@ -240,6 +269,7 @@ def main(argv: list[str] | None = None) -> float:
     p.add_argument("--data-steps", type=int, default=20_000, help="random env steps put into the buffers")
     p.add_argument("--skip-stock", action="store_true")
     p.add_argument("--skip-sb3", action="store_true")
+    p.add_argument("--skip-end-to-end", action="store_true", help="skip the CO-PILOT loop measurement")
     args = p.parse_args(argv)
 
     torch.set_num_threads(args.torch_threads)
@@ -284,6 +314,13 @@ def main(argv: list[str] | None = None) -> float:
             print(
                 f"ours/{other}: paired median={paired:.2f}  ratio of medians={med['ours'] / med[other]:.2f}"
             )
+    if not args.skip_end_to_end:
+        e2e = copilot_end_to_end()
+        print(
+            f"CO-PILOT end to end (K=5, four-rooms, 1 update per env step): "
+            f"{e2e['env_steps_per_s']:.1f} env steps/s over {e2e['env_steps']:.0f} steps, "
+            f"planner + cost-model share of wall time {e2e['planning_share']:.1%}"
+        )
     ratio_sb3 = (
         statistics.median(o / x for o, x in zip(rates["ours"], rates["sb3"], strict=True))
         if "sb3" in med
