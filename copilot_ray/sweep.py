@@ -43,6 +43,7 @@ from copilot_ray.tracking import (
     SPEC_PATH_KEY,
     config_key,
     describe_trial,
+    result_value,
     trial_flat,
 )
 
@@ -198,7 +199,7 @@ def _make_progress_printer():
 
         def on_trial_result(self, iteration, trials, trial, result, **info):
             ev = result.get("copilot", {}).get("eval", {})
-            steps = _nested(result, ENV_STEPS_KEY, 0)
+            steps = result_value(result, ENV_STEPS_KEY, 0)
             mark = "" if ev.get("fresh", 1.0) else " (last eval)"
             _say(
                 f"{self._head(trial)}  iter {result.get('training_iteration', 0):4d}  "
@@ -269,17 +270,6 @@ def _say(line: str) -> None:
 
 def _fmt(v: Any) -> str:
     return f"{v:.2f}" if isinstance(v, int | float) and not math.isnan(v) else "  - "
-
-
-def _nested(d: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
-    if dotted in d:
-        return d[dotted]
-    node: Any = d
-    for part in dotted.split("/"):
-        if not isinstance(node, Mapping) or part not in node:
-            return default
-        node = node[part]
-    return node
 
 
 def _searcher(spec, spec_path: Path, index: int, seed: int):
@@ -397,7 +387,7 @@ def rows_from_grid(grid) -> list[TrialRow]:
                 status=status,
                 success_planned=_last_valid(df, SUCCESS_KEYS[0]),
                 success_direct=_last_valid(df, SUCCESS_KEYS[1]),
-                env_steps=int(_nested(m, ENV_STEPS_KEY, 0) or 0),
+                env_steps=int(result_value(m, ENV_STEPS_KEY, 0) or 0),
                 wall_s=float(m.get("time_total_s", 0.0) or 0.0),
             )
         )

@@ -506,7 +506,7 @@ def _make_mlflow_callback():
             from mlflow.entities import Metric
 
             run_id = self.run_id(trial)
-            step = int(_get(result, ENV_STEPS_KEY, 0))
+            step = int(result_value(result, ENV_STEPS_KEY, 0))
             if step <= self._last_step.get(run_id, -1):
                 return  # already logged before a restore from an earlier checkpoint
             metrics = metrics_from_result(result)
@@ -555,7 +555,7 @@ def _make_mlflow_callback():
     return MlflowSweepCallback
 
 
-def _get(result: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
+def result_value(result: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
     """``result['a/b/c']`` from a nested or flattened result."""
     if dotted in result:
         return result[dotted]
