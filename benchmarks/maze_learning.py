@@ -51,7 +51,7 @@ def build(method: str, args, seed: int):
     return config.build_algo()
 
 
-def run_one(method: str, args, seed: int) -> list[dict]:
+def run_one(method: str, args, seed: int, rows_path: Path, done: list[dict]) -> list[dict]:
     algo = build(method, args, seed)
     rows = []
     started = time.time()
@@ -71,6 +71,8 @@ def run_one(method: str, args, seed: int) -> list[dict]:
                 "planning_share": float(result["copilot"]["time"]["planning_share"]),
             }
             rows.append(row)
+            # Written every iteration: a killed benchmark keeps what it measured.
+            rows_path.write_text(json.dumps(done + rows, indent=1))
             print(
                 f"{method:8s} seed {seed}  iter {row['iteration']:3d}  env_steps {steps:8d}  "
                 f"planned {row['success_planned']:.2f}  direct {row['success_direct']:.2f}  "
@@ -123,18 +125,17 @@ def main(argv: list[str] | None = None) -> None:
 
     import ray
 
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     rows: list[dict] = []
     try:
         for seed in args.seeds:
             for method in args.methods:
-                rows += run_one(method, args, seed)
+                rows += run_one(method, args, seed, out / "rows.json", rows)
     finally:
         ray.shutdown()
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "rows.json").write_text(json.dumps(rows, indent=1))
     plot(rows, out / "success_vs_env_steps.png")
     print("\nmethod    seed  env_steps  final planned  final direct  best planned  wall_s")
     for method, seed in sorted({(r["method"], r["seed"]) for r in rows}):
