@@ -293,6 +293,9 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "gamma": _float("training", 0.0, 1.0, lo_open=True),
     "tau": _float("training", 0.0, 1.0, lo_open=True),
     "train_batch_size_per_learner": _int("training", 1),
+    # RLlib's name for the update-to-data ratio (timesteps replayed per timestep sampled); an
+    # alternative to updates_per_env_step = training_intensity / train_batch_size_per_learner.
+    "training_intensity": _float("training", 0.0, lo_open=True),
     "num_steps_sampled_before_learning_starts": _int("training", 0),
 }
 
@@ -873,6 +876,13 @@ class SweepSpec(_Model):
 
         issues = []
         points = self._grid_points() if self.searcher.type == "grid" else _representative_points(self.search)
+        for point in points:
+            merged = {**self.config, **point}
+            if "updates_per_env_step" in merged and "training_intensity" in merged:
+                where = "search" if {"updates_per_env_step", "training_intensity"} & set(point) else "config"
+                both = {k: merged[k] for k in ("updates_per_env_step", "training_intensity")}
+                issues.append(_Issue(where, both, "both set the update-to-data ratio; set one"))
+                break
         for point in points:
             merged = {**self.config, **point}
             if not any(k.startswith("alpha_schedule") for k in merged):

@@ -32,7 +32,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0: sample on driver)")
     p.add_argument("--eval-interval", type=int, default=1, help="iterations between evaluations (0: never)")
     p.add_argument("--eval-tasks", type=int, default=100, help="held-out test tasks per evaluation")
-    p.add_argument("--updates-per-env-step", type=float, default=1.0, help="SAC gradient steps per env step")
+    p.add_argument(
+        "--updates-per-env-step",
+        type=float,
+        default=None,
+        help="SAC gradient steps per env step (default 1.0)",
+    )
     p.add_argument("--stock-learner", action="store_true", help="RLlib's stock SAC learner path (slow)")
     p.add_argument("--checkpoint-dir", default="results/train", help="where checkpoints go")
     p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI; none: no MLflow")

@@ -57,3 +57,30 @@ def test_vectorised_runners_are_rejected():
     c = config().env_runners(num_envs_per_env_runner=4)
     with pytest.raises(ValueError, match="num_envs_per_env_runner=4"):
         c.validate()
+
+
+@pytest.mark.parametrize(
+    ("updates_per_env_step", "training_intensity", "batch", "ratio"),
+    [
+        (None, None, 256, 1.0),  # SB3's one gradient step per env step
+        (0.25, None, 256, 0.25),
+        (None, 512.0, 256, 2.0),  # RLlib's meaning: 512 replayed timesteps per sampled one
+        (None, 64.0, 128, 0.5),
+    ],
+)
+def test_update_to_data_ratio_from_either_knob(updates_per_env_step, training_intensity, batch, ratio):
+    c = config(updates_per_env_step=updates_per_env_step).training(
+        training_intensity=training_intensity, train_batch_size_per_learner=batch
+    )
+    c.validate()
+    assert c.utd_ratio() == pytest.approx(ratio)
+    # The fast learner records the same ratio it was built with.
+    assert c.learner_config_dict["gc_sac"]["updates_per_env_step"] == pytest.approx(ratio)
+
+
+def test_both_update_to_data_knobs_at_once_are_rejected():
+    c = config(updates_per_env_step=0.5).training(training_intensity=128.0)
+    with pytest.raises(ValueError, match=r"training_intensity=128\.0.*updates_per_env_step=0\.5"):
+        c.validate()
+    with pytest.raises(ValueError, match=r"training_intensity=0"):
+        config().training(training_intensity=0).validate()

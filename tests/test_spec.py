@@ -309,6 +309,17 @@ def test_alpha_schedule_keys_must_form_a_schedule():
     assert "search: " in rejected(data) and "does not apply to kind='constant'" in rejected(data)
 
 
+def test_update_to_data_ratio_set_twice_is_rejected():
+    data = spec_with(config={"tree_depth": 2, "updates_per_env_step": 0.5, "training_intensity": 128.0})
+    msg = rejected(data)
+    assert "config: " in msg and "training_intensity" in msg and "updates_per_env_step" in msg
+    data = spec_with(config={"tree_depth": 2, "updates_per_env_step": 0.5})
+    data["search"] = {"training_intensity": {"grid": [64.0, 256.0]}}
+    assert "search: " in rejected(data)
+    # One of them alone is fine.
+    parse_spec(spec_with(config={"tree_depth": 2, "training_intensity": 128.0}), "x.yaml")
+
+
 def test_when_needs_known_choices_and_categorical():
     search = {"alpha_schedule.kind": {"categorical": ["constant"], "when": {"constnt": {}}}}
     message = rejected(spec_with(search=search, searcher=_optuna()))

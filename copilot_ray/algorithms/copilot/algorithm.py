@@ -31,6 +31,7 @@ from ray.rllib.utils.metrics import (
 
 from copilot_ray.algorithms.copilot.agent_updates import make_agent_updater
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env
+from copilot_ray.algorithms.gc_sac import GradientStepSchedule
 from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
 from copilot_ray.planning import (
     AlphaClock,
@@ -109,6 +110,11 @@ class CoPilot(SAC):
         self.train_starts, self.train_goals = env.tasks("train")
         self.test_starts, self.test_goals = env.tasks("test")
         self.agent_updater = make_agent_updater(self)
+        # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
+        # exact over the run instead of rounded per sampling round.
+        self.gradient_steps = GradientStepSchedule(
+            cfg.utd_ratio(), learning_starts=cfg.num_steps_sampled_before_learning_starts
+        )
         self._artifact_dir: Path | None = None
 
     # --------------------------------------------------------------------------- training step
@@ -200,7 +206,7 @@ class CoPilot(SAC):
         """Bottom-up traversal of every tree on the env runners, with SAC updates in between.
 
         Tasks are split over the runners; each round every runner runs its next
-        `subtasks_per_sample` sub-tasks, then the learner does updates_per_env_step gradient steps
+        `subtasks_per_sample` sub-tasks, then the learner does `config.utd_ratio()` gradient steps
         per new env step and the runners get the new weights.
         """
         cfg = self.config
@@ -252,12 +258,10 @@ class CoPilot(SAC):
     def _learn(self, episodes) -> None:
         new_steps = sum(len(e) for e in episodes)
         self.agent_updater.add(episodes)
-        lifetime = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
-        if lifetime < self.config.num_steps_sampled_before_learning_starts:
-            return
-        num_updates = int(round(self.config.updates_per_env_step * new_steps))
+        num_updates = self.gradient_steps.on_env_steps(new_steps)
         if num_updates == 0:
             return
+        lifetime = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
         timesteps = {
             NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime,
             NUM_AGENT_STEPS_SAMPLED_LIFETIME: lifetime,
@@ -319,6 +323,7 @@ class CoPilot(SAC):
             "rng": self._rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "agent_updater": self.agent_updater.get_state(),
+            "gradient_steps": self.gradient_steps.get_state(),
         }
         return state
 
@@ -334,6 +339,7 @@ class CoPilot(SAC):
         self._rng.bit_generator.state = own["rng"]
         torch.set_rng_state(own["torch_rng"])
         self.agent_updater.set_state(own["agent_updater"])
+        self.gradient_steps.set_state(own["gradient_steps"])
 
 
 def _traversal_stats(subtasks: dict[str, np.ndarray], depth: int) -> dict[str, float]:

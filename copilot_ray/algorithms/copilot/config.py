@@ -62,7 +62,9 @@ class CoPilotConfig(SACConfig):
         self.eval_tree_tasks = 3  # fixed test tasks whose sub-goal trees are saved per evaluation
         self.subtasks_per_sample = 64  # sub-tasks per runner between two learner updates
         self.fast_learner = True  # our flat-buffer SAC learner; False: RLlib's stock SAC path
-        self.updates_per_env_step = 1.0  # gradient steps per sampled env step (UTD ratio)
+        # Gradient steps per sampled env step (the update-to-data ratio). None: derived from RLlib's
+        # `training_intensity` (replayed / sampled timesteps) when that is set, else 1.0.
+        self.updates_per_env_step: float | None = None
         self.goal_env: str | None = None
         self.goal_env_config: dict[str, Any] = {}
 
@@ -138,11 +140,24 @@ class CoPilotConfig(SACConfig):
             # One torch thread per CPU this process holds: more threads than cores make OpenMP spin
             # against other trials and runners (measured 10-20x slower SAC updates on 2 busy cores).
             threads = max(1, int(self.num_cpus_for_main_process or 1))
-            use_fast_gc_sac(self, updates_per_env_step=self.updates_per_env_step, torch_threads=threads)
+            use_fast_gc_sac(self, updates_per_env_step=self.utd_ratio(), torch_threads=threads)
         from copilot_ray.algorithms.copilot.algorithm import register_traversal_env
 
         register_traversal_env()
         super().validate()
+
+    def utd_ratio(self) -> float:
+        """SAC gradient steps per sampled env step.
+
+        `updates_per_env_step` if set; else RLlib's `training_intensity` (timesteps replayed per
+        timestep sampled, see SACConfig.training) divided by the train batch size, because one gradient
+        step replays one batch; else 1.0 (SB3's `train_freq=1, gradient_steps=1`).
+        """
+        if self.updates_per_env_step is not None:
+            return float(self.updates_per_env_step)
+        if self.training_intensity is not None:
+            return float(self.training_intensity) / float(self.total_train_batch_size)
+        return 1.0
 
     def _validate_copilot(self) -> None:
         def bad(key: str, value: Any, fix: str) -> ValueError:
@@ -173,8 +188,20 @@ class CoPilotConfig(SACConfig):
             raise bad("eval_tree_tasks", self.eval_tree_tasks, "use an integer >= 0")
         if not (isinstance(self.collision_penalty, int | float) and self.collision_penalty >= 0):
             raise bad("collision_penalty", self.collision_penalty, "use a number >= 0 (paper: 10)")
-        if not (isinstance(self.updates_per_env_step, int | float) and self.updates_per_env_step > 0):
-            raise bad("updates_per_env_step", self.updates_per_env_step, "use a number > 0, e.g. 1.0")
+        for key in ("updates_per_env_step", "training_intensity"):
+            value = getattr(self, key)
+            if value is not None and not (
+                isinstance(value, int | float) and not isinstance(value, bool) and value > 0
+            ):
+                raise bad(key, value, "use a number > 0 (or None)")
+        if self.updates_per_env_step is not None and self.training_intensity is not None:
+            raise bad(
+                "training_intensity",
+                self.training_intensity,
+                f"updates_per_env_step={self.updates_per_env_step!r} is set too; both set the "
+                "update-to-data ratio (training_intensity = updates_per_env_step * train batch size), "
+                "set one",
+            )
         try:
             AlphaSchedule.from_dict(self.alpha_schedule)
         except (ValueError, TypeError) as err:
