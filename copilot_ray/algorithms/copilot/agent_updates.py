@@ -13,39 +13,46 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
+from ray.rllib.utils.from_config import from_config
 from ray.rllib.utils.metrics import ALL_MODULES, TD_ERROR_KEY
 from ray.rllib.utils.numpy import convert_to_numpy
+from ray.rllib.utils.replay_buffers import ReplayBuffer
 from ray.rllib.utils.replay_buffers.utils import update_priorities_in_episode_replay_buffer
 
 from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer
 
 
 class StockSACUpdater:
-    def __init__(self, algo):
-        self.algo = algo
+    """RLlib's SAC update path: its (prioritised) episode replay buffer, learner connector and
+    one `learner_group.update(episodes=...)` per gradient step, with priority updates."""
+
+    def __init__(self, config, learner_group, replay_buffer=None):
+        self.config = config
+        self.learner_group = learner_group
+        self.replay_buffer = replay_buffer if replay_buffer is not None else make_rllib_replay_buffer(config)
 
     def add(self, episodes) -> None:
-        self.algo.local_replay_buffer.add(episodes)
+        self.replay_buffer.add(episodes)
 
     def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
-        cfg = self.algo.config
+        cfg = self.config
         results: list[dict[str, Any]] = []
         for _ in range(num_updates):
-            episodes = self.algo.local_replay_buffer.sample(
+            episodes = self.replay_buffer.sample(
                 num_items=cfg.total_train_batch_size,
                 n_step=cfg.n_step,
                 gamma=cfg.gamma,
                 beta=cfg.replay_buffer_config.get("beta"),
                 sample_episodes=True,
             )
-            learner_results = self.algo.learner_group.update(episodes=episodes, timesteps=timesteps)
+            learner_results = self.learner_group.update(episodes=episodes, timesteps=timesteps)
             td_errors = defaultdict(list)
             for res in learner_results:
                 for module_id, module_results in res.items():
                     if module_id != ALL_MODULES and TD_ERROR_KEY in module_results:
                         td_errors[module_id].extend(convert_to_numpy(module_results.pop(TD_ERROR_KEY).peek()))
             update_priorities_in_episode_replay_buffer(
-                replay_buffer=self.algo.local_replay_buffer,
+                replay_buffer=self.replay_buffer,
                 td_errors={m: {TD_ERROR_KEY: np.concatenate(e)} for m, e in td_errors.items()},
             )
             results.extend(learner_results)
@@ -59,14 +66,23 @@ class StockSACUpdater:
         """Nothing of ours to restore (see get_state)."""
 
 
+def make_rllib_replay_buffer(config):
+    """The episode replay buffer RLlib's Algorithm.setup builds from `config.replay_buffer_config`."""
+    buffer_config = dict(config.replay_buffer_config)
+    if "EpisodeReplayBuffer" in str(buffer_config.get("type", "")):
+        buffer_config["metrics_num_episodes_for_smoothing"] = config.metrics_num_episodes_for_smoothing
+    return from_config(ReplayBuffer, buffer_config)
+
+
 class FastSACUpdater:
     """Flat transition buffer -> N gradient steps in one `learner_group.update(batch=...)` call."""
 
-    def __init__(self, algo):
-        self.algo = algo
-        capacity = int(algo.config.replay_buffer_config.get("capacity", 1_000_000))
+    def __init__(self, config, learner_group):
+        self.config = config
+        self.learner_group = learner_group
+        capacity = int(config.replay_buffer_config.get("capacity", 1_000_000))
         self.buffer = FlatTransitionBuffer(capacity)
-        seed = 0 if algo.config.seed is None else int(algo.config.seed)
+        seed = 0 if config.seed is None else int(config.seed)
         self.rng = np.random.default_rng([seed, 1])  # its own stream: buffer sampling
 
     def add(self, episodes) -> None:
@@ -74,10 +90,10 @@ class FastSACUpdater:
 
     def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
         return update_from_buffer(
-            self.algo.learner_group,
+            self.learner_group,
             self.buffer,
             num_updates,
-            self.algo.config.train_batch_size_per_learner,
+            self.config.train_batch_size_per_learner,
             self.rng,
             timesteps,
         )
@@ -91,4 +107,6 @@ class FastSACUpdater:
 
 
 def make_agent_updater(algo):
-    return FastSACUpdater(algo) if algo.config.fast_learner else StockSACUpdater(algo)
+    if algo.config.fast_learner:
+        return FastSACUpdater(algo.config, algo.learner_group)
+    return StockSACUpdater(algo.config, algo.learner_group, algo.local_replay_buffer)
