@@ -167,3 +167,45 @@ def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path)
         assert run.info.status == "FINISHED"
         steps = [m.step for m in client.get_metric_history(run.info.run_id, "training_iteration")]
         assert steps and len(steps) == len(set(steps)) and steps == sorted(steps)
+
+
+def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
+    """An Optuna sweep killed mid-way continues the same study: no trial lost, none run twice."""
+    import optuna
+
+    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep import run_sweep, sweep_root
+
+    path = _smoke_copy(tmp_path)
+    data = yaml.safe_load(path.read_text())
+    data["search"] = {"tree_depth": {"categorical": [1, 2]}}
+    data["searcher"] = {
+        "type": "optuna",
+        "sampler": "tpe",
+        "metric": "copilot/eval/success_planned",
+        "mode": "max",
+        "num_samples": 2,
+        "seed": 0,
+    }
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    spec = load_spec(path)
+
+    _InterruptAfterFirstTrial.armed = True
+    first = run_sweep(spec, extra_callbacks=[_interrupt_callback()()])
+    assert first.status == "interrupted"
+    second = run_sweep(spec, resume=True)
+    assert second.status == "finished", second.summary
+    assert second.parent_run_id == first.parent_run_id
+
+    client, parents, children = _runs(spec)
+    assert len(parents) == 1 and len(children) == 2
+    assert len({c.data.tags["copilot.trial_id"] for c in children}) == 2
+    for run in children:
+        assert run.info.status == "FINISHED"
+        steps = [m.step for m in client.get_metric_history(run.info.run_id, "training_iteration")]
+        assert steps and len(steps) == len(set(steps))
+    storage = f"sqlite:///{sweep_root(spec) / 'optuna.db'}"
+    (summary,) = optuna.get_all_study_summaries(storage)  # one study: one seed
+    study = optuna.load_study(study_name=summary.study_name, storage=storage)
+    finished = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    assert len(finished) == 2, [t.state for t in study.trials]
