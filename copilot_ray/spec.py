@@ -253,6 +253,7 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "tau_max": _int("copilot", 1),
     "task_batch_size": _int("copilot", 1),
     "collision_penalty": _float("copilot", 0.0),
+    "collision_cost": _choice("copilot", ("indicator", "length")),  # planning.segment_cost.COLLISION_COSTS
     "updates_per_env_step": _float("copilot", 0.0, lo_open=True),
     "fast_learner": _bool("copilot"),
     "eval_interval": _int("copilot", 0, note=" (0: no evaluation)"),

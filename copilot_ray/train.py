@@ -25,6 +25,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--repetitions", type=int, default=5, help="b (the paper uses 5)")
     p.add_argument("--alpha-schedule", default="paper_per_task", help="preset name of the alpha schedule")
     p.add_argument("--tau-max", type=int, default=25, help="step budget of one sub-task")
+    p.add_argument(
+        "--collision-cost",
+        choices=["indicator", "length"],
+        default="indicator",
+        help="planner's collision term: per colliding segment (paper) or per length in collision (reference code)",
+    )
     p.add_argument("--task-batch-size", type=int, default=30, help="tasks per training iteration")
     p.add_argument("--stop-env-steps", type=int, default=100_000, help="stop after this many env steps")
     p.add_argument("--stop-iters", type=int, default=None, help="stop after this many iterations")
@@ -68,6 +74,7 @@ def build_config(args: argparse.Namespace):
             repetitions=args.repetitions,
             alpha_schedule=args.alpha_schedule,
             tau_max=args.tau_max,
+            collision_cost=args.collision_cost,
             task_batch_size=args.task_batch_size,
             eval_interval=args.eval_interval,
             eval_num_tasks=args.eval_tasks,

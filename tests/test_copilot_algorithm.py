@@ -11,7 +11,9 @@ from copilot_ray.algorithms.copilot import CoPilotConfig
 pytestmark = pytest.mark.ray
 
 
-def tiny_config(fast_learner: bool = True, num_env_runners: int = 1) -> CoPilotConfig:
+def tiny_config(
+    fast_learner: bool = True, num_env_runners: int = 1, collision_cost="indicator"
+) -> CoPilotConfig:
     return (
         CoPilotConfig()
         .environment("maze-point", env_config={"layout": "u-maze"})
@@ -27,6 +29,7 @@ def tiny_config(fast_learner: bool = True, num_env_runners: int = 1) -> CoPilotC
             eval_tree_tasks=2,
             updates_per_env_step=0.05,
             fast_learner=fast_learner,
+            collision_cost=collision_cost,
             planner={"num_samples": 4},
             cost_model={"init_euclidean": 500, "fit_steps": 5},
         )
@@ -56,7 +59,9 @@ def lookup(result, key):
 
 @pytest.mark.parametrize("fast_learner", [True, False], ids=["fast", "stock"])
 def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_path, fast_learner):
-    algo = tiny_config(fast_learner).build_algo()
+    # The stock run also covers the graded (length-in-collision) planner cost end to end.
+    collision_cost = "indicator" if fast_learner else "length"
+    algo = tiny_config(fast_learner, collision_cost=collision_cost).build_algo()
     try:
         results = [algo.train() for _ in range(2)]
         for key in EXPECTED_METRICS:
@@ -78,7 +83,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
             assert (art["subtask_steps"][:, 0, 0] > 0).all() and (art["subtask_steps"][:, 0, 1:] == -1).all()
 
         path = algo.save_to_path(str(tmp_path / "ckpt"))
-        restored = tiny_config(fast_learner).build_algo()
+        restored = tiny_config(fast_learner, collision_cost=collision_cost).build_algo()
         try:
             restored.restore_from_path(path)
             want, got = algo.planner.state_dict()["nets"], restored.planner.state_dict()["nets"]
@@ -88,6 +93,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
             assert restored.alpha_clock.episode == algo.alpha_clock.episode
             assert restored._rng.bit_generator.state == algo._rng.bit_generator.state
             assert restored.iteration == algo.iteration == 2
+            assert restored.gradient_steps.get_state() == algo.gradient_steps.get_state()
             # The task sampler continues where it stopped: both draw the same next mini-batch.
             assert (restored._rng.integers(1 << 30, size=4) == algo._rng.integers(1 << 30, size=4)).all()
             if fast_learner:

@@ -42,6 +42,7 @@ def test_validate_swaps_in_the_traversal_env_and_the_fast_learner():
         ({"tau_max": 2.5}, r"tau_max=2.5"),
         ({"collision_penalty": -1}, r"collision_penalty=-1"),
         ({"updates_per_env_step": 0}, r"updates_per_env_step=0"),
+        ({"collision_cost": "area"}, r"collision_cost='area'.*indicator"),
         ({"alpha_schedule": {"kind": "constant", "alpha": 1.5}}, r"alpha_schedule=.*1\.5"),
         ({"planner": {"stdd": 0.1}}, r"planner\.stdd=0\.1.*known keys"),
         ({"planner": {"std": 0}}, r"planner\.std=0"),
@@ -84,3 +85,9 @@ def test_both_update_to_data_knobs_at_once_are_rejected():
         c.validate()
     with pytest.raises(ValueError, match=r"training_intensity=0"):
         config().training(training_intensity=0).validate()
+
+
+def test_collision_penalty_defaults_follow_the_collision_cost():
+    assert config().collision_penalty_value() == 10.0  # paper: per colliding segment
+    assert config(collision_cost="length").collision_penalty_value() == 100.0  # reference: per unit length
+    assert config(collision_cost="length", collision_penalty=30.0).collision_penalty_value() == 30.0

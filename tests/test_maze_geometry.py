@@ -94,6 +94,33 @@ def test_matches_liang_barsky_on_random_segments():
     np.testing.assert_array_equal(obstacles.segments_collide(a, b), expected)
 
 
+def test_collision_lengths_hand_cases():
+    box = Obstacles(np.array([[0.4, 0.4]]), np.array([[0.6, 0.6]]))
+    a = np.array([[0.1, 0.5], [0.1, 0.1], [0.5, 0.5], [0.5, 0.5], [0.3, 0.3], [0.5, 0.9], [0.4, 0.3]])
+    b = np.array([[0.9, 0.5], [0.9, 0.1], [0.55, 0.55], [1.5, 0.5], [0.7, 0.7], [0.5, 1.2], [0.3, 0.4]])
+    # through; beside; inside; through and out of the square (0.1 + 0.5); diagonal; out of the square;
+    # touching a corner only
+    expected = [0.2, 0.0, 0.05 * np.sqrt(2), 0.6, 0.2 * np.sqrt(2), 0.2, 0.0]
+    np.testing.assert_allclose(box.collision_lengths(a, b), expected, atol=1e-12)
+
+
+def test_collision_lengths_match_dense_sampling():
+    obstacles = Obstacles.from_layout(load_layout("random15-3"))
+    rng = np.random.default_rng(2)
+    a, b = rng.uniform(-0.1, 1.1, (5000, 2)), rng.uniform(0.01, 0.99, (5000, 2))  # > one chunk
+    got = obstacles.collision_lengths(a, b)
+    n = 400  # the dense reference is [n, 4001, boxes] booleans
+    t = np.linspace(0.0, 1.0, 4001)[None, :, None]
+    points = a[:n, None] + t * (b[:n] - a[:n])[:, None]
+    out = ((points <= 0.0) | (points >= 1.0)).any(axis=2)
+    inside = ((points[..., None, :] >= obstacles.lo) & (points[..., None, :] <= obstacles.hi)).all(-1).any(-1)
+    length = np.linalg.norm(b[:n] - a[:n], axis=1)
+    np.testing.assert_allclose(got[:n], length * (out | inside).mean(axis=1), atol=2e-3)
+    # Positive length in collision is a collision; free segments have none.
+    assert obstacles.segments_collide(a, b)[got > 1e-9].all()
+    assert (got[~obstacles.segments_collide(a, b)] == 0.0).all()
+
+
 def test_merge_cells_covers_exactly_once():
     grid = load_layout("random15-5").grid
     cover = np.zeros(grid.shape, dtype=int)

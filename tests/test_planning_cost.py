@@ -67,3 +67,31 @@ def test_segment_cost_validation():
     cost.alpha = -0.1
     with pytest.raises(ValueError, match="alpha"):
         cost(np.zeros((1, 2)), np.ones((1, 2)))
+    with pytest.raises(ValueError, match="collision_cost='sometimes'"):
+        SegmentCost(collision_cost="sometimes")
+    with pytest.raises(ValueError, match="collision_lengths"):
+        SegmentCost(collision_cost="length")
+
+
+def test_length_collision_cost_charges_length_in_collision():
+    trees = _hand_tree()
+
+    def collide(a, b):  # segments with an end at x = 2 "collide"
+        return (a[:, 0] == 2.0) | (b[:, 0] == 2.0)
+
+    def lengths(a, b):  # ... with half of their length
+        return np.where(collide(a, b), 0.5 * euclidean_distance(a, b), 0.0)
+
+    cost = SegmentCost(
+        alpha=1.0,
+        segments_collide=collide,
+        collision_penalty=100.0,
+        collision_cost="length",
+        collision_lengths=lengths,
+    )
+    layer_costs, _ = tree_cost(trees, 2, 2, cost)
+    # layer 0: 2 + 100 * 1; layer 1: (0,0)->(1,1) free, (1,1)->(2,0) half of sqrt2 in collision;
+    # layer 2: (1,1)->(2,1) and (2,1)->(2,0) collide, half of each (0.5 + 0.5).
+    expected = [2.0 + 100.0, 2 * np.sqrt(2) + 50.0 * np.sqrt(2), 4.0 + 100.0]
+    np.testing.assert_allclose(layer_costs[0], expected)
+    assert set(cost.components(trees[0, :2], trees[0, 1:3])) >= {"collides", "collision_length"}

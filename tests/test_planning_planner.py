@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from copilot_ray.envs.maze.geometry import Obstacles
 from copilot_ray.planning import (
     SegmentCost,
     SubgoalPlanner,
@@ -175,8 +176,9 @@ def test_segment_hits_box_helper():
     assert segment_hits_box(a, b).tolist() == [True, False, True, True, False]
 
 
-def _obstacle_run(seed, updates=250):
-    cost = SegmentCost(alpha=1.0, segments_collide=segment_hits_box, collision_penalty=10.0)
+def _obstacle_run(seed, updates=250, cost=None):
+    if cost is None:  # the paper's indicator penalty
+        cost = SegmentCost(alpha=1.0, segments_collide=segment_hits_box, collision_penalty=10.0)
     planner = SubgoalPlanner(2, 1, low=0.0, high=1.0, seed=seed)
     B = 8
     starts, goals = np.tile([0.1, 0.5], (B, 1)), np.tile([0.9, 0.5], (B, 1))
@@ -224,3 +226,25 @@ def test_planner_learns_to_route_around_an_obstacle():
             assert after["cost"] < 0.2 * before["cost"], after
             assert after["collide"] < 0.25, after  # most stochastic layer-1 paths are collision-free
             assert not after["mean_collides"], after  # the mean layer-1 path is collision-free
+
+
+def test_length_collision_cost_leads_out_of_the_obstacle_trap():
+    """Same problem with SGT-PG's graded cost (100 x length in collision): seeds 2 and 5, which stall
+    with one colliding segment under the paper's indicator penalty, find a collision-free layer-1
+    path. Measured over seeds 0-5: all six end with a collision-free mean path and <= 8 % colliding
+    samples (indicator: seeds 2 and 5 at 100 %)."""
+    box = Obstacles(BOX_LO[None], BOX_HI[None])
+    for seed in (2, 5):
+        before, after, _ = _obstacle_run(
+            seed,
+            cost=SegmentCost(
+                alpha=1.0,
+                segments_collide=segment_hits_box,
+                collision_penalty=100.0,
+                collision_cost="length",
+                collision_lengths=box.collision_lengths,
+            ),
+        )
+        assert before["collide"] > 0.9 and before["mean_collides"]
+        assert not after["mean_collides"], (seed, after)
+        assert after["collide"] < 0.25, (seed, after)

@@ -4,7 +4,10 @@
 
 ``dist`` is the environment's ``goal_distance`` hook (Euclidean by default; it wraps angles where the goal
 has angles). The collision term is the paper's additive penalty of 10 for a segment that trespasses an
-obstacle (Sec. 4.1).
+obstacle (Sec. 4.1), ``collision_cost="indicator"``. ``collision_cost="length"`` charges
+``collision_penalty * (length of a-b in collision)`` instead, as SGT-PG's reference planner does (with
+100): the indicator is flat inside an obstacle, so a planner whose samples all land in a thick wall
+gets no signal about which way is out; the length is graded.
 
 Units of the time cost. ``tau_hat`` is expressed in DISTANCE units, not in raw steps: a measured sub-task
 of ``n`` steps is stored in D_tau as ``n * step_distance`` where ``step_distance`` is the environment's
@@ -29,7 +32,9 @@ import numpy as np
 
 from .subgoal_tree import check_layer, depth_of, layer_indices
 
-__all__ = ["SegmentCost", "euclidean_distance", "tree_cost", "tree_segments"]
+__all__ = ["COLLISION_COSTS", "SegmentCost", "euclidean_distance", "tree_cost", "tree_segments"]
+
+COLLISION_COSTS = ("indicator", "length")
 
 ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -50,7 +55,10 @@ class SegmentCost:
             whenever alpha < 1.
         segments_collide: the environment's ``segments_collide(a, b) -> bool[N]``; None = no obstacles.
         distance: the environment's ``goal_distance(a, b) -> [N]``; None = Euclidean.
-        collision_penalty: added per colliding segment (10 in the paper).
+        collision_penalty: added per colliding segment (10 in the paper), or per unit of length in
+            collision with ``collision_cost="length"``.
+        collision_cost: "indicator" (the paper) or "length" (needs ``collision_lengths``).
+        collision_lengths: the environment's ``collision_lengths(a, b) -> float[N]``.
     """
 
     alpha: float = 1.0
@@ -58,9 +66,17 @@ class SegmentCost:
     segments_collide: ArrayFn | None = None
     distance: ArrayFn | None = None
     collision_penalty: float = 10.0
+    collision_cost: str = "indicator"
+    collision_lengths: ArrayFn | None = None
 
     def __post_init__(self) -> None:
         self._check_alpha()
+        if self.collision_cost not in COLLISION_COSTS:
+            raise ValueError(
+                f"collision_cost={self.collision_cost!r} is invalid: use one of {COLLISION_COSTS}"
+            )
+        if self.collision_cost == "length" and self.collision_lengths is None:
+            raise ValueError("collision_cost='length' needs a collision_lengths(a, b) function")
 
     def _check_alpha(self) -> None:
         if not 0.0 <= float(self.alpha) <= 1.0:
@@ -80,7 +96,10 @@ class SegmentCost:
             collides = np.zeros(a.shape[0], dtype=bool)
         else:
             collides = np.asarray(self.segments_collide(a, b), dtype=bool)
-        return {"distance": np.asarray(dist, dtype=np.float64), "time": tau, "collides": collides}
+        parts = {"distance": np.asarray(dist, dtype=np.float64), "time": tau, "collides": collides}
+        if self.collision_cost == "length":
+            parts["collision_length"] = np.asarray(self.collision_lengths(a, b), dtype=np.float64)
+        return parts
 
     def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         self._check_alpha()
@@ -89,6 +108,8 @@ class SegmentCost:
         cost = alpha * parts["distance"]
         if parts["time"] is not None:
             cost = cost + (1.0 - alpha) * parts["time"]
+        if self.collision_cost == "length":
+            return cost + self.collision_penalty * parts["collision_length"]
         return cost + self.collision_penalty * parts["collides"]
 
     def tree_cost(self, trees: np.ndarray, K: int | None = None, upto_layer: int | None = None):

@@ -69,6 +69,11 @@ class CoPilot(SAC):
         # A driver-side copy of the goal env: geometry for the planner's cost, tasks, evaluation.
         self.goal_env = make(cfg.goal_env, **cfg.goal_env_config)
         env = self.goal_env.unwrapped
+        if cfg.collision_cost == "length" and not hasattr(env, "collision_lengths"):
+            raise ValueError(
+                f"CoPilotConfig: collision_cost='length' is invalid for env {cfg.goal_env!r}: it has no "
+                "collision_lengths(a, b) hook; use collision_cost='indicator'"
+            )
         seed = 0 if cfg.seed is None else int(cfg.seed)
         self._rng = np.random.default_rng(seed)
         torch.manual_seed(seed)
@@ -181,7 +186,9 @@ class CoPilot(SAC):
             time_cost=self.cost_model.predict,
             segments_collide=env.segments_collide,
             distance=env.goal_distance,
-            collision_penalty=cfg.collision_penalty,
+            collision_penalty=cfg.collision_penalty_value(),
+            collision_cost=cfg.collision_cost,
+            collision_lengths=getattr(env, "collision_lengths", None),
         )
         built = construct_trees(
             self.planner,

@@ -23,6 +23,7 @@ from ray.rllib.algorithms.sac import SACConfig
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
 from copilot_ray.algorithms.gc_sac import is_fast_gc_sac, use_fast_gc_sac
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
+from copilot_ray.planning.segment_cost import COLLISION_COSTS
 
 # Paper Section 4.1 and the reference planner (facts.md), where the paper is silent.
 DEFAULT_PLANNER = {
@@ -54,7 +55,12 @@ class CoPilotConfig(SACConfig):
         self.alpha_schedule: dict[str, Any] = AlphaSchedule.preset("paper_per_task").to_dict()
         self.tau_max = 25
         self.task_batch_size = 30
-        self.collision_penalty = 10.0
+        # Eq. 11's collision term: "indicator" (the paper: a penalty per colliding segment) or "length"
+        # (SGT-PG's reference planner: a penalty per unit of segment length in collision, which tells
+        # the planner which way is out of a wall). None: 10 for "indicator" (paper 4.1), 100 for
+        # "length" (reference code; a 1/15-wide wall then costs ~6.7, not 0.67).
+        self.collision_cost = "indicator"
+        self.collision_penalty: float | None = None
         self.planner: dict[str, Any] = dict(DEFAULT_PLANNER)
         self.cost_model: dict[str, Any] = dict(DEFAULT_COST_MODEL)
         self.eval_interval = 1  # iterations between evaluations on held-out test tasks (0: never)
@@ -93,7 +99,8 @@ class CoPilotConfig(SACConfig):
         alpha_schedule: dict | str | AlphaSchedule = NotProvided,
         tau_max: int = NotProvided,
         task_batch_size: int = NotProvided,
-        collision_penalty: float = NotProvided,
+        collision_penalty: float | None = NotProvided,
+        collision_cost: str = NotProvided,
         planner: dict = NotProvided,
         cost_model: dict = NotProvided,
         eval_interval: int = NotProvided,
@@ -146,6 +153,12 @@ class CoPilotConfig(SACConfig):
         register_traversal_env()
         super().validate()
 
+    def collision_penalty_value(self) -> float:
+        """`collision_penalty`, or its default for `collision_cost` (10 per segment, 100 per length)."""
+        if self.collision_penalty is not None:
+            return float(self.collision_penalty)
+        return 100.0 if self.collision_cost == "length" else 10.0
+
     def utd_ratio(self) -> float:
         """SAC gradient steps per sampled env step.
 
@@ -186,8 +199,14 @@ class CoPilotConfig(SACConfig):
             raise bad("eval_interval", self.eval_interval, "use an integer >= 0 (0 disables evaluation)")
         if not isinstance(self.eval_tree_tasks, int) or self.eval_tree_tasks < 0:
             raise bad("eval_tree_tasks", self.eval_tree_tasks, "use an integer >= 0")
-        if not (isinstance(self.collision_penalty, int | float) and self.collision_penalty >= 0):
-            raise bad("collision_penalty", self.collision_penalty, "use a number >= 0 (paper: 10)")
+        if self.collision_penalty is not None and not (
+            isinstance(self.collision_penalty, int | float)
+            and not isinstance(self.collision_penalty, bool)
+            and self.collision_penalty >= 0
+        ):
+            raise bad("collision_penalty", self.collision_penalty, "use a number >= 0 (paper: 10), or None")
+        if self.collision_cost not in COLLISION_COSTS:
+            raise bad("collision_cost", self.collision_cost, f"use one of {list(COLLISION_COSTS)}")
         for key in ("updates_per_env_step", "training_intensity"):
             value = getattr(self, key)
             if value is not None and not (

@@ -60,6 +60,12 @@ class AgentGeometry(ABC):
         """float [N]: exact shortest collision-free path lengths; only where an exact method exists."""
         raise NotImplementedError(f"no exact shortest path for agent {self.name!r}")
 
+    def motion_collision_lengths(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """float [N]: length of the straight motion a[i] -> b[i] spent in collision (planning costs)."""
+        raise NotImplementedError(
+            f"no collision length for agent {self.name!r}; use collision_cost='indicator'"
+        )
+
 
 class PointMass(AgentGeometry):
     """A point at (x, y) that moves by `speed * a / max(1, |a|)` per step, a in [-1, 1]^2.
@@ -92,6 +98,9 @@ class PointMass(AgentGeometry):
 
     def motions_collide(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return obstacles.segments_collide(a, b)
+
+    def motion_collision_lengths(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return obstacles.collision_lengths(a, b)
 
     def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.asarray(b, dtype=np.float64) - np.asarray(a, dtype=np.float64), axis=-1)

@@ -137,6 +137,10 @@ class GoalMazeEnv(gym.Env):
         """[N, d], [N, d] -> bool [N]: the straight motion touches an obstacle or leaves the square."""
         return self.agent_geometry.motions_collide(self.obstacles, a, b)
 
+    def collision_lengths(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """[N, d], [N, d] -> float [N]: how much of the straight motion is in collision (0: free or touching)."""
+        return self.agent_geometry.motion_collision_lengths(self.obstacles, a, b)
+
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None) -> Any:
         """Sparse: goal_reward within success_radius, else 0. [N, d] -> [N]; [d] -> float."""
         reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius

@@ -41,6 +41,20 @@ def merge_cells(grid: np.ndarray) -> list[tuple[int, int, int, int]]:
     return rects
 
 
+def _clipped_fraction(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """[N, boxes]: the fraction of segment a -> b (t in [0, 1]) that lies inside each box (Liang-Barsky)."""
+    d = (b - a)[:, None, :]  # [N, 1, 2]
+    a = a[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo[None] - a) / d, (hi[None] - a) / d  # [N, boxes, 2]
+    parallel = d == 0.0
+    # Parallel to an axis: inside that slab for every t, or for none.
+    in_slab = (a >= lo[None]) & (a <= hi[None])
+    t_enter = np.where(parallel, np.where(in_slab, -np.inf, np.inf), np.minimum(ta, tb)).max(axis=2)
+    t_exit = np.where(parallel, np.where(in_slab, np.inf, -np.inf), np.maximum(ta, tb)).min(axis=2)
+    return np.clip(np.minimum(t_exit, 1.0) - np.maximum(t_enter, 0.0), 0.0, None)
+
+
 class Obstacles:
     """The obstacles of one layout as axis-aligned boxes `lo[i] <= p <= hi[i]` (float64)."""
 
@@ -91,6 +105,29 @@ class Obstacles:
             hit &= np.maximum(p0, p1) - np.minimum(q0, q1) >= 0.0
             out[s : s + _CHUNK] |= hit.any(axis=1)
         return out
+
+    def collision_lengths(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """float [N]: length of the segment a[i] -> b[i] inside obstacles or outside the unit square.
+
+        A graded version of `segments_collide` for planning costs (SGT-PG's reference planner charges
+        length in collision): a sub-goal deep inside a wall costs more than one at its edge, so the
+        planner can tell which way is out. Per box, the Liang-Barsky clip gives the parameter interval
+        inside it; the merged boxes do not overlap, so the lengths add (a segment running exactly along
+        an edge two boxes share is counted twice, a measure-zero case). Touching is length 0.
+        """
+        a = np.asarray(a, dtype=np.float64).reshape(-1, 2)
+        b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
+        if a.shape != b.shape:
+            raise ValueError(f"segment endpoints differ in shape: {a.shape} vs {b.shape}")
+        length = np.linalg.norm(b - a, axis=1)
+        unit = (np.zeros((1, 2)), np.ones((1, 2)))
+        outside = length * (1.0 - _clipped_fraction(a, b, *unit).sum(axis=1))
+        inside = np.zeros(len(a))
+        if len(self.lo):
+            for s in range(0, len(a), _CHUNK):
+                part = _clipped_fraction(a[s : s + _CHUNK], b[s : s + _CHUNK], self.lo, self.hi)
+                inside[s : s + _CHUNK] = length[s : s + _CHUNK] * part.sum(axis=1)
+        return np.maximum(outside, 0.0) + inside
 
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """float [N]: Euclidean distance from each point to the nearest obstacle or the border (0 inside)."""
