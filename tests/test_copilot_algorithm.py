@@ -42,6 +42,8 @@ EXPECTED_METRICS = [
     ("copilot", "alpha"),
     ("copilot", "planner", "cost_layer_0"),
     ("copilot", "planner", "cost_layer_2"),
+    ("copilot", "planner", "approx_kl_max"),
+    ("copilot", "planner", "nonfinite_skipped"),
     ("copilot", "agent", "steps_layer_0"),
     ("copilot", "agent", "steps_layer_2"),
     ("copilot", "agent", "success_layer_1"),
@@ -64,6 +66,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
     algo = tiny_config(fast_learner, collision_cost=collision_cost).build_algo()
     try:
         results = [algo.train() for _ in range(2)]
+        assert algo.planner.max_grad_norm == 0.5  # CO-PILOT's default planner gradient clip
         for key in EXPECTED_METRICS:
             assert np.isfinite(lookup(results[-1], key)), key
         steps = [lookup(r, EXPECTED_METRICS[-1]) for r in results]

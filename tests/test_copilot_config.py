@@ -43,6 +43,8 @@ def test_validate_swaps_in_the_traversal_env_and_the_fast_learner():
         ({"collision_penalty": -1}, r"collision_penalty=-1"),
         ({"updates_per_env_step": 0}, r"updates_per_env_step=0"),
         ({"collision_cost": "area"}, r"collision_cost='area'.*indicator"),
+        ({"planner": {"max_grad_norm": 0}}, r"planner\.max_grad_norm=0"),
+        ({"planner": {"target_kl": -1.0}}, r"planner\.target_kl=-1\.0"),
         ({"alpha_schedule": {"kind": "constant", "alpha": 1.5}}, r"alpha_schedule=.*1\.5"),
         ({"planner": {"stdd": 0.1}}, r"planner\.stdd=0\.1.*known keys"),
         ({"planner": {"std": 0}}, r"planner\.std=0"),

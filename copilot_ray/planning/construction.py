@@ -126,6 +126,8 @@ def construct_trees(
             stats[f"loss_layer_{k}"] = s["loss"]
             stats[f"approx_kl_layer_{k}"] = s["approx_kl"]
             stats[f"clip_fraction_layer_{k}"] = s["clip_fraction"]
+            stats[f"epochs_layer_{k}"] = s["epochs_run"]
+            stats["nonfinite_skipped"] = stats.get("nonfinite_skipped", 0.0) + s["nonfinite_skipped"]
         planner.extend(trees, k, deterministic=deterministic, rng=rng)
     if cost_fn is not None:
         layer_costs, total = tree_cost(trees, K, K, cost_fn)

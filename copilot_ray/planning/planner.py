@@ -90,6 +90,8 @@ class SubgoalPlanner:
         shared_across_layers: one MLP for all layers instead of one per layer.
         lr, clip_eps, epochs: Adam learning rate, PPO clip range and PPO epochs per ``update``.
         max_grad_norm: optional gradient-norm clip (None: off, as in the reference).
+        target_kl: stop an ``update``'s epochs early once the approximate KL between the sampling
+            policy and the current one exceeds 1.5 x this (as SB3's PPO); None: run all epochs.
         normalize_advantages: divide the baselined advantages by their standard deviation.
         augment_reversed: ask ``construct_trees`` to also train on every sample with start and goal
             swapped (the reference code does this); costs of reversed trees are re-evaluated there, so an
@@ -111,6 +113,7 @@ class SubgoalPlanner:
         clip_eps: float = 0.2,
         epochs: int = 4,
         max_grad_norm: float | None = None,
+        target_kl: float | None = None,
         normalize_advantages: bool = True,
         augment_reversed: bool = False,
         last_init_scale: float = 0.01,
@@ -142,6 +145,9 @@ class SubgoalPlanner:
         self.clip_eps = float(clip_eps)
         self.epochs = int(epochs)
         self.max_grad_norm = None if max_grad_norm is None else float(max_grad_norm)
+        if target_kl is not None and not float(target_kl) > 0:
+            raise ValueError(f"target_kl must be > 0 or None, got target_kl={target_kl!r}")
+        self.target_kl = None if target_kl is None else float(target_kl)
         self.normalize_advantages = bool(normalize_advantages)
         self.augment_reversed = bool(augment_reversed)
         self.last_init_scale = float(last_init_scale)
@@ -182,6 +188,7 @@ class SubgoalPlanner:
             "clip_eps": self.clip_eps,
             "epochs": self.epochs,
             "max_grad_norm": self.max_grad_norm,
+            "target_kl": self.target_kl,
             "normalize_advantages": self.normalize_advantages,
             "augment_reversed": self.augment_reversed,
             "last_init_scale": self.last_init_scale,
@@ -324,21 +331,33 @@ class SubgoalPlanner:
             old_logp = self.log_prob(trees, layers)
         lo, hi = 1.0 - self.clip_eps, 1.0 + self.clip_eps
         loss_v = kl_v = clip_v = 0.0
+        epochs_run = skipped = 0
         for _ in range(self.epochs if epochs is None else int(epochs)):
             logp = self.log_prob(trees, layers)
-            log_ratio = logp - old_logp
+            # A tree's log-probability sums 2^(k+1) - 2 sub-goals x d dims at std 0.05, so one epoch can
+            # move it by tens of nats: clamp before exp so that ratio stays finite (such a sample is
+            # clipped by the surrogate anyway).
+            log_ratio = (logp - old_logp).clamp(-20.0, 20.0)
             ratio = torch.exp(log_ratio)
+            with torch.no_grad():
+                kl_v = float(((ratio - 1.0) - log_ratio).mean())  # k3 estimator, >= 0
+                clip_v = float(((ratio - 1.0).abs() > self.clip_eps).float().mean())
+            if self.target_kl is not None and kl_v > 1.5 * self.target_kl:
+                break  # the policy moved far enough from the one that sampled these trees
             surrogate = torch.minimum(ratio * adv_t, torch.clamp(ratio, lo, hi) * adv_t)
             loss = -surrogate.mean()
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if self.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.nets.parameters(), self.max_grad_norm)
+            grads = [p.grad for p in self.nets.parameters() if p.grad is not None]
+            if not all(bool(torch.isfinite(g).all()) for g in grads):
+                self.optimizer.zero_grad(set_to_none=True)
+                skipped += 1
+                break  # never let a non-finite step into the weights
             self.optimizer.step()
-            with torch.no_grad():
-                loss_v = float(loss.detach())
-                kl_v = float(((ratio - 1.0) - log_ratio).mean())  # k3 estimator, >= 0
-                clip_v = float(((ratio - 1.0).abs() > self.clip_eps).float().mean())
+            loss_v = float(loss.detach())
+            epochs_run += 1
         return {
             "loss": loss_v,
             "cost_mean": float(costs.mean()),
@@ -346,4 +365,6 @@ class SubgoalPlanner:
             "approx_kl": kl_v,
             "clip_fraction": clip_v,
             "adv_std": adv_std,
+            "epochs_run": float(epochs_run),
+            "nonfinite_skipped": float(skipped),
         }

@@ -93,6 +93,8 @@ class CoPilot(SAC):
                 lr=p["lr"],
                 clip_eps=p["clip"],
                 epochs=p["epochs"],
+                max_grad_norm=p["max_grad_norm"],
+                target_kl=p["target_kl"],
                 seed=seed,
             )
         )
@@ -202,6 +204,11 @@ class CoPilot(SAC):
         )
         for k in range(cfg.tree_depth + 1):
             stats[f"planner/cost_layer_{k}"].append(built.stats[f"cost_layer_{k}"])
+        # How far PPO moved the planner per layer update (a diverging planner shows here first).
+        stats["planner/approx_kl_max"].append(
+            max(built.stats[f"approx_kl_layer_{k}"] for k in range(1, cfg.tree_depth + 1))
+        )
+        stats["planner/nonfinite_skipped"].append(built.stats.get("nonfinite_skipped", 0.0))
         return built.trees
 
     # ------------------------------------------------------------------------------ agent phase

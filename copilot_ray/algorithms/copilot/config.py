@@ -33,6 +33,11 @@ DEFAULT_PLANNER = {
     "clip": 0.2,  # paper 4.1 (PPO trust region)
     "epochs": 4,
     "num_samples": 16,  # repeated samples per task; their mean cost is the baseline
+    # Not in the paper or the reference code: without a gradient-norm clip the PPO update diverged on
+    # four-rooms at K = 5 within ~100 planner phases (approx. KL in the millions, NaN weights); with
+    # 0.5 (SB3's PPO default) the same run reached 81-83 % collision-free test plans (2 seeds).
+    "max_grad_norm": 0.5,
+    "target_kl": None,  # optional early stop of the PPO epochs (SB3's target_kl); None: off
 }
 DEFAULT_COST_MODEL = {
     "hidden": [64, 64],
@@ -235,6 +240,12 @@ class CoPilotConfig(SACConfig):
         for key in ("std", "lr", "clip"):
             if not self.planner[key] > 0:
                 raise bad(f"planner.{key}", self.planner[key], "use a number > 0")
+        for key in ("max_grad_norm", "target_kl"):
+            value = self.planner[key]
+            if value is not None and not (
+                isinstance(value, int | float) and not isinstance(value, bool) and value > 0
+            ):
+                raise bad(f"planner.{key}", value, "use a number > 0, or None (off)")
         positive_int("planner.num_samples", self.planner["num_samples"])
         positive_int("planner.epochs", self.planner["epochs"])
         positive_int("cost_model.capacity", self.cost_model["capacity"])
