@@ -96,11 +96,15 @@ def test_matches_liang_barsky_on_random_segments():
 
 def test_collision_lengths_hand_cases():
     box = Obstacles(np.array([[0.4, 0.4]]), np.array([[0.6, 0.6]]))
-    a = np.array([[0.1, 0.5], [0.1, 0.1], [0.5, 0.5], [0.5, 0.5], [0.3, 0.3], [0.5, 0.9], [0.4, 0.3]])
-    b = np.array([[0.9, 0.5], [0.9, 0.1], [0.55, 0.55], [1.5, 0.5], [0.7, 0.7], [0.5, 1.2], [0.3, 0.4]])
+    a = np.array(
+        [[0.1, 0.5], [0.1, 0.1], [0.5, 0.5], [0.5, 0.5], [0.3, 0.3], [0.5, 0.9], [0.4, 0.3], [0, 0.2]]
+    )
+    b = np.array(
+        [[0.9, 0.5], [0.9, 0.1], [0.55, 0.55], [1.5, 0.5], [0.7, 0.7], [0.5, 1.2], [0.3, 0.4], [0, 0.6]]
+    )
     # through; beside; inside; through and out of the square (0.1 + 0.5); diagonal; out of the square;
-    # touching a corner only
-    expected = [0.2, 0.0, 0.05 * np.sqrt(2), 0.6, 0.2 * np.sqrt(2), 0.2, 0.0]
+    # touching a corner only; along the border (a wall)
+    expected = [0.2, 0.0, 0.05 * np.sqrt(2), 0.6, 0.2 * np.sqrt(2), 0.2, 0.0, 0.4]
     np.testing.assert_allclose(box.collision_lengths(a, b), expected, atol=1e-12)
 
 

@@ -90,8 +90,13 @@ def test_length_collision_cost_charges_length_in_collision():
         collision_lengths=lengths,
     )
     layer_costs, _ = tree_cost(trees, 2, 2, cost)
-    # layer 0: 2 + 100 * 1; layer 1: (0,0)->(1,1) free, (1,1)->(2,0) half of sqrt2 in collision;
-    # layer 2: (1,1)->(2,1) and (2,1)->(2,0) collide, half of each (0.5 + 0.5).
-    expected = [2.0 + 100.0, 2 * np.sqrt(2) + 50.0 * np.sqrt(2), 4.0 + 100.0]
+    # Each colliding segment: 100 * (length in collision + 0.1). Layer 0: 2 + 100 * (1 + 0.1); layer 1:
+    # (0,0)->(1,1) free, (1,1)->(2,0) half of sqrt2 in collision; layer 2: (1,1)->(2,1) and (2,1)->(2,0)
+    # collide, half of each.
+    expected = [
+        2.0 + 110.0,
+        2 * np.sqrt(2) + 100.0 * (0.5 * np.sqrt(2) + 0.1),
+        4.0 + 100.0 * (0.5 + 0.5 + 0.2),
+    ]
     np.testing.assert_allclose(layer_costs[0], expected)
     assert set(cost.components(trees[0, :2], trees[0, 1:3])) >= {"collides", "collision_length"}

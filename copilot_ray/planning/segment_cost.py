@@ -5,9 +5,13 @@
 ``dist`` is the environment's ``goal_distance`` hook (Euclidean by default; it wraps angles where the goal
 has angles). The collision term is the paper's additive penalty of 10 for a segment that trespasses an
 obstacle (Sec. 4.1), ``collision_cost="indicator"``. ``collision_cost="length"`` charges
-``collision_penalty * (length of a-b in collision)`` instead, as SGT-PG's reference planner does (with
-100): the indicator is flat inside an obstacle, so a planner whose samples all land in a thick wall
-gets no signal about which way is out; the length is graded.
+``collision_penalty * (length of a-b in collision + TOUCH_LENGTH * [a-b collides])`` instead: the length
+term is SGT-PG's reference planner's (with 100), and is graded, where the indicator is flat inside an
+obstacle (a planner whose samples all land in a thick wall gets no signal about which way is out).
+The ``TOUCH_LENGTH`` (0.1) term keeps a segment that only touches an obstacle or the border, with zero
+length in collision, from being free: without it the planner learned to park sub-goals on the border
+(measured on four-rooms, K = 5: 0 % collision-free test plans). With the default penalty of 100 it is the
+paper's 10 per colliding segment.
 
 Units of the time cost. ``tau_hat`` is expressed in DISTANCE units, not in raw steps: a measured sub-task
 of ``n`` steps is stored in D_tau as ``n * step_distance`` where ``step_distance`` is the environment's
@@ -35,6 +39,7 @@ from .subgoal_tree import check_layer, depth_of, layer_indices
 __all__ = ["COLLISION_COSTS", "SegmentCost", "euclidean_distance", "tree_cost", "tree_segments"]
 
 COLLISION_COSTS = ("indicator", "length")
+TOUCH_LENGTH = 0.1  # with collision_cost="length": length charged for any colliding segment
 
 ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -109,7 +114,9 @@ class SegmentCost:
         if parts["time"] is not None:
             cost = cost + (1.0 - alpha) * parts["time"]
         if self.collision_cost == "length":
-            return cost + self.collision_penalty * parts["collision_length"]
+            return cost + self.collision_penalty * (
+                parts["collision_length"] + TOUCH_LENGTH * parts["collides"]
+            )
         return cost + self.collision_penalty * parts["collides"]
 
     def tree_cost(self, trees: np.ndarray, K: int | None = None, upto_layer: int | None = None):

@@ -41,15 +41,20 @@ def merge_cells(grid: np.ndarray) -> list[tuple[int, int, int, int]]:
     return rects
 
 
-def _clipped_fraction(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """[N, boxes]: the fraction of segment a -> b (t in [0, 1]) that lies inside each box (Liang-Barsky)."""
+def _clipped_fraction(
+    a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, *, open_box: bool = False
+) -> np.ndarray:
+    """[N, boxes]: the fraction of segment a -> b (t in [0, 1]) that lies inside each box (Liang-Barsky).
+
+    Boxes are closed; `open_box` makes them open, which only matters for a segment running exactly
+    along a face (the other boundary contacts have length 0)."""
     d = (b - a)[:, None, :]  # [N, 1, 2]
     a = a[:, None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
         ta, tb = (lo[None] - a) / d, (hi[None] - a) / d  # [N, boxes, 2]
     parallel = d == 0.0
     # Parallel to an axis: inside that slab for every t, or for none.
-    in_slab = (a >= lo[None]) & (a <= hi[None])
+    in_slab = ((a > lo[None]) & (a < hi[None])) if open_box else ((a >= lo[None]) & (a <= hi[None]))
     t_enter = np.where(parallel, np.where(in_slab, -np.inf, np.inf), np.minimum(ta, tb)).max(axis=2)
     t_exit = np.where(parallel, np.where(in_slab, np.inf, -np.inf), np.maximum(ta, tb)).min(axis=2)
     return np.clip(np.minimum(t_exit, 1.0) - np.maximum(t_enter, 0.0), 0.0, None)
@@ -113,7 +118,8 @@ class Obstacles:
         length in collision): a sub-goal deep inside a wall costs more than one at its edge, so the
         planner can tell which way is out. Per box, the Liang-Barsky clip gives the parameter interval
         inside it; the merged boxes do not overlap, so the lengths add (a segment running exactly along
-        an edge two boxes share is counted twice, a measure-zero case). Touching is length 0.
+        an edge two boxes share is counted twice, a measure-zero case). Running along the border counts
+        as outside it. Touching a box or the border at a point is length 0 (`segments_collide` is True).
         """
         a = np.asarray(a, dtype=np.float64).reshape(-1, 2)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
@@ -121,7 +127,8 @@ class Obstacles:
             raise ValueError(f"segment endpoints differ in shape: {a.shape} vs {b.shape}")
         length = np.linalg.norm(b - a, axis=1)
         unit = (np.zeros((1, 2)), np.ones((1, 2)))
-        outside = length * (1.0 - _clipped_fraction(a, b, *unit).sum(axis=1))
+        # The border is a wall: free space is the open square, so a run along the border is in collision.
+        outside = length * (1.0 - _clipped_fraction(a, b, *unit, open_box=True).sum(axis=1))
         inside = np.zeros(len(a))
         if len(self.lo):
             for s in range(0, len(a), _CHUNK):
