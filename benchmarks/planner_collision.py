@@ -25,10 +25,10 @@ import time
 import numpy as np
 import torch
 
-from copilot_ray.algorithms.copilot.config import DEFAULT_PLANNER
+from copilot_ray.algorithms.copilot.config import DEFAULT_PLANNER, build_planner
 from copilot_ray.envs import make
 from copilot_ray.envs.maze.env import shortest_path_lengths
-from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees
+from copilot_ray.planning import SegmentCost, construct_trees
 from copilot_ray.planning.subgoal_tree import layer_indices
 
 
@@ -46,21 +46,7 @@ def run(collision_cost: str, seed: int, args, env, test, shortest) -> list[tuple
     torch.manual_seed(seed)
     low, high = env.goal_space.low, env.goal_space.high
     # CO-PILOT's planner defaults (the gradient clip keeps PPO from diverging at K = 5).
-    d = DEFAULT_PLANNER
-    planner = SubgoalPlanner(
-        env.goal_dim,
-        args.depth,
-        low,
-        high,
-        hidden=tuple(d["hidden"]),
-        std=d["std"],
-        lr=d["lr"],
-        clip_eps=d["clip"],
-        epochs=d["epochs"],
-        max_grad_norm=d["max_grad_norm"],
-        target_kl=d["target_kl"],
-        seed=seed,
-    )
+    planner = build_planner(DEFAULT_PLANNER, env.goal_dim, args.depth, low, high, seed)
     cost = SegmentCost(
         alpha=1.0,
         segments_collide=env.segments_collide,

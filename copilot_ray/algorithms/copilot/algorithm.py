@@ -30,6 +30,7 @@ from ray.rllib.utils.metrics import (
 )
 
 from copilot_ray.algorithms.copilot.agent_updates import make_agent_updater
+from copilot_ray.algorithms.copilot.config import build_planner
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env
 from copilot_ray.algorithms.gc_sac import GradientStepSchedule
 from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
@@ -37,7 +38,6 @@ from copilot_ray.planning import (
     AlphaClock,
     AlphaSchedule,
     SegmentCost,
-    SubgoalPlanner,
     TimeCostModel,
     construct_trees,
 )
@@ -78,25 +78,11 @@ class CoPilot(SAC):
         self._rng = np.random.default_rng(seed)
         torch.manual_seed(seed)
         low, high = env.goal_space.low, env.goal_space.high
-        p = cfg.planner
         # tree_depth 0 is plain goal-conditioned SAC on (s0, g): no planner, one sub-task per task.
         self.planner = (
             None
             if cfg.tree_depth == 0
-            else SubgoalPlanner(
-                env.goal_dim,
-                cfg.tree_depth,
-                low,
-                high,
-                hidden=tuple(p["hidden"]),
-                std=p["std"],
-                lr=p["lr"],
-                clip_eps=p["clip"],
-                epochs=p["epochs"],
-                max_grad_norm=p["max_grad_norm"],
-                target_kl=p["target_kl"],
-                seed=seed,
-            )
+            else build_planner(cfg.planner, env.goal_dim, cfg.tree_depth, low, high, seed)
         )
         c = cfg.cost_model
         self.cost_model = TimeCostModel(

@@ -22,6 +22,7 @@ from ray.rllib.algorithms.sac import SACConfig
 
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
 from copilot_ray.algorithms.gc_sac import is_fast_gc_sac, use_fast_gc_sac
+from copilot_ray.planning import SubgoalPlanner
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 
@@ -39,6 +40,26 @@ DEFAULT_PLANNER = {
     "max_grad_norm": 0.5,
     "target_kl": None,  # optional early stop of the PPO epochs (SB3's target_kl); None: off
 }
+
+
+def build_planner(planner: dict[str, Any], goal_dim: int, depth: int, low, high, seed: int) -> SubgoalPlanner:
+    """The planner pi_p from a `planner` settings dict (CoPilotConfig.planner, i.e. DEFAULT_PLANNER's keys)."""
+    return SubgoalPlanner(
+        goal_dim,
+        depth,
+        low,
+        high,
+        hidden=tuple(planner["hidden"]),
+        std=planner["std"],
+        lr=planner["lr"],
+        clip_eps=planner["clip"],
+        epochs=planner["epochs"],
+        max_grad_norm=planner["max_grad_norm"],
+        target_kl=planner["target_kl"],
+        seed=seed,
+    )
+
+
 DEFAULT_COST_MODEL = {
     "hidden": [64, 64],
     "lr": 1e-3,
