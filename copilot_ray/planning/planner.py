@@ -31,6 +31,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from copilot_ray.torch_checks import all_finite
+
 from .subgoal_tree import check_depth, depth_of, empty_tree, new_layer_indices, parent_indices
 
 __all__ = ["SubgoalPlanner", "group_baseline"]
@@ -350,8 +352,7 @@ class SubgoalPlanner:
             loss.backward()
             if self.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.nets.parameters(), self.max_grad_norm)
-            grads = [p.grad for p in self.nets.parameters() if p.grad is not None]
-            if not all(bool(torch.isfinite(g).all()) for g in grads):
+            if not all_finite(p.grad for p in self.nets.parameters()):
                 self.optimizer.zero_grad(set_to_none=True)
                 skipped += 1
                 break  # never let a non-finite step into the weights

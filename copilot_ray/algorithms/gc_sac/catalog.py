@@ -78,24 +78,22 @@ class GCSACCatalog(SACCatalog):
         if not hiddens:
             raise ValueError("GCSACCatalog needs at least one hidden layer in model_config['fcnet_hiddens']")
         activation = self._model_config_dict["fcnet_activation"]
+        # The same initializers as RLlib's fcnet stack, for the hidden layers and the output layer alike.
+        init = {
+            "weights_initializer": self._model_config_dict.get("fcnet_kernel_initializer"),
+            "weights_initializer_config": self._model_config_dict.get("fcnet_kernel_initializer_kwargs"),
+            "bias_initializer": self._model_config_dict.get("fcnet_bias_initializer"),
+            "bias_initializer_config": self._model_config_dict.get("fcnet_bias_initializer_kwargs"),
+        }
         self.qf_encoder_config = ConcatObsActionMLPEncoderConfig(
             input_dims=[int(obs_space.shape[0]) + int(act_space.shape[0])],
             hidden_layer_dims=hiddens[:-1],
             hidden_layer_activation=activation,
-            hidden_layer_weights_initializer=self._model_config_dict.get("fcnet_kernel_initializer"),
-            hidden_layer_weights_initializer_config=self._model_config_dict.get(
-                "fcnet_kernel_initializer_kwargs"
-            ),
-            hidden_layer_bias_initializer=self._model_config_dict.get("fcnet_bias_initializer"),
-            hidden_layer_bias_initializer_config=self._model_config_dict.get("fcnet_bias_initializer_kwargs"),
             output_layer_dim=hiddens[-1],
             output_layer_activation=activation,
-            output_layer_weights_initializer=self._model_config_dict.get("fcnet_kernel_initializer"),
-            output_layer_weights_initializer_config=self._model_config_dict.get(
-                "fcnet_kernel_initializer_kwargs"
-            ),
-            output_layer_bias_initializer=self._model_config_dict.get("fcnet_bias_initializer"),
-            output_layer_bias_initializer_config=self._model_config_dict.get("fcnet_bias_initializer_kwargs"),
+            **{
+                f"{layer}_layer_{key}": value for layer in ("hidden", "output") for key, value in init.items()
+            },
         )
         return self.qf_encoder_config.build(framework=framework)
 

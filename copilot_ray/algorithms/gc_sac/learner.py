@@ -51,6 +51,8 @@ from ray.rllib.core.learner.torch.torch_learner import TorchLearner
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.metrics import ALL_MODULES, NUM_TARGET_UPDATES
 
+from copilot_ray.torch_checks import all_finite
+
 GC_SAC_KEY = "gc_sac"
 NONFINITE_SKIPPED_KEY = "num_nonfinite_steps_skipped"
 LOG_ALPHA_STATE_KEY = "gc_sac_log_alpha"
@@ -110,29 +112,19 @@ class GCSACTorchLearner(SACTorchLearner):
         params_critic = self.get_parameters(module.qf_encoder) + self.get_parameters(module.qf)
         if config.twin_q:
             params_critic += self.get_parameters(module.qf_twin_encoder) + self.get_parameters(module.qf_twin)
-        self.register_optimizer(
-            module_id=module_id,
-            optimizer_name="qf",
-            optimizer=adam(params_critic),
-            params=params_critic,
-            lr_or_lr_schedule=config.critic_lr,
-        )
         params_actor = self.get_parameters(module.pi_encoder) + self.get_parameters(module.pi)
-        self.register_optimizer(
-            module_id=module_id,
-            optimizer_name="policy",
-            optimizer=adam(params_actor),
-            params=params_actor,
-            lr_or_lr_schedule=config.actor_lr,
-        )
-        temperature = self.curr_log_alpha[module_id]
-        self.register_optimizer(
-            module_id=module_id,
-            optimizer_name="alpha",
-            optimizer=adam([temperature]),
-            params=[temperature],
-            lr_or_lr_schedule=config.alpha_lr,
-        )
+        for name, params, lr in (
+            ("qf", params_critic, config.critic_lr),
+            ("policy", params_actor, config.actor_lr),
+            ("alpha", [self.curr_log_alpha[module_id]], config.alpha_lr),
+        ):
+            self.register_optimizer(
+                module_id=module_id,
+                optimizer_name=name,
+                optimizer=adam(params),
+                params=params,
+                lr_or_lr_schedule=lr,
+            )
 
     # ------------------------------------------------------------------ loss
     def _compute_loss_for_module_continuous(self, *, module_id, config, batch, fwd_out):
@@ -202,7 +194,7 @@ class GCSACTorchLearner(SACTorchLearner):
         loss_per_module = self.compute_losses(fwd_out=fwd_out, batch=batch)
         gradients = self.compute_gradients(loss_per_module)
         gradients = self.postprocess_gradients(gradients)
-        if self._all_finite(gradients):
+        if all_finite(gradients.values()):
             self.apply_gradients(gradients)
             self._polyak_update_targets()
         else:
@@ -210,14 +202,6 @@ class GCSACTorchLearner(SACTorchLearner):
                 optim.zero_grad(set_to_none=True)
             self.metrics.log_value((ALL_MODULES, NONFINITE_SKIPPED_KEY), 1, reduce="lifetime_sum")
         return fwd_out, loss_per_module, {}
-
-    @staticmethod
-    def _all_finite(gradients: dict) -> bool:
-        grads = [g for g in gradients.values() if g is not None]
-        if not grads:
-            return True
-        norms = torch._foreach_norm(grads)
-        return bool(torch.isfinite(torch.stack(norms)).all())
 
     def _target_pairs(self, module_id) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
         pairs = self._gc_target_pairs.get(module_id)

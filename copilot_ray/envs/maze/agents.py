@@ -43,6 +43,10 @@ class AgentGeometry(ABC):
         """bool [N]: does moving straight (in configuration space) from a[i] to b[i] hit anything?"""
 
     @abstractmethod
+    def motion_collision_lengths(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """float [N]: length of the straight motion a[i] -> b[i] spent in collision (planning costs)."""
+
+    @abstractmethod
     def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """float [N]: distance between configurations (wraps angles where there are any)."""
 
@@ -59,12 +63,6 @@ class AgentGeometry(ABC):
     ) -> np.ndarray:
         """float [N]: exact shortest collision-free path lengths; only where an exact method exists."""
         raise NotImplementedError(f"no exact shortest path for agent {self.name!r}")
-
-    def motion_collision_lengths(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """float [N]: length of the straight motion a[i] -> b[i] spent in collision (planning costs)."""
-        raise NotImplementedError(
-            f"no collision length for agent {self.name!r}; use collision_cost='indicator'"
-        )
 
 
 class PointMass(AgentGeometry):
