@@ -150,14 +150,19 @@ def final_success(configs: list[ConfigSummary], axis_name: str, path: Path) -> P
     return path
 
 
+def tree_figure_layers(depth: int) -> list[int]:
+    """The layers Fig. 4d shows: 2, 3 and 4 as in the paper, or the deepest three of a shallower tree."""
+    return [2, 3, 4] if depth >= 4 else list(range(max(1, depth - 2), depth + 1))
+
+
 def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str, path: Path) -> Path:
-    """Paper Fig. 4d: rows = layers 2..K (1..K when K < 2), columns = training stages; each panel shows
-    the layer's planned path for one fixed test task over the maze (start red, goal blue) and, above it,
-    the agent's measured steps per sub-task along that path (grey = sub-task not reached)."""
+    """Paper Fig. 4d: rows = layers 2, 3, 4 (see `tree_figure_layers`), columns = training stages; each
+    panel shows the layer's planned path for one fixed test task over the maze (start red, goal blue)
+    and, above it, the agent's measured steps per sub-task along that path (grey = not reached)."""
     from copilot_ray.envs.maze import load_layout, render_maze
 
     depth = snapshots[0].depth
-    layers = list(range(2, depth + 1)) if depth >= 2 else list(range(1, depth + 1))
+    layers = tree_figure_layers(depth)
     layout_name = snapshots[0].layout or "four-rooms"
     try:
         layout = load_layout(layout_name)
@@ -197,9 +202,137 @@ def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str,
             if c == 0:
                 ax_m.set_ylabel(f"layer {k}\n({2**k} sub-tasks)", fontsize=9)
     fig.suptitle(
-        f"{title}\nsub-goal paths of test task {task}; bars: agent steps per sub-task (grey: not reached)",
+        f"{title}\nsub-goal paths of test task {task} (start: red, goal: blue); "
+        "bars: agent steps per sub-task (grey: not reached)",
         fontsize=9,
     )
     fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- diagnostics
+# One panel per question, one colour per configuration, one line per seed. (metric, line style, label).
+_DIAG_PANELS = (
+    (
+        "sub-goals inside obstacles",
+        (
+            ("copilot/diag/subgoal_in_obstacle_layer_{K}", "-", "layer K"),
+            ("copilot/diag/subgoal_in_obstacle_layer_{K2}", ":", "layer K-2"),
+        ),
+    ),
+    (
+        "segments longer than one sub-task can cover",
+        (
+            ("copilot/diag/segment_unreachable_layer_{K}", "-", "layer K"),
+            ("copilot/diag/segment_unreachable_layer_{K2}", ":", "layer K-2"),
+        ),
+    ),
+    (
+        "training sub-task success by layer",
+        (
+            ("copilot/agent/subtask_success_layer_{K}", "-", "layer K"),
+            ("copilot/agent/subtask_success_layer_{K2}", "--", "layer K-2"),
+            ("copilot/agent/subtask_success_layer_0", ":", "layer 0"),
+        ),
+    ),
+    (
+        "sub-task success after the previous one was...",
+        (
+            ("copilot/diag/success_after_reached", "-", "reached"),
+            ("copilot/diag/success_after_failed", ":", "failed"),
+        ),
+    ),
+    ("critic's mean Q", (("copilot/diag/q_mean", "-", "mean Q"),)),
+    (
+        "test: planned path collision-free / followed",
+        (
+            ("copilot/eval/planned_collision_free", ":", "plan collision-free"),
+            ("copilot/eval/deterministic/reached_planned", "--", "reached (collisions allowed)"),
+            ("copilot/eval/deterministic/success_planned", "-", "success"),
+        ),
+    ),
+    (
+        "test success: deterministic vs sampled actions",
+        (
+            ("copilot/eval/deterministic/success_planned", "-", "deterministic, planned"),
+            ("copilot/eval/sampled/success_planned", "--", "sampled, planned"),
+            ("copilot/eval/sampled/success_direct", ":", "sampled, direct"),
+        ),
+    ),
+)
+
+
+def depth_of(trial) -> int:
+    layers = [
+        int(k.rsplit("_", 1)[1]) for k in trial.curves if k.startswith("copilot/diag/segment_length_layer_")
+    ]
+    return max(layers, default=0)
+
+
+def diagnostics(configs: list[ConfigSummary], path: Path) -> Path | None:
+    """Why runs (do not) learn: the `copilot/diag/...` curves and their evaluation counterparts against
+    env steps. Returns None when no run logged diagnostics."""
+    shown, _ = _select(configs)
+    trials = [(c, t) for c in shown for t in c.trials if depth_of(t) > 0 or "copilot/diag/q_mean" in t.curves]
+    if not trials:
+        return None
+    colors = dict(zip([c.key for c in shown], _colors(len(shown)), strict=True))
+    cols = 4
+    rows = -(-len(_DIAG_PANELS) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows), squeeze=False)
+    for ax, (title, lines) in zip(axes.flat, _DIAG_PANELS, strict=False):
+        for c, t in trials:
+            K = depth_of(t)
+            for metric, style, _ in lines:
+                key = metric.format(K=K, K2=max(K - 2, 1))
+                if key not in t.curves:
+                    continue
+                steps, values = t.curves[key]
+                ax.plot(steps, values, style, color=colors[c.key], linewidth=1.3, alpha=0.85)
+        for _, style, label in lines:  # the line styles' legend, in black
+            ax.plot([], [], style, color="black", label=label)
+        ax.set_title(title, fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
+        ax.legend(fontsize=6, loc="best")
+    for ax in axes.flat[len(_DIAG_PANELS) :]:
+        ax.axis("off")
+    handles = [plt.Line2D([], [], color=colors[c.key], linewidth=2) for c in shown]
+    axes.flat[-1].legend(handles, [c.label for c in shown], fontsize=7, loc="center", title="configuration")
+    fig.suptitle("Diagnostics against environment steps (one line per seed)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def tau_hat_profiles(
+    profiles: list[tuple[str, list[TreeSnapshot]]], reachable: float | None, path: Path
+) -> Path | None:
+    """tau_hat (the learned time cost, distance units) against segment length at a few points of
+    training, one panel per configuration; the diagonal is the Euclidean cost it starts from."""
+    profiles = [(label, [s for s in snaps if s.tau_hat is not None]) for label, snaps in profiles]
+    profiles = [(label, snaps) for label, snaps in profiles if snaps]
+    if not profiles:
+        return None
+    fig, axes = plt.subplots(1, len(profiles), figsize=(4.2 * len(profiles), 3.6), squeeze=False)
+    for ax, (label, snaps) in zip(axes[0], profiles, strict=True):
+        top = max(float(np.max(s.tau_hat_length)) for s in snaps)
+        ax.plot([0, top], [0, top], color="0.6", linewidth=1, label="Euclidean")
+        shades = plt.get_cmap("viridis")(np.linspace(0.1, 0.9, len(snaps)))
+        for s, shade in zip(snaps, shades, strict=True):
+            ax.plot(s.tau_hat_length, s.tau_hat, "o-", color=shade, label=f"{s.env_steps:,} env steps")
+        if reachable is not None:
+            ax.axvline(reachable, color="tab:red", linestyle=":", linewidth=1, label="one sub-task's reach")
+        ax.set_xlabel("segment length")
+        ax.set_ylabel("tau_hat (distance units)")
+        ax.set_title(label, fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle("Learned time cost against segment length over training", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
     plt.close(fig)
     return path

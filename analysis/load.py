@@ -2,7 +2,7 @@
 
 The layout read here is the sweep runner's contract (DESIGN.md section 7 and `copilot_ray.sweep`): one
 parent run per sweep (tag `copilot.role=sweep`), one child run per trial (tags `mlflow.parentRunId`,
-`copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `K`, `b`,
+`copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `preset`, `K`, `b`,
 `alpha_schedule`), success metrics logged with `step` = environment steps, and sub-goal tree snapshots as
 `copilot_trees/trees_iterNNNNNN.npz` artifacts.
 """
@@ -20,11 +20,14 @@ import numpy as np
 SUCCESS_PLANNED = "copilot/eval/success_planned"
 SUCCESS_DIRECT = "copilot/eval/success_direct"
 SUCCESS_METRICS = (SUCCESS_PLANNED, SUCCESS_DIRECT)
+# Curves for the diagnostics page (copilot_ray.algorithms.copilot.diagnostics): every metric under these
+# prefixes that a run logged.
+DIAGNOSTIC_PREFIXES = ("copilot/diag/", "copilot/eval/", "copilot/agent/subtask_success_layer_")
 WALL_TIME = "time_total_s"
 ENV_STEPS = "env_runners/num_env_steps_sampled_lifetime"
 TREES_DIR = "copilot_trees"
 # Tags that name a sweep axis, in the order they are shown in labels.
-AXIS_TAGS = ("algorithm", "env", "K", "b", "alpha_schedule")
+AXIS_TAGS = ("algorithm", "env", "preset", "K", "b", "alpha_schedule")
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
 # KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
 USABLE_STATUSES = ("FINISHED", "RUNNING")
@@ -205,7 +208,8 @@ def _trial(client, run) -> Trial:
         seed=tags.get("seed", run.data.params.get("seed", "?")),
         tags=tags,
     )
-    for key in SUCCESS_METRICS:
+    wanted = set(SUCCESS_METRICS) | {k for k in run.data.metrics if k.startswith(DIAGNOSTIC_PREFIXES)}
+    for key in sorted(wanted):
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
             hist = client.get_metric_history(run.info.run_id, key)
             steps = np.array([m.step for m in hist], dtype=np.float64)
@@ -243,6 +247,9 @@ class TreeSnapshot:
     subtask_steps: np.ndarray  # [n_tasks, K + 1, 2^K], -1 beyond 2^k entries
     subtask_reached: np.ndarray  # bool, same shape
     layout: str
+    # tau_hat profile (absent in older snapshots): mean segment length and mean tau_hat per probe length
+    tau_hat_length: np.ndarray | None = None
+    tau_hat: np.ndarray | None = None
 
     def layer_path(self, task: int, k: int) -> np.ndarray:
         """Layer k's path: tree indices j * 2^(K-k), j = 0..2^k."""
@@ -266,6 +273,10 @@ def load_tree_snapshots(tracking_uri: str, run_id: str, paths: list[str]) -> lis
                         subtask_steps=np.asarray(z["subtask_steps"]),
                         subtask_reached=np.asarray(z["subtask_reached"], dtype=bool),
                         layout=str(z["layout"]) if "layout" in z.files else "",
+                        tau_hat_length=np.asarray(z["tau_hat_length"])
+                        if "tau_hat_length" in z.files
+                        else None,
+                        tau_hat=np.asarray(z["tau_hat"]) if "tau_hat" in z.files else None,
                     )
                 )
     return out

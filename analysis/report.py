@@ -97,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
         figs.append(("Final success", figures.final_success(configs, axis_name, out / "final_success.png")))
     else:
         notes.append("No run has evaluation metrics yet: no success figures.")
-    tree_figs = _tree_figures(sweep, configs, args, out, notes)
+    tree_figs, snapshots = _tree_figures(sweep, configs, args, out, notes)
+    diag_figs = _diagnostic_figures(configs, snapshots, out, notes)
 
     frame = tables.summary_frame(configs)
     tables.write_csv(frame, out / "summary.csv")
@@ -109,7 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         msg = "no sweep (parent) run in this experiment: the report is not logged to MLflow"
         notes.append(msg)
         print(f"note: {msg}")
-    doc = _document(sweep, configs, missing, axis_name, figs, tree_figs, table_md, frame, notes, log_to)
+    doc = _document(
+        sweep, configs, missing, axis_name, figs, tree_figs + diag_figs, table_md, frame, notes, log_to
+    )
     (out / "report.md").write_text(_to_markdown(doc))
     (out / "report.html").write_text(_to_html(doc, sweep.experiment))
     print(f"report: {out / 'report.md'}")
@@ -145,6 +148,7 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
     if not candidates:
         notes.append("No run has sub-goal tree snapshots (copilot_trees/*.npz): no tree figure.")
     result = []
+    loaded: list[tuple[str, list]] = []
     for c in candidates:
         trial = _tree_trial(c)
         files = trial.tree_artifacts
@@ -162,10 +166,32 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
                 snaps, task, title, out / f"subgoal_tree_{_slug(c.label)}.png"
             )
             result.append((f"Sub-goal tree, {c.label}", path))
+            loaded.append((c.label, snaps))
         except Exception as e:  # one malformed snapshot must not sink the rest of the report
             msg = f"tree figure for {c.label} (run {trial.run_id}) failed: {type(e).__name__}: {e}"
             notes.append(msg)
             print(f"warning: {msg}", file=sys.stderr)
+    return result, loaded
+
+
+def _diagnostic_figures(configs: list[ConfigSummary], snapshots, out: Path, notes: list[str]):
+    """The diagnostics page: why runs do or do not learn (copilot/diag/... curves, tau_hat profiles)."""
+    result = []
+    path = figures.diagnostics(configs, out / "diagnostics.png")
+    if path is None:
+        notes.append("No run logged copilot/diag/... metrics: no diagnostics figure.")
+    else:
+        result.append(("Diagnostics", path))
+    # The finest layer's reach (what the tau_hat plot is read against).
+    keys = [
+        (t, f"copilot/diag/reachable_length_layer_{figures.depth_of(t)}") for c in configs for t in c.trials
+    ]
+    reach = [t.curves[k][1][-1] for t, k in keys if k in t.curves]
+    path = figures.tau_hat_profiles(
+        snapshots, float(np.median(reach)) if reach else None, out / "tau_hat.png"
+    )
+    if path is not None:
+        result.append(("Learned time cost tau_hat against segment length", path))
     return result
 
 

@@ -2,6 +2,11 @@
 
 Rollouts run N copies of the goal env in lockstep on the driver, with one batched policy call per
 step, so evaluating 100 test tasks costs a few seconds and needs no env runner.
+
+Every evaluation runs the policy twice: with deterministic actions (tanh of the Gaussian's mean) and
+with sampled ones. A blocked move leaves the point where it was, so a deterministic policy whose mean
+points into a wall repeats that move until time runs out, where a sampled one slides off. Success needs
+the goal reached without any collision; "reached" counts reaching it at all.
 """
 
 from __future__ import annotations
@@ -18,20 +23,28 @@ from copilot_ray.algorithms.copilot.traversal_env import flat_observation, path_
 Policy = Callable[[np.ndarray], np.ndarray]
 
 
+ACTION_MODES = ("deterministic", "sampled")
+
+
 class ModulePolicy:
-    """Deterministic actions of a SAC RLModule: the tanh-squashed mean of its Gaussian.
+    """Actions of a SAC RLModule: the tanh-squashed mean of its Gaussian, or (`sampled=True`) a sample.
 
     Not `dist.to_deterministic()`: for RLlib's TorchSquashedGaussian that returns the *unsquashed*
     mean, which clipped to [-1, 1] turns every confident action into a full-speed one.
     """
 
-    def __init__(self, module):
+    def __init__(self, module, sampled: bool = False, seed: int = 0):
         self.module = module
+        self.sampled = sampled
+        self.generator = torch.Generator().manual_seed(seed)
 
     @torch.no_grad()
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         out = self.module.forward_inference({"obs": torch.as_tensor(obs, dtype=torch.float32)})
-        mean, _ = out["action_dist_inputs"].chunk(2, dim=-1)
+        mean, log_std = out["action_dist_inputs"].chunk(2, dim=-1)
+        if self.sampled:
+            noise = torch.randn(mean.shape, generator=self.generator)
+            mean = mean + noise * torch.exp(log_std)
         return torch.tanh(mean).numpy()
 
 
@@ -45,11 +58,14 @@ class WaypointRollout:
     subtask_reached: np.ndarray  # [N, P-1]
 
 
-def follow_waypoints(envs: list, policy: Policy, waypoints: np.ndarray, tau_max: int) -> WaypointRollout:
+def follow_waypoints(
+    envs: list, policy: Policy, waypoints: np.ndarray, tau_max: int, with_delta: bool = False
+) -> WaypointRollout:
     """Each env starts at waypoints[i, 0] and heads for waypoints[i, 1], [i, 2], ... in turn.
 
     A sub-task ends when its waypoint is reached or after tau_max steps; the next one starts from
-    wherever the agent stopped (as in training).
+    wherever the agent stopped. `with_delta`: the policy also sees waypoint - position
+    (agent_input="state_goal_delta").
     """
     n, p, _ = waypoints.shape
     obs = np.zeros((n, envs[0].observation_space["observation"].shape[0]), np.float32)
@@ -68,7 +84,7 @@ def follow_waypoints(envs: list, policy: Policy, waypoints: np.ndarray, tau_max:
     while active.any():
         ids = np.flatnonzero(active)
         goals = waypoints[ids, target[ids]]
-        actions = policy(flat_observation(obs[ids], goals))
+        actions = policy(flat_observation(obs[ids], goals, pos[ids] if with_delta else None))
         for j, i in enumerate(ids):
             o, _, reached, _, info = envs[i].step(actions[j])
             obs[i], pos[i] = o["observation"], o["achieved_goal"]
@@ -91,28 +107,43 @@ def follow_waypoints(envs: list, policy: Policy, waypoints: np.ndarray, tau_max:
 
 @dataclass
 class CopilotEvaluation:
-    success_planned: float
-    success_direct: float
+    # {"deterministic": {...}, "sampled": {...}}, each with success_planned, success_direct,
+    # reached_planned, reached_direct (shares of the test tasks), subgoals_reached_planned
+    by_action: dict[str, dict[str, float]]
     plan_collision_free: float
     trees: np.ndarray | None  # [n_tree, 2^K + 1, d] deterministic trees of the first test tasks
     tree_subtask_steps: np.ndarray | None  # [n_tree, K + 1, 2^K], -1 where layer k has no sub-task
     tree_subtask_reached: np.ndarray | None
+
+    def headline(self, action: str) -> dict[str, float]:
+        return self.by_action[action]
 
 
 def evaluate_copilot(
     *,
     goal_env_id: str,
     goal_env_config: Mapping[str, Any],
-    policy: Policy,
+    policies: Mapping[str, Policy],
     planner,
     starts: np.ndarray,
     goals: np.ndarray,
     depth: int,
     tau_max: int,
     tree_tasks: int = 0,
+    tree_policy: str | None = None,
+    step_limit_of: Callable[[int], int] | None = None,
+    with_delta: bool = False,
 ) -> CopilotEvaluation:
+    """Success of each policy in `policies` (e.g. deterministic and sampled actions) on the tasks.
+
+    Planned: the agent follows the planner's finest path (mean tree), `step_limit_of(K)` steps per
+    sub-goal (default tau_max); direct: the agent alone, with the step budget of the finest plan,
+    tau_max * 2^K. The trees of the first `tree_tasks` tasks are traversed layer by layer with
+    `policies[tree_policy]` (default: the first policy) for the sub-goal tree figure.
+    """
     from copilot_ray.envs import make
 
+    step_limit_of = step_limit_of or (lambda k: tau_max)
     n = len(starts)
     envs = [make(goal_env_id, **dict(goal_env_config)) for _ in range(n)]
     # depth 0: no planner, the "plan" is the task itself.
@@ -121,9 +152,22 @@ def evaluate_copilot(
         if planner is None
         else planner.sample(starts, goals, deterministic=True)
     )
-    planned = follow_waypoints(envs, policy, trees, tau_max)
-    # The agent alone gets the same step budget as the finest plan.
-    direct = follow_waypoints(envs, policy, np.stack([starts, goals], axis=1), tau_max * 2**depth)
+    by_action = {}
+    for name, policy in policies.items():
+        planned = follow_waypoints(envs, policy, trees, step_limit_of(depth), with_delta)
+        # The agent alone gets the same step budget as the finest plan.
+        direct = follow_waypoints(
+            envs, policy, np.stack([starts, goals], axis=1), tau_max * 2**depth, with_delta
+        )
+        by_action[name] = {
+            "success_planned": float(planned.success.mean()),
+            "success_direct": float(direct.success.mean()),
+            "reached_planned": float(planned.reached_final.mean()),
+            "reached_direct": float(direct.reached_final.mean()),
+            # share of the finest path's sub-goals reached: how far along the plan the agent gets
+            "subgoals_reached_planned": float(planned.subtask_reached.mean()),
+        }
+    policy = policies[tree_policy or next(iter(policies))]
     geometry = envs[0].unwrapped
     a = trees[:, :-1].reshape(-1, trees.shape[-1])
     b = trees[:, 1:].reshape(-1, trees.shape[-1])
@@ -136,14 +180,13 @@ def evaluate_copilot(
         tree_reached = np.zeros((tree_tasks, depth + 1, 2**depth), bool)
         for k in range(depth + 1):
             path = kept[:, path_indices(depth, k)]
-            r = follow_waypoints(envs[:tree_tasks], policy, path, tau_max)
+            r = follow_waypoints(envs[:tree_tasks], policy, path, step_limit_of(k), with_delta)
             tree_steps[:, k, : 2**k] = r.subtask_steps
             tree_reached[:, k, : 2**k] = r.subtask_reached
     for env in envs:
         env.close()
     return CopilotEvaluation(
-        success_planned=float(planned.success.mean()),
-        success_direct=float(direct.success.mean()),
+        by_action=by_action,
         plan_collision_free=float(plan_free.mean()),
         trees=kept,
         tree_subtask_steps=tree_steps,

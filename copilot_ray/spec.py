@@ -71,6 +71,9 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
+from copilot_ray.algorithms.copilot import readings
+from copilot_ray.planning.planner import NOISE_MODES
+
 __all__ = [
     "ALGORITHMS",
     "COPILOT_KNOBS",
@@ -234,6 +237,10 @@ def _alpha_schedule_ok(v: Any) -> bool:
     return True
 
 
+def _target_entropy_ok(v: Any) -> bool:
+    return v == "auto" or _is_num(v)
+
+
 _ALPHA_KINDS = ("constant", "linear", "exponential", "step")  # copilot_ray.planning.alpha_schedule.KINDS
 _ALPHA_CLOCKS = ("global", "per_task")
 _ALPHA_PRESETS = ("paper_warm_start", "paper_per_task", "euclidean", "time_cost")
@@ -247,7 +254,10 @@ _ALPHA_PRESETS = ("paper_warm_start", "paper_per_task", "euclidean", "time_cost"
 #   training       -> .training(<key>=value)                       (SAC / AlgorithmConfig knobs)
 COPILOT_KNOBS: dict[str, Knob] = {
     "tree_depth": _int(
-        "copilot", 1, MAX_TREE_DEPTH, " (K > 10 is too deep for memory: 2^(K+1) - 1 sub-tasks per task)"
+        "copilot",
+        0,
+        MAX_TREE_DEPTH,
+        " (0: no planner, plain goal-conditioned SAC; K > 10 is too deep for memory: 2^(K+1) - 1 sub-tasks per task)",
     ),
     "repetitions": _int("copilot", 1),
     "tau_max": _int("copilot", 1),
@@ -260,6 +270,21 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "eval_num_tasks": _int("copilot", 1),
     "eval_tree_tasks": _int("copilot", 0),
     "subtasks_per_sample": _int("copilot", 1),
+    # Readings of the paper's ambiguities (copilot_ray/algorithms/copilot/readings.py); `preset` is
+    # applied first, every other key of the spec overrides it.
+    "preset": _choice("copilot", tuple(readings.PRESETS)),
+    "step_limit": _choice("copilot", readings.STEP_LIMITS),
+    "after_failure": _choice("copilot", readings.AFTER_FAILURE),
+    "subtask_reward": _choice("copilot", readings.SUBTASK_REWARDS),
+    "reward_scale": _float("copilot", 0.0, lo_open=True),
+    "agent_collision": _choice("copilot", readings.AGENT_COLLISIONS),
+    "agent_collision_penalty": _float("copilot", 0.0),
+    "agent_input": _choice("copilot", readings.AGENT_INPUTS),
+    "failed_subtask_cost": _choice("copilot", readings.FAILED_SUBTASK_COSTS),
+    "traversal_tree": _choice("copilot", readings.TRAVERSAL_TREES),
+    "planner_warm_start": _int("copilot", 0, note=" (planner phases before the first traversal)"),
+    "planner_task_batch_size": _int("copilot", 1),
+    "eval_action": _choice("copilot", readings.EVAL_ACTIONS),
     "alpha_schedule": Knob(
         "schedule",
         "alpha_schedule",
@@ -278,8 +303,11 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "alpha_schedule.values": _num_list("alpha_schedule", 0.0, 1.0, "alpha values in [0, 1]"),
     "planner.hidden": _int_list("planner"),
     "planner.std": _float("planner", 0.0, lo_open=True),
+    "planner.noise": _choice("planner", NOISE_MODES),
+    "planner.std_final": _float("planner", 0.0, lo_open=True),
+    "planner.std_anneal_phases": _int("planner", 1),
     "planner.lr": _float("planner", 0.0, lo_open=True),
-    "planner.clip": _float("planner", 0.0, lo_open=True),
+    "planner.clip": _float("planner", 0.0, 1.0, lo_open=True, hi_open=True),
     "planner.epochs": _int("planner", 1),
     "planner.num_samples": _int("planner", 1),
     "planner.max_grad_norm": _float("planner", 0.0, lo_open=True),
@@ -294,6 +322,9 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "critic_lr": _float("training", 0.0, lo_open=True),
     "alpha_lr": _float("training", 0.0, lo_open=True),
     "gamma": _float("training", 0.0, 1.0, lo_open=True),
+    # SAC's entropy temperature: its start value and the entropy it is tuned towards ("auto": -|A|).
+    "initial_alpha": _float("training", 0.0, lo_open=True),
+    "target_entropy": Knob("float", "training", _target_entropy_ok, '"auto" or a number'),
     "tau": _float("training", 0.0, 1.0, lo_open=True),
     "train_batch_size_per_learner": _int("training", 1),
     # RLlib's name for the update-to-data ratio (timesteps replayed per timestep sampled); an

@@ -117,7 +117,7 @@ class MlflowRun:
 #                                artifacts  spec.yaml (as given), spec.resolved.yaml (what ran), summary.md
 #   child run (one per trial)    tags  mlflow.parentRunId, copilot.role=trial, copilot.sweep,
 #                                      copilot.trial_id, copilot.config_key, algorithm, env, K, b,
-#                                      alpha_schedule, seed, git_commit
+#                                      alpha_schedule, preset, seed, git_commit
 #                                params  every knob of the algorithm at its effective value, seed, env.*
 #                                metrics  metrics_from_result + time_total_s + training_iteration,
 #                                         step = env steps (ENV_STEPS_KEY)
@@ -304,6 +304,7 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "K": getattr(algo_config, "tree_depth", None),
         "b": getattr(algo_config, "repetitions", None),
         "alpha_schedule": alpha_schedule_label(merged),
+        "preset": getattr(algo_config, "preset", None) or "default",
         "seed": seed,
         "knobs": effective_knobs(algo_config, spec),
     }
@@ -479,6 +480,7 @@ def _make_mlflow_callback():
                 "K": str(info["K"]),
                 "b": str(info["b"]),
                 "alpha_schedule": info["alpha_schedule"],
+                "preset": info["preset"],
                 "seed": str(info["seed"]),
                 "git_commit": self._commit,
             }

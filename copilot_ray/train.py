@@ -21,10 +21,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m copilot_ray.train", description=__doc__.split("\n\n")[0])
     p.add_argument("--env", default="maze-point", help="goal-conditioned env id (see copilot_ray.envs)")
     p.add_argument("--layout", default=None, help="maze layout: a built-in name or a layout file")
+    p.add_argument(
+        "--preset",
+        default=None,
+        help="readings of the paper's ambiguities, e.g. paper_literal (default: the measured defaults)",
+    )
     p.add_argument("--tree-depth", type=int, default=5, help="K (the paper uses 5)")
     p.add_argument("--repetitions", type=int, default=5, help="b (the paper uses 5)")
     p.add_argument("--alpha-schedule", default="paper_per_task", help="preset name of the alpha schedule")
-    p.add_argument("--tau-max", type=int, default=25, help="step budget of one sub-task")
+    p.add_argument("--tau-max", type=int, default=None, help="step budget of one sub-task (default 25)")
     p.add_argument(
         "--collision-cost",
         choices=["indicator", "length"],
@@ -69,18 +74,21 @@ def build_config(args: argparse.Namespace):
         # runners leave free; CoPilotConfig sizes torch's thread pool from this.
         .resources(num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners))
         .debugging(seed=args.seed)
-        .copilot(
-            tree_depth=args.tree_depth,
-            repetitions=args.repetitions,
-            alpha_schedule=args.alpha_schedule,
-            tau_max=args.tau_max,
-            collision_cost=args.collision_cost,
-            task_batch_size=args.task_batch_size,
-            eval_interval=args.eval_interval,
-            eval_num_tasks=args.eval_tasks,
-            updates_per_env_step=args.updates_per_env_step,
-            fast_learner=not args.stock_learner,
-        )
+    )
+    if args.preset is not None:
+        config.copilot(preset=args.preset)
+    if args.tau_max is not None:
+        config.copilot(tau_max=args.tau_max)
+    config.copilot(
+        tree_depth=args.tree_depth,
+        repetitions=args.repetitions,
+        alpha_schedule=args.alpha_schedule,
+        collision_cost=args.collision_cost,
+        task_batch_size=args.task_batch_size,
+        eval_interval=args.eval_interval,
+        eval_num_tasks=args.eval_tasks,
+        updates_per_env_step=args.updates_per_env_step,
+        fast_learner=not args.stock_learner,
     )
     config.copy(copy_frozen=False).validate()
     return config
@@ -131,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
                 "K": str(args.tree_depth),
                 "b": str(args.repetitions),
                 "alpha_schedule": args.alpha_schedule,
+                "preset": args.preset or "default",
                 "seed": str(args.seed),
                 "git_commit": git_commit(),
             },

@@ -30,8 +30,10 @@ def tiny_config(
             updates_per_env_step=0.05,
             fast_learner=fast_learner,
             collision_cost=collision_cost,
-            planner={"num_samples": 4},
+            planner={"num_samples": 4, "std_anneal_phases": 6},
             cost_model={"init_euclidean": 500, "fit_steps": 5},
+            planner_warm_start=3,
+            planner_task_batch_size=5,
         )
     )
 
@@ -49,6 +51,16 @@ EXPECTED_METRICS = [
     ("copilot", "agent", "success_layer_1"),
     ("copilot", "dtau", "size"),
     ("copilot", "cost_model", "loss"),
+    ("copilot", "eval", "deterministic", "success_planned"),
+    ("copilot", "eval", "sampled", "success_planned"),
+    ("copilot", "eval", "sampled", "reached_direct"),
+    ("copilot", "eval", "deterministic", "subgoals_reached_planned"),
+    ("copilot", "diag", "subgoal_in_obstacle_layer_2"),
+    ("copilot", "diag", "segment_unreachable_layer_1"),
+    ("copilot", "diag", "reachable_length_layer_2"),
+    ("copilot", "diag", "dtau_tuple_length_mean"),
+    ("copilot", "diag", "q_mean"),
+    ("copilot", "planner", "std"),
     ("env_runners", "num_env_steps_sampled_lifetime"),
 ]
 
@@ -67,6 +79,14 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
     try:
         results = [algo.train() for _ in range(2)]
         assert algo.planner.max_grad_norm == 0.5  # CO-PILOT's default planner gradient clip
+        # 3 warm-start phases, then one phase per repetition; the std annealed 0.05 -> 0.015 over 6.
+        assert algo._planner_phases == 3 + 2 * 2
+        assert algo.planner.std[0] == pytest.approx(0.015)
+        assert lookup(results[0], ("copilot", "planner", "warm_start_s")) > 0
+        # The headline metrics are the deterministic ones (eval_action's default).
+        assert lookup(results[-1], ("copilot", "eval", "success_planned")) == lookup(
+            results[-1], ("copilot", "eval", "deterministic", "success_planned")
+        )
         for key in EXPECTED_METRICS:
             assert np.isfinite(lookup(results[-1], key)), key
         steps = [lookup(r, EXPECTED_METRICS[-1]) for r in results]
@@ -82,6 +102,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
         assert len(artefacts) == 2
         with np.load(artefacts[-1]) as art:
             assert art["trees"].shape == (2, 5, 2)
+            assert art["tau_hat"].shape == art["tau_hat_length"].shape == (6,)
             assert art["subtask_steps"].shape == (2, 3, 4)
             assert (art["subtask_steps"][:, 0, 0] > 0).all() and (art["subtask_steps"][:, 0, 1:] == -1).all()
 
@@ -97,6 +118,8 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
             assert restored._rng.bit_generator.state == algo._rng.bit_generator.state
             assert restored.iteration == algo.iteration == 2
             assert restored.gradient_steps.get_state() == algo.gradient_steps.get_state()
+            assert restored._planner_phases == algo._planner_phases and restored._warm_started
+            assert restored.planner.std.tolist() == algo.planner.std.tolist()
             # The task sampler continues where it stopped: both draw the same next mini-batch.
             assert (restored._rng.integers(1 << 30, size=4) == algo._rng.integers(1 << 30, size=4)).all()
             if fast_learner:

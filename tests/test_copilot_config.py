@@ -27,7 +27,8 @@ def test_validate_swaps_in_the_traversal_env_and_the_fast_learner():
     c = config(tree_depth=2, tau_max=7)
     c.validate()
     assert c.env == TRAVERSAL_ENV_ID and c.goal_env == "maze-point"
-    assert c.env_config == {"goal_env": "maze-point", "goal_env_config": {"layout": "u-maze"}, "tau_max": 7}
+    assert c.env_config["goal_env"] == "maze-point" and c.env_config["tau_max"] == 7
+    assert c.env_config["goal_env_config"] == {"layout": "u-maze"}
     assert "gc_sac" in c.learner_config_dict
     c.validate()  # idempotent: validating twice keeps the goal env
     assert c.goal_env == "maze-point"
@@ -93,3 +94,62 @@ def test_collision_penalty_defaults_follow_the_collision_cost():
     assert config().collision_penalty_value() == 10.0  # paper: per colliding segment
     assert config(collision_cost="length").collision_penalty_value() == 100.0  # reference: per unit length
     assert config(collision_cost="length", collision_penalty=30.0).collision_penalty_value() == 30.0
+
+
+def test_paper_literal_preset_sets_every_reading_and_later_arguments_override_it():
+    from copilot_ray.algorithms.copilot.readings import PRESETS
+
+    c = config(preset="paper_literal")
+    literal = PRESETS["paper_literal"]
+    for key, value in literal.items():
+        if key == "planner":
+            assert all(c.planner[k] == v for k, v in value.items())
+        else:
+            assert getattr(c, key) == value, key
+    assert c.preset == "paper_literal"
+    assert c.planner["lr"] == 0.005  # planner keys the preset does not name keep their values
+    # Arguments of the same call override the preset, whatever their order.
+    c = config(tau_max=40, preset="paper_literal", planner={"std": 0.02})
+    assert c.tau_max == 40 and c.planner["std"] == 0.02 and c.after_failure == "continue"
+    c.validate()
+    assert c.env_config["tau_max"] == 40 and c.env_config["after_failure"] == "continue"
+
+
+def test_unknown_preset_is_rejected_naming_it():
+    with pytest.raises(ValueError, match=r"preset='paper'.*paper_literal"):
+        config(preset="paper")
+
+
+def test_traversal_rules_reach_the_env_config():
+    c = config(step_limit="scaled", after_failure="abort_layer", subtask_reward="uniform", reward_scale=2.0)
+    c.validate()
+    rules = {k: c.env_config[k] for k in ("step_limit", "after_failure", "subtask_reward", "reward_scale")}
+    assert rules == {
+        "step_limit": "scaled",
+        "after_failure": "abort_layer",
+        "subtask_reward": "uniform",
+        "reward_scale": 2.0,
+    }
+
+
+@pytest.mark.parametrize(
+    ("knobs", "match"),
+    [
+        ({"step_limit": "exp"}, r"step_limit='exp'"),
+        ({"after_failure": "retry"}, r"after_failure='retry'"),
+        ({"subtask_reward": "dense"}, r"subtask_reward='dense'"),
+        ({"agent_collision": "stop"}, r"agent_collision='stop'"),
+        ({"agent_collision_penalty": -0.5}, r"agent_collision_penalty=-0.5"),
+        ({"reward_scale": 0}, r"reward_scale=0"),
+        ({"traversal_tree": "best"}, r"traversal_tree='best'"),
+        ({"eval_action": "greedy"}, r"eval_action='greedy'"),
+        ({"planner_warm_start": -3}, r"planner_warm_start=-3"),
+        ({"planner": {"noise": "gaussian"}}, r"planner\.noise='gaussian'"),
+        ({"planner": {"clip": 1.5}}, r"planner\.clip=1\.5"),
+        ({"planner": {"std_final": 0}}, r"planner\.std_final=0"),
+        ({"planner": {"std_anneal_phases": 0}}, r"planner\.std_anneal_phases=0"),
+    ],
+)
+def test_bad_reading_knobs_are_rejected_with_key_and_value(knobs, match):
+    with pytest.raises(ValueError, match=match):
+        config(**knobs).validate()

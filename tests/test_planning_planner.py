@@ -82,6 +82,44 @@ def test_log_prob_equals_hand_computed_gaussian():
     np.testing.assert_allclose(fresh.log_prob(trees, [1]).detach().numpy(), hand, rtol=1e-4)
 
 
+def test_relative_noise_scales_with_the_parent_segment_and_log_prob_matches_by_hand():
+    planner = SubgoalPlanner(2, 2, low=0.0, high=1.0, std=0.1, noise="relative", seed=0)
+    starts = np.array([[0.1, 0.5], [0.45, 0.5]])
+    goals = np.array([[0.9, 0.5], [0.55, 0.5]])  # parent segments 0.8 and 0.1 long
+    rng = np.random.default_rng(0)
+    reps = 4000
+    trees = planner.sample(np.repeat(starts, reps, 0), np.repeat(goals, reps, 0), upto_layer=1, rng=rng)
+    spread = trees[:, 2].reshape(2, reps, 2).std(axis=1).mean(axis=1)
+    np.testing.assert_allclose(spread, [0.08, 0.01], rtol=0.08)  # std = 0.1 x parent length
+    trees = planner.sample(starts, goals, rng=rng).astype(np.float64)
+    expected = np.zeros(2)
+    for k in (1, 2):
+        li, ri = parent_indices(2, k)
+        with torch.no_grad():
+            mu = planner.mean(
+                torch.as_tensor(trees[:, li], dtype=torch.float32),
+                torch.as_tensor(trees[:, ri], dtype=torch.float32),
+                k,
+            ).numpy()
+        std = np.maximum(0.1 * np.linalg.norm(trees[:, ri] - trees[:, li], axis=-1, keepdims=True), 1e-3)
+        x = trees[:, new_layer_indices(2, k)]
+        dens = -0.5 * ((x - mu) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi)
+        expected += dens.sum(axis=(1, 2))
+    np.testing.assert_allclose(planner.log_prob(trees, 2).detach().numpy(), expected, rtol=1e-4)
+
+
+def test_set_std_changes_the_spread_and_survives_a_state_dict_round_trip():
+    planner = SubgoalPlanner(2, 1, low=0.0, high=1.0, std=0.05, seed=0)
+    planner.set_std(0.01)
+    starts, goals = np.full((3000, 2), 0.3), np.full((3000, 2), 0.7)
+    trees = planner.sample(starts, goals, rng=np.random.default_rng(0))
+    assert trees[:, 1].std(axis=0) == pytest.approx([0.01, 0.01], rel=0.08)
+    restored = SubgoalPlanner.from_state_dict(planner.state_dict())
+    assert restored.std.tolist() == pytest.approx([0.01, 0.01])
+    with pytest.raises(ValueError, match="std must be > 0"):
+        planner.set_std(0.0)
+
+
 def test_group_baseline():
     costs = np.array([1.0, 3.0, 10.0, 20.0, 30.0])
     np.testing.assert_allclose(group_baseline(costs, np.array([0, 0, 1, 1, 1])), [2, 2, 20, 20, 20])

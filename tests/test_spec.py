@@ -128,8 +128,8 @@ def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
     "changes, expected",
     [
         (
-            {"config__tree_depth": 0},
-            "config.tree_depth: 0 is invalid: tree_depth must be an integer in [1, 10]",
+            {"config__tree_depth": -1},
+            "config.tree_depth: -1 is invalid: tree_depth must be an integer in [0, 10]",
         ),
         ({"config__tree_depth": 11}, "too deep for memory"),
         ({"config__tree_depth": "5"}, "config.tree_depth: '5' is invalid"),
@@ -149,8 +149,8 @@ def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
         ({"search__repetitions__grid": []}, "search.repetitions.grid: [] is invalid: an empty grid"),
         ({"search__repetitions__grid": [1, 1]}, "duplicate value 1"),
         (
-            {"search": {"tree_depth": {"grid": [1, 2, 0]}}, "config": {}},
-            "search.tree_depth.grid[2]: 0 is invalid: tree_depth must be an integer in [1, 10]",
+            {"search": {"tree_depth": {"grid": [1, 2, -1]}}, "config": {}},
+            "search.tree_depth.grid[2]: -1 is invalid: tree_depth must be an integer in [0, 10]",
         ),
         ({"config": {"tree_depth": 2, "planner.std": 0.0}}, "config.planner.std: 0.0 is invalid"),
         ({"config__tree_deph": 3}, "config.tree_deph: unknown key; did you mean 'tree_depth'?"),
@@ -279,9 +279,9 @@ def test_searcher_and_scheduler_rules():
 
 
 def test_several_problems_are_reported_together():
-    message = rejected(spec_with(config={"tree_depth": 0, "repetitions": 0}, seeds=[1, 1]))
+    message = rejected(spec_with(config={"tree_depth": -1, "repetitions": 0}, seeds=[1, 1]))
     lines = message.splitlines()
-    assert any("config.tree_depth: 0" in line for line in lines)
+    assert any("config.tree_depth: -1" in line for line in lines)
     assert any("config.repetitions: 0" in line for line in lines)
     assert any("duplicate seed 1" in line for line in lines)
 
@@ -375,7 +375,7 @@ def test_bad_layout_file_names_file_line_column(tmp_path):
 
 def test_rejected_spec_imports_no_ray(tmp_path):
     path = tmp_path / "bad.yaml"
-    path.write_text(yaml.safe_dump(spec_with(config__tree_depth=0)))
+    path.write_text(yaml.safe_dump(spec_with(config__tree_depth=-1)))
     code = (
         "import sys\n"
         "from copilot_ray.spec import load_spec, SpecError\n"
@@ -393,7 +393,7 @@ def test_rejected_spec_imports_no_ray(tmp_path):
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
     )
     assert out.returncode == 0, out.stderr
-    assert "REJECTED" in out.stdout and "config.tree_depth: 0 is invalid" in out.stdout
+    assert "REJECTED" in out.stdout and "config.tree_depth: -1 is invalid" in out.stdout
     assert "NO RAY" in out.stdout
 
 
@@ -520,8 +520,29 @@ def test_build_algorithm_config_applies_dotted_keys():
     assert cfg.alpha_schedule["clock"] == "global" and cfg.alpha_schedule["duration"] == 2
     with pytest.raises(SpecError, match=r"trial.tree_deph: .*did you mean 'tree_depth'"):
         build_algorithm_config({"tree_deph": 3}, smoke)
-    with pytest.raises(SpecError, match=r"trial.tree_depth: 0 is invalid"):
-        build_algorithm_config({"tree_depth": 0}, smoke)
+    with pytest.raises(SpecError, match=r"trial.tree_depth: -1 is invalid"):
+        build_algorithm_config({"tree_depth": -1}, smoke)
+
+
+def test_preset_in_a_spec_is_applied_first_and_other_keys_override_it():
+    reason = _copilot_importable()
+    if reason:
+        pytest.skip(reason)
+    spec = parse_spec(
+        spec_with(
+            config={"tree_depth": 2, "preset": "paper_literal", "tau_max": 30, "initial_alpha": 0.01},
+            search={"after_failure": {"grid": ["continue", "restart"]}},
+        )
+    )
+    configs = [build_algorithm_config(trial, spec) for trial in spec.trial_plan()]
+    assert {c.after_failure for c in configs} == {"continue", "restart"}
+    for c in configs:
+        assert c.preset == "paper_literal" and c.traversal_tree == "sampled" and c.planner_warm_start == 0
+        assert c.tau_max == 30 and c.initial_alpha == 0.01  # the spec's own keys win over the preset
+    with pytest.raises(SpecError, match=r"config.preset: 'paper' is invalid.*paper_literal"):
+        parse_spec(spec_with(config={"preset": "paper"}))
+    with pytest.raises(SpecError, match=r"config.target_entropy: 'low' is invalid"):
+        parse_spec(spec_with(config={"target_entropy": "low"}))
 
 
 def test_knob_table_matches_copilot_config():

@@ -101,3 +101,129 @@ def test_observation_space_contains_observations(depth):
     env.load_plan(straight_tree(depth)[None], depth, np.array([0]))
     obs, _ = env.reset()
     assert env.observation_space.contains(obs)
+
+
+def make_ruled_env(**rules):
+    config = {"goal_env": "maze-point", "goal_env_config": {"layout": "empty", "speed": 0.01}, "tau_max": 5}
+    return TraversalEnv({**config, **rules})
+
+
+def run_subtask(env, policy=drive_to_goal):
+    obs, _ = env.reset()
+    total, steps = 0.0, 0
+    while True:
+        obs, r, term, trunc, info = env.step(policy(env, obs))
+        total += r
+        steps += 1
+        if term or trunc:
+            return obs, total, steps, term, info
+
+
+def stand_still(env, obs):
+    return np.zeros(2, np.float32)
+
+
+def test_scaled_step_limit_gives_layer_k_tau_max_times_2_to_the_K_minus_k():
+    depth = 2
+    env = make_ruled_env(step_limit="scaled")
+    env.load_plan(straight_tree(depth)[None], depth, np.array([0]))
+    steps = [run_subtask(env, stand_still)[2] for _ in range(7)]
+    # layers 2, 2, 2, 2, 1, 1, 0 -> 5, 5, 5, 5, 10, 10, 20 steps before truncation
+    assert steps == [5] * 4 + [10] * 2 + [20]
+    fixed = make_ruled_env(step_limit="fixed")
+    fixed.load_plan(straight_tree(depth)[None], depth, np.array([0]))
+    assert [run_subtask(fixed, stand_still)[2] for _ in range(7)] == [5] * 7
+
+
+def test_after_failure_restart_starts_the_next_subtask_at_the_missed_subgoal():
+    depth = 1
+    tree = straight_tree(depth)
+    env = make_ruled_env(after_failure="restart")
+    env.load_plan(tree[None], depth, np.array([0]))
+    *_, info = run_subtask(env, stand_still)  # fails: stays at s0
+    assert info["subtask_reached"] is False
+    obs, _ = env.reset()  # next sub-task of the layer starts at the sub-goal it missed
+    np.testing.assert_allclose(obs[:2], tree[1], atol=1e-6)
+    np.testing.assert_allclose(obs[2:], tree[2], atol=1e-6)
+
+
+def test_after_failure_restart_falls_back_to_the_agent_position_when_the_subgoal_is_in_a_wall():
+    depth = 1
+    tree = straight_tree(depth).copy()
+    env = TraversalEnv(
+        {
+            "goal_env": "maze-point",
+            "goal_env_config": {"layout": "u-maze", "speed": 0.01},
+            "tau_max": 3,
+            "after_failure": "restart",
+        }
+    )
+    inner = env.inner
+    starts, goals = inner.tasks("train")
+    wall = np.array([0.5, 0.5], np.float32)
+    assert not inner.is_free(wall)
+    tree = np.stack([starts[0], wall, goals[0]])
+    env.load_plan(tree[None], depth, np.array([0]))
+    *_, info = run_subtask(env, stand_still)
+    obs, _ = env.reset()
+    np.testing.assert_allclose(obs[:2], info["subtask_end"], atol=1e-6)
+
+
+def test_after_failure_abort_layer_drops_the_rest_of_the_layer():
+    depth = 2
+    env = make_ruled_env(after_failure="abort_layer")
+    n = env.load_plan(np.stack([straight_tree(depth)] * 2), depth, np.array([0, 1]))
+    assert n == 14
+    *_, info = run_subtask(env, stand_still)  # task 0, layer 2, first sub-goal: fails
+    assert (info["subtask_layer"], info["subtask_index"]) == (2, 1)
+    # The three remaining sub-tasks of task 0's layer 2 are gone; layer 1 of task 0 is next.
+    assert env.remaining() == 14 - 4
+    *_, info = run_subtask(env, stand_still)
+    assert (info["subtask_task"], info["subtask_layer"], info["subtask_index"]) == (0, 1, 1)
+
+
+@pytest.mark.parametrize(
+    ("mode", "scale", "expected"),
+    [("halving", 1.0, 0.25), ("uniform", 1.0, 1.0), ("uniform", 3.0, 3.0), ("halving", 2.0, 0.5)],
+)
+def test_subtask_reward_modes(mode, scale, expected):
+    depth = 2
+    env = make_ruled_env(subtask_reward=mode, reward_scale=scale, tau_max=100)
+    env.load_plan(straight_tree(depth)[None], depth, np.array([0]))
+    _, total, _, term, _ = run_subtask(env)  # a layer-2 sub-task, reached
+    assert term and total == pytest.approx(expected)
+
+
+def into_the_wall(env, obs):
+    return np.array([0.0, -1.0], np.float32)  # straight down into the border
+
+
+@pytest.mark.parametrize(
+    ("mode", "steps", "total"), [("none", 5, 0.0), ("penalty", 5, -0.5), ("terminate", 1, -0.1)]
+)
+def test_agent_collision_modes(mode, steps, total):
+    depth = 1
+    tree = straight_tree(depth).copy()
+    tree[:, 1] = 0.005  # the path runs along the bottom border, 0.005 above it
+    env = make_ruled_env(agent_collision=mode, agent_collision_penalty=0.1)
+    env.load_plan(tree[None], depth, np.array([0]))
+    _, got_total, got_steps, term, info = run_subtask(env, into_the_wall)
+    assert got_steps == steps and got_total == pytest.approx(total)
+    assert term == (mode == "terminate") and info["subtask_collided"] is True
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("step_limit", "linear"),
+        ("after_failure", "retry"),
+        ("subtask_reward", "dense"),
+        ("agent_collision", "explode"),
+        ("reward_scale", 0.0),
+        ("agent_collision_penalty", -1.0),
+        ("tau_max", 0),
+    ],
+)
+def test_bad_traversal_rules_name_key_and_value(key, value):
+    with pytest.raises(ValueError, match=rf"{key}={value!r}"):
+        make_ruled_env(**{key: value})

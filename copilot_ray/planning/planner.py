@@ -5,6 +5,12 @@ Follows the SGT-PG planner that the paper's public code copies (see ``reference/
 * one small MLP per tree layer (``shared_across_layers=False``, the default) or one for all layers;
 * Gaussian with mean ``(g_i + g_j) / 2 + MLP([g_i, g_j])`` and a fixed standard deviation (0.05);
   the MLP's last layer starts near zero, so the initial policy proposes (noisy) midpoints;
+* the exploration noise is ``noise="absolute"`` (the reference code: ``std`` in goal units at every
+  layer) or ``noise="relative"`` (``std`` times the length of the parent segment ``g_i -> g_j``, so a
+  layer-5 sub-goal between points 0.06 apart is not thrown 0.05 off, as with the absolute std, while a
+  layer-1 sub-goal still explores widely; floored at ``MIN_STD``). ``set_std`` changes ``std`` between
+  updates (annealing); the log-density always uses the std the tree was sampled with, because an update
+  follows its sampling directly;
 * sampled sub-goals are clipped into the goal box ``[low, high]``. The log-density is that of the
   unclipped Gaussian evaluated at the (clipped) stored sub-goal, as in the reference code; with the
   default std 0.05 clipping only matters at the very edge of the box;
@@ -38,6 +44,8 @@ from .subgoal_tree import check_depth, depth_of, empty_tree, new_layer_indices, 
 __all__ = ["SubgoalPlanner", "group_baseline"]
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+NOISE_MODES = ("absolute", "relative")
+MIN_STD = 1e-3  # floor of a relative std (goal units): a zero-length parent segment keeps a density
 
 
 def _as_rng(rng) -> np.random.Generator:
@@ -88,7 +96,9 @@ class SubgoalPlanner:
         low, high: goal-space bounds (arrays [d] or scalars); sub-goals are clipped into them. ``None``
             means unbounded (no clipping, no input/output scaling).
         hidden: hidden sizes of each MLP (tanh).
-        std: fixed standard deviation (scalar or [d]) in goal units.
+        std: standard deviation (scalar or [d]): in goal units with ``noise="absolute"``, a fraction of
+            the parent segment's length with ``noise="relative"``.
+        noise: "absolute" (the reference code) or "relative" (see the module docstring).
         shared_across_layers: one MLP for all layers instead of one per layer.
         lr, clip_eps, epochs: Adam learning rate, PPO clip range and PPO epochs per ``update``.
         max_grad_norm: optional gradient-norm clip (None: off, as in the reference).
@@ -110,6 +120,7 @@ class SubgoalPlanner:
         *,
         hidden: Sequence[int] = (20, 20, 20),
         std: float | Sequence[float] = 0.05,
+        noise: str = "absolute",
         shared_across_layers: bool = False,
         lr: float = 0.005,
         clip_eps: float = 0.2,
@@ -133,10 +144,10 @@ class SubgoalPlanner:
             if not np.all(high > low):
                 raise ValueError(f"goal bounds need high > low, got low={low}, high={high}")
         self.low, self.high = low, high
-        std_arr = np.broadcast_to(np.asarray(std, dtype=np.float32), (self.goal_dim,)).copy()
-        if not np.all(std_arr > 0):
-            raise ValueError(f"std must be > 0, got std={std!r}")
-        self.std = std_arr
+        if noise not in NOISE_MODES:
+            raise ValueError(f"noise must be one of {NOISE_MODES}, got noise={noise!r}")
+        self.noise = noise
+        self.set_std(std)
         if not 0 < clip_eps < 1:
             raise ValueError(f"clip_eps must lie in (0, 1), got clip_eps={clip_eps!r}")
         if int(epochs) < 1:
@@ -173,8 +184,14 @@ class SubgoalPlanner:
             half = np.ones(self.goal_dim, np.float32)
         self._center = torch.as_tensor(center, dtype=torch.float32)
         self._half = torch.as_tensor(half, dtype=torch.float32)
+
+    def set_std(self, std: float | Sequence[float]) -> None:
+        """Sets the exploration std (scalar or [d]; its meaning depends on ``noise``)."""
+        std_arr = np.broadcast_to(np.asarray(std, dtype=np.float32), (self.goal_dim,)).copy()
+        if not np.all(std_arr > 0):
+            raise ValueError(f"std must be > 0, got std={std!r}")
+        self.std = std_arr
         self._std_t = torch.as_tensor(self.std, dtype=torch.float32)
-        self._log_std_sum = float(np.log(self.std).sum())
 
     # ------------------------------------------------------------------ config / persistence
     def config(self) -> dict:
@@ -185,6 +202,7 @@ class SubgoalPlanner:
             "high": None if self.high is None else self.high.tolist(),
             "hidden": list(self.hidden),
             "std": self.std.tolist(),
+            "noise": self.noise,
             "shared_across_layers": self.shared_across_layers,
             "lr": self.lr,
             "clip_eps": self.clip_eps,
@@ -204,6 +222,8 @@ class SubgoalPlanner:
         }
 
     def load_state_dict(self, state: dict) -> None:
+        # The std is state too: an annealed planner resumes with the std it had.
+        self.set_std(state["config"]["std"])
         self.nets.load_state_dict(state["nets"])
         self.optimizer.load_state_dict(state["optimizer"])
 
@@ -237,6 +257,14 @@ class SubgoalPlanner:
         li, ri = parent_indices(K, k)
         return self.mean(trees_t[:, _tidx(li)], trees_t[:, _tidx(ri)], k)
 
+    def _layer_std(self, trees_t: torch.Tensor, K: int, k: int) -> torch.Tensor:
+        """Std of each of layer k's new sub-goals: ``[d]`` (absolute) or ``[B, 2^(k-1), d]`` (relative)."""
+        if self.noise == "absolute":
+            return self._std_t
+        li, ri = parent_indices(K, k)
+        parent = torch.linalg.vector_norm(trees_t[:, _tidx(ri)] - trees_t[:, _tidx(li)], dim=-1, keepdim=True)
+        return torch.clamp(parent * self._std_t, min=MIN_STD)
+
     def extend(self, trees: np.ndarray, k: int, deterministic: bool = False, rng=None) -> np.ndarray:
         """Fill layer k of ``trees`` in place (layers < k must be filled) and return them."""
         K = self._check_trees(trees)
@@ -245,10 +273,12 @@ class SubgoalPlanner:
         if np.isnan(trees[:, li]).any() or np.isnan(trees[:, ri]).any():
             raise ValueError(f"layer {k} needs layers 0..{k - 1} filled first (found NaN parents)")
         with torch.no_grad():
-            mu = self._layer_mean(torch.as_tensor(trees, dtype=torch.float32), K, k).numpy()
+            trees_t = torch.as_tensor(trees, dtype=torch.float32)
+            mu = self._layer_mean(trees_t, K, k).numpy()
+            std = None if deterministic else self._layer_std(trees_t, K, k).numpy()
         if not deterministic:
             rng = _as_rng(rng)
-            mu = mu + rng.standard_normal(mu.shape).astype(np.float32) * self.std
+            mu = mu + rng.standard_normal(mu.shape).astype(np.float32) * std
         if self.low is not None:
             mu = np.clip(mu, self.low, self.high)
         trees[:, mid] = mu
@@ -292,11 +322,11 @@ class SubgoalPlanner:
         for k in layers:
             mid = new_layer_indices(K, k)
             mu = self._layer_mean(trees_t, K, k)
-            z = (trees_t[:, _tidx(mid)] - mu) / self._std_t
+            std = self._layer_std(trees_t, K, k)
+            z = (trees_t[:, _tidx(mid)] - mu) / std
+            log_std = torch.log(std).expand_as(z).sum(dim=(1, 2))
             n_terms = len(mid) * self.goal_dim
-            total = (
-                total - 0.5 * (z * z).sum(dim=(1, 2)) - len(mid) * self._log_std_sum - n_terms * _LOG_SQRT_2PI
-            )
+            total = total - 0.5 * (z * z).sum(dim=(1, 2)) - log_std - n_terms * _LOG_SQRT_2PI
         return total
 
     # ------------------------------------------------------------------ learning

@@ -2,6 +2,7 @@
 
 One `training_step` = one task mini-batch, repeated b times:
 
+    (first call only) planner_warm_start planner phases on the Euclidean + collision cost, no env steps
     tasks <- draw task_batch_size (s0, g) pairs from the env's train set
     for repetition in 1..b:
         planner phase   top-down construction (Alg. 1): update pi_p on J^k, sample layer k, k = 1..K
@@ -9,6 +10,8 @@ One `training_step` = one task mini-batch, repeated b times:
         cost model      D_tau += (start, end, steps) of every sub-task; refit tau_hat
         alpha           the schedule advances one episode
     every eval_interval iterations: success on held-out test tasks (planned and direct)
+
+Besides the paper's metrics, `copilot/diag/...` says why a run does or does not learn (diagnostics.py).
 """
 
 from __future__ import annotations
@@ -31,7 +34,12 @@ from ray.rllib.utils.metrics import (
 
 from copilot_ray.algorithms.copilot.agent_updates import make_agent_updater
 from copilot_ray.algorithms.copilot.config import build_planner
-from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env
+from copilot_ray.algorithms.copilot.diagnostics import (
+    plan_diagnostics,
+    tau_hat_profile,
+    traversal_diagnostics,
+)
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env, path_indices
 from copilot_ray.algorithms.gc_sac import GradientStepSchedule
 from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
 from copilot_ray.planning import (
@@ -43,6 +51,10 @@ from copilot_ray.planning import (
 )
 
 _STATE_KEY = "copilot"
+# Tasks per planner phase of the warm start: the paper's task mini-batch for the maze.
+WARM_START_TASKS = 30
+# Segment lengths at which tau_hat is profiled at every evaluation (the report's diagnostics page).
+TAU_PROFILE_LENGTHS = np.array([0.0125, 0.025, 0.05, 0.1, 0.2, 0.4])
 
 
 def register_traversal_env() -> None:
@@ -102,6 +114,11 @@ class CoPilot(SAC):
         self.alpha_clock = AlphaClock(AlphaSchedule.from_dict(cfg.alpha_schedule), cfg.repetitions)
         self.train_starts, self.train_goals = env.tasks("train")
         self.test_starts, self.test_goals = env.tasks("test")
+        self.rules = cfg.traversal_rules()
+        self._planner_phases = 0  # for the planner's std annealing; checkpointed
+        self._warm_started = cfg.planner_warm_start == 0 or self.planner is None
+        directions = self._rng.standard_normal(self.test_starts.shape)
+        self._tau_probe = (self.test_starts, directions / np.linalg.norm(directions, axis=1, keepdims=True))
         self.agent_updater = make_agent_updater(self)
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
         # exact over the run instead of rounded per sampling round.
@@ -113,9 +130,15 @@ class CoPilot(SAC):
     # --------------------------------------------------------------------------- training step
     def training_step(self) -> None:
         cfg = self.config
+        if not self._warm_started:
+            self._warm_start_planner()
         n_tasks = min(cfg.task_batch_size, len(self.train_starts))
-        idx = self._rng.choice(len(self.train_starts), size=n_tasks, replace=False)
+        n_plan = min(max(cfg.planner_task_batch_size, n_tasks), len(self.train_starts))
+        # The first n_tasks are traversed by the agent; the planner's PPO batch has all n_plan of them.
+        idx = self._rng.choice(len(self.train_starts), size=n_plan, replace=False)
         starts, goals = self.train_starts[idx], self.train_goals[idx]
+        if self.planner is None:
+            idx, starts, goals = idx[:n_tasks], starts[:n_tasks], goals[:n_tasks]
         # Per-repetition figures, averaged over the iteration's b repetitions before logging.
         stats: dict[str, list[float]] = defaultdict(list)
         timing = defaultdict(float)
@@ -124,15 +147,16 @@ class CoPilot(SAC):
             stats["alpha"].append(alpha)
 
             t0 = time.perf_counter()
-            trees = self._plan(starts, goals, alpha, stats)
+            trees = self._plan(starts, goals, alpha, stats)[:n_tasks]
             t1 = time.perf_counter()
 
-            subtasks = self._traverse(trees, idx)
+            subtasks = self._traverse(trees, idx[:n_tasks])
             t2 = time.perf_counter()
+            for key, value in self._traversal_diagnostics(subtasks, trees, idx[:n_tasks]).items():
+                stats[f"diag/{key}"].append(value)
 
             if self.planner is not None:
-                # D_tau <- (start, end, steps) of every sub-task, failed ones included (paper 3.4).
-                self.cost_model.add_steps(subtasks["start"], subtasks["end"], subtasks["steps"])
+                self._add_to_dtau(subtasks)
                 stats["cost_model/loss"].append(
                     self.cost_model.fit(cfg.cost_model["fit_steps"], cfg.cost_model["batch_size"], self._rng)
                 )
@@ -147,6 +171,12 @@ class CoPilot(SAC):
         for key, values in stats.items():
             self.metrics.log_value(("copilot", *key.split("/")), float(np.mean(values)), window=1)
         self.metrics.log_value(("copilot", "dtau", "size"), len(self.cost_model.dataset), window=1)
+        try:
+            q_mean = float(self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, "qf_mean")))
+        except KeyError:  # no learner update yet
+            q_mean = None
+        if q_mean is not None:
+            self.metrics.log_value(("copilot", "diag", "q_mean"), q_mean, window=1)
         total = sum(timing.values())
         for key, value in timing.items():
             self.metrics.log_value(("copilot", "time", key), value, window=1)
@@ -163,31 +193,76 @@ class CoPilot(SAC):
             self.metrics.log_value(("copilot", "time", "eval_s"), time.perf_counter() - t, window=1)
 
     # ---------------------------------------------------------------------------- planner phase
-    def _plan(self, starts: np.ndarray, goals: np.ndarray, alpha: float, stats) -> np.ndarray:
-        """Top-down construction (Algorithm 1): trees [B, 2^K + 1, goal_dim]."""
-        cfg = self.config
-        if self.planner is None:
-            return np.stack([starts, goals], axis=1)
+    def _segment_cost(self, alpha: float) -> SegmentCost:
         env = self.goal_env.unwrapped
-        cost = SegmentCost(
+        return SegmentCost(
             alpha=alpha,
             time_cost=self.cost_model.predict,
             segments_collide=env.segments_collide,
             distance=env.goal_distance,
-            collision_penalty=cfg.collision_penalty_value(),
-            collision_cost=cfg.collision_cost,
+            collision_penalty=self.config.collision_penalty_value(),
+            collision_cost=self.config.collision_cost,
             collision_lengths=getattr(env, "collision_lengths", None),
         )
-        built = construct_trees(
+
+    def _planner_phase(self, starts, goals, cost: SegmentCost, mean_tree: bool):
+        """One top-down construction with one PPO update per layer (Algorithm 1)."""
+        p = self.config.planner
+        if p["std_final"] is not None:
+            # Linear annealing of the exploration std over the first std_anneal_phases phases.
+            frac = min(1.0, self._planner_phases / p["std_anneal_phases"])
+            self.planner.set_std(p["std"] + frac * (p["std_final"] - p["std"]))
+        self._planner_phases += 1
+        return construct_trees(
             self.planner,
             starts,
             goals,
-            cfg.tree_depth,
+            self.config.tree_depth,
             cost,
-            num_samples=cfg.planner["num_samples"],
+            num_samples=p["num_samples"],
             train=True,
+            deterministic=mean_tree,
             rng=self._rng,
         )
+
+    def _warm_start_planner(self) -> None:
+        """`planner_warm_start` planner phases on the Euclidean + collision cost (alpha = 1): no env
+        steps, so the agent's first sub-goals do not run through walls (SGT-PG's planner, trained alone)."""
+        t0 = time.perf_counter()
+        cost = self._segment_cost(1.0)
+        n = min(WARM_START_TASKS, len(self.train_starts))
+        for _ in range(self.config.planner_warm_start):
+            idx = self._rng.choice(len(self.train_starts), size=n, replace=False)
+            built = self._planner_phase(self.train_starts[idx], self.train_goals[idx], cost, mean_tree=True)
+        self._warm_started = True
+        self.metrics.log_value(("copilot", "planner", "warm_start_s"), time.perf_counter() - t0, window=1)
+        self.metrics.log_value(
+            ("copilot", "planner", "warm_start_cost"),
+            built.stats["cost_layer_" + str(self.config.tree_depth)],
+            window=1,
+        )
+
+    def _plan(self, starts: np.ndarray, goals: np.ndarray, alpha: float, stats) -> np.ndarray:
+        """Top-down construction (Algorithm 1): trees [B, 2^K + 1, goal_dim].
+
+        The diagnostics describe the first task_batch_size trees, the ones the agent traverses."""
+        cfg = self.config
+        if self.planner is None:
+            return np.stack([starts, goals], axis=1)
+        built = self._planner_phase(
+            starts, goals, self._segment_cost(alpha), mean_tree=cfg.traversal_tree == "mean"
+        )
+        stats["planner/std"].append(float(self.planner.std.mean()))
+        env = self.goal_env.unwrapped
+        diag = plan_diagnostics(
+            built.trees[: cfg.task_batch_size],
+            cfg.tree_depth,
+            point_collides=lambda p: env.segments_collide(p, p),
+            distance=env.goal_distance,
+            reachable_length=self._reachable_length,
+        )
+        for key, value in diag.items():
+            stats[f"diag/{key}"].append(value)
         for k in range(cfg.tree_depth + 1):
             stats[f"planner/cost_layer_{k}"].append(built.stats[f"cost_layer_{k}"])
         # How far PPO moved the planner per layer update (a diverging planner shows here first).
@@ -196,6 +271,39 @@ class CoPilot(SAC):
         )
         stats["planner/nonfinite_skipped"].append(built.stats.get("nonfinite_skipped", 0.0))
         return built.trees
+
+    def _add_to_dtau(self, subtasks: dict[str, np.ndarray]) -> None:
+        """D_tau <- one tuple per sub-task, failed ones included (paper 3.4); see `dtau_tuples`."""
+        env = self.goal_env.unwrapped
+        starts, ends, steps = dtau_tuples(
+            subtasks, self.config.failed_subtask_cost, env.goal_distance, float(env.nominal_step_distance)
+        )
+        self.cost_model.add_steps(starts, ends, steps)
+
+    def _reachable_length(self, layer: int) -> float:
+        """The longest segment a layer-`layer` sub-task can cover (step limit x step + radius)."""
+        env = self.goal_env.unwrapped
+        steps = self.rules.step_limit_of(layer, self.config.tree_depth)
+        return steps * float(env.nominal_step_distance) + float(getattr(env, "success_radius", 0.0))
+
+    def _traversal_diagnostics(self, subtasks, trees: np.ndarray, task_ids: np.ndarray) -> dict[str, float]:
+        env = self.goal_env.unwrapped
+        # Each record's sub-goal, looked up in its task's tree, for the "trivial first sub-task" share.
+        row = {int(t): i for i, t in enumerate(task_ids)}
+        rows = np.array([row[int(t)] for t in subtasks["task"]])
+        depth = self.config.tree_depth
+        node = np.array(
+            [
+                path_indices(depth, int(k))[int(i)]
+                for k, i in zip(subtasks["layer"], subtasks["index"], strict=True)
+            ]
+        )
+        return traversal_diagnostics(
+            subtasks,
+            distance=env.goal_distance,
+            success_radius=float(getattr(env, "success_radius", 0.0)),
+            goals=trees[rows, node],
+        )
 
     # ------------------------------------------------------------------------------ agent phase
     def _runner_ids(self) -> list[int]:
@@ -277,20 +385,32 @@ class CoPilot(SAC):
     def _evaluate(self) -> None:
         cfg = self.config
         n = min(cfg.eval_num_tasks, len(self.test_starts))
-        policy = ModulePolicy(self.get_module(DEFAULT_MODULE_ID))
+        module = self.get_module(DEFAULT_MODULE_ID)
+        seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
+        policies = {
+            "deterministic": ModulePolicy(module),
+            "sampled": ModulePolicy(module, sampled=True, seed=seed),
+        }
+        # The headline action goes first: it also drives the sub-goal tree figure's rollouts.
+        policies = {cfg.eval_action: policies[cfg.eval_action], **policies}
         result = evaluate_copilot(
             goal_env_id=cfg.goal_env,
             goal_env_config=cfg.goal_env_config,
-            policy=policy,
+            policies=policies,
             planner=self.planner,
             starts=self.test_starts[:n],
             goals=self.test_goals[:n],
             depth=cfg.tree_depth,
             tau_max=cfg.tau_max,
             tree_tasks=min(cfg.eval_tree_tasks, n),
+            step_limit_of=lambda k: self.rules.step_limit_of(k, cfg.tree_depth),
+            with_delta=self.rules.agent_input == "state_goal_delta",
         )
-        self.metrics.log_value(("copilot", "eval", "success_planned"), result.success_planned, window=1)
-        self.metrics.log_value(("copilot", "eval", "success_direct"), result.success_direct, window=1)
+        for key, value in result.headline(cfg.eval_action).items():
+            self.metrics.log_value(("copilot", "eval", key), value, window=1)
+        for action, values in result.by_action.items():
+            for key, value in values.items():
+                self.metrics.log_value(("copilot", "eval", action, key), value, window=1)
         self.metrics.log_value(
             ("copilot", "eval", "planned_collision_free"), result.plan_collision_free, window=1
         )
@@ -300,6 +420,16 @@ class CoPilot(SAC):
 
     def _save_tree_artifact(self, result, env_steps: int) -> None:
         """Sub-goal trees of fixed test tasks (all layers) and the agent's steps per sub-task."""
+        env = self.goal_env.unwrapped
+        # tau_hat along straight segments of a few lengths from the test starts (diagnostics page).
+        profile = tau_hat_profile(
+            self.cost_model.predict,
+            env.goal_distance,
+            *self._tau_probe,
+            TAU_PROFILE_LENGTHS,
+            env.goal_space.low,
+            env.goal_space.high,
+        )
         directory = Path(self.logdir) / "copilot_trees"
         directory.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(
@@ -311,6 +441,8 @@ class CoPilot(SAC):
             subtask_steps=result.tree_subtask_steps,
             subtask_reached=result.tree_subtask_reached,
             layout=np.array(str(self.config.goal_env_config.get("layout", ""))),
+            tau_hat_length=profile[0],
+            tau_hat=profile[1],
         )
 
     # ------------------------------------------------------------------------------ checkpoints
@@ -324,6 +456,8 @@ class CoPilot(SAC):
             "torch_rng": torch.get_rng_state(),
             "agent_updater": self.agent_updater.get_state(),
             "gradient_steps": self.gradient_steps.get_state(),
+            "planner_phases": self._planner_phases,
+            "warm_started": self._warm_started,
         }
         return state
 
@@ -340,6 +474,26 @@ class CoPilot(SAC):
         torch.set_rng_state(own["torch_rng"])
         self.agent_updater.set_state(own["agent_updater"])
         self.gradient_steps.set_state(own["gradient_steps"])
+        self._planner_phases = int(own.get("planner_phases", 0))
+        self._warm_started = bool(own.get("warm_started", True))
+
+
+def dtau_tuples(subtasks: dict[str, np.ndarray], failed_subtask_cost: str, distance, step_distance: float):
+    """(starts, ends, steps) of the D_tau tuples of finished sub-tasks (the `_subtask_records` columns).
+
+    "end_state" (the paper): (start, where the agent stopped, steps) for every sub-task.
+    "lower_bound": a failed sub-task says what it cost NOT to reach its sub-goal, so its tuple is
+    (start, sub-goal, steps + the remaining distance at full speed), a lower bound of the steps the
+    sub-task needs. Without it tau_hat never sees a segment longer than the agent ever covered and
+    extrapolates long segments as cheap, so the planner learns to lengthen its finest segments.
+    """
+    starts, ends, steps = subtasks["start"], subtasks["end"], subtasks["steps"].astype(np.float64)
+    if failed_subtask_cost == "lower_bound":
+        failed = ~subtasks["reached"]
+        remaining = distance(subtasks["end"], subtasks["goal"]) / step_distance
+        ends = np.where(failed[:, None], subtasks["goal"], ends)
+        steps = np.where(failed, steps + remaining, steps)
+    return starts, ends, steps
 
 
 def _traversal_stats(subtasks: dict[str, np.ndarray], depth: int) -> dict[str, float]:
@@ -365,9 +519,11 @@ def _subtask_records(episodes) -> dict[str, np.ndarray]:
     return {
         "start": np.stack([i["subtask_start"] for i in infos]).astype(np.float32),
         "end": np.stack([i["subtask_end"] for i in infos]).astype(np.float32),
+        "goal": np.stack([i["subtask_goal"] for i in infos]).astype(np.float32),
         "steps": np.array([i["subtask_steps"] for i in infos], np.int64),
         "layer": np.array([i["subtask_layer"] for i in infos], np.int64),
         "index": np.array([i["subtask_index"] for i in infos], np.int64),
         "task": np.array([i["subtask_task"] for i in infos], np.int64),
         "reached": np.array([i["subtask_reached"] for i in infos], bool),
+        "collided": np.array([i.get("subtask_collided", False) for i in infos], bool),
     }

@@ -20,16 +20,30 @@ from typing import Any
 from ray.rllib.algorithms.algorithm_config import NotProvided
 from ray.rllib.algorithms.sac import SACConfig
 
-from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
+from copilot_ray.algorithms.copilot.readings import (
+    AFTER_FAILURE,
+    AGENT_COLLISIONS,
+    AGENT_INPUTS,
+    DEFAULTS,
+    EVAL_ACTIONS,
+    FAILED_SUBTASK_COSTS,
+    PRESETS,
+    STEP_LIMITS,
+    SUBTASK_REWARDS,
+    TRAVERSAL_TREES,
+)
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, TraversalRules
 from copilot_ray.algorithms.gc_sac import is_fast_gc_sac, use_fast_gc_sac
 from copilot_ray.planning import SubgoalPlanner
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
+from copilot_ray.planning.planner import NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 
 # Paper Section 4.1 and the reference planner (facts.md), where the paper is silent.
 DEFAULT_PLANNER = {
     "hidden": [20, 20, 20],  # reference code: 3 x 20 tanh, one net per layer
-    "std": 0.05,
+    "std": 0.05,  # the reference code's absolute std; with noise="relative" a fraction of the parent segment
+    "noise": "absolute",
     "lr": 0.005,  # paper 4.1
     "clip": 0.2,  # paper 4.1 (PPO trust region)
     "epochs": 4,
@@ -39,6 +53,11 @@ DEFAULT_PLANNER = {
     # 0.5 (SB3's PPO default) the same run reached 81-83 % collision-free test plans (2 seeds).
     "max_grad_norm": 0.5,
     "target_kl": None,  # optional early stop of the PPO epochs (SB3's target_kl); None: off
+    # Annealing (not in the paper): the std moves linearly to std_final over the first
+    # std_anneal_phases planner phases (warm-start phases included); std_final None: constant std.
+    # CoPilotConfig's default anneals (readings.DEFAULTS).
+    "std_final": None,
+    "std_anneal_phases": 1000,
 }
 
 
@@ -51,6 +70,7 @@ def build_planner(planner: dict[str, Any], goal_dim: int, depth: int, low, high,
         high,
         hidden=tuple(planner["hidden"]),
         std=planner["std"],
+        noise=planner["noise"],
         lr=planner["lr"],
         clip_eps=planner["clip"],
         epochs=planner["epochs"],
@@ -99,6 +119,12 @@ class CoPilotConfig(SACConfig):
         self.updates_per_env_step: float | None = None
         self.goal_env: str | None = None
         self.goal_env_config: dict[str, Any] = {}
+        # Tasks in the planner's PPO batch per phase: the iteration's task_batch_size tasks plus other
+        # training tasks up to this number (planner phases cost no env steps). With the agent's
+        # mini-batch alone (a few tasks, for frequent evaluations) each PPO step over-fits those tasks:
+        # measured on four-rooms, collision-free test plans fell from 0.85 to 0.36-0.45 within 10
+        # phases on 2 tasks and stayed at 0.80-0.91 on 30 (the paper's mini-batch).
+        self.planner_task_batch_size = 30
 
         # --- RLlib settings CO-PILOT needs ---
         # One training_step is one task mini-batch x b repetitions: no minimum time or steps.
@@ -109,13 +135,13 @@ class CoPilotConfig(SACConfig):
         self.critic_lr = 3e-4
         self.alpha_lr = 3e-4
         self.gamma = 0.99
-        # Not SAC's default 1.0: CO-PILOT's rewards are sparse and at most R / 2^k, so an entropy
-        # bonus that starts at 1 swamps them for ~10k steps. Measured on an open maze (speed 0.05,
-        # radius 0.1, K = 1): 0.00 test success after 8k env steps with 1.0, 0.74 after 5.4k with 0.02.
-        self.initial_alpha = 0.02
         self.num_steps_sampled_before_learning_starts = 1000
         self.num_envs_per_env_runner = 1
         self.num_env_runners = 0
+
+        # --- readings of the paper's ambiguities: readings.DEFAULTS (the measured ones) ---
+        self.preset: str | None = None  # the last preset applied, for the record
+        self._apply_preset(DEFAULTS)
 
     def copilot(
         self,
@@ -135,14 +161,36 @@ class CoPilotConfig(SACConfig):
         subtasks_per_sample: int = NotProvided,
         fast_learner: bool = NotProvided,
         updates_per_env_step: float = NotProvided,
+        preset: str = NotProvided,
+        step_limit: str = NotProvided,
+        after_failure: str = NotProvided,
+        subtask_reward: str = NotProvided,
+        reward_scale: float = NotProvided,
+        agent_collision: str = NotProvided,
+        agent_collision_penalty: float = NotProvided,
+        agent_input: str = NotProvided,
+        failed_subtask_cost: str = NotProvided,
+        traversal_tree: str = NotProvided,
+        planner_warm_start: int = NotProvided,
+        planner_task_batch_size: int = NotProvided,
+        eval_action: str = NotProvided,
     ) -> CoPilotConfig:
         """Sets CO-PILOT's knobs. `planner` and `cost_model` dicts update the defaults key by key.
+
+        preset: a key of PRESETS (e.g. "paper_literal"), applied first; the other arguments of the same
+        call override it.
 
         alpha_schedule: a preset name ("paper_per_task": 0.9 -> 0.1 over every task's b episodes;
         "paper_warm_start": 1 -> 0 over the first two episodes), a dict (see AlphaSchedule), or an
         AlphaSchedule.
         """
         given = {k: v for k, v in locals().items() if k != "self" and v is not NotProvided}
+        if "preset" in given:
+            name = given.pop("preset")
+            if name not in PRESETS:
+                raise ValueError(f"CoPilotConfig: preset={name!r} is invalid: use one of {sorted(PRESETS)}")
+            self.preset = name
+            self._apply_preset(PRESETS[name])
         if "alpha_schedule" in given:
             schedule = given["alpha_schedule"]
             if isinstance(schedule, str):
@@ -157,6 +205,13 @@ class CoPilotConfig(SACConfig):
             setattr(self, key, value)
         return self
 
+    def _apply_preset(self, values: dict[str, Any]) -> None:
+        for key, value in values.items():
+            if key in ("planner", "cost_model"):
+                setattr(self, key, {**getattr(self, key), **value})
+            else:
+                setattr(self, key, copy.deepcopy(value))
+
     def validate(self) -> None:
         self._validate_copilot()
         # The runners sample the traversal env; remember the goal env the user asked for.
@@ -167,7 +222,7 @@ class CoPilotConfig(SACConfig):
         self.env_config = {
             "goal_env": self.goal_env,
             "goal_env_config": self.goal_env_config,
-            "tau_max": self.tau_max,
+            **self.traversal_rules().to_dict(),
         }
         if self.fast_learner and not is_fast_gc_sac(self):
             # One torch thread per CPU this process holds: more threads than cores make OpenMP spin
@@ -178,6 +233,19 @@ class CoPilotConfig(SACConfig):
 
         register_traversal_env()
         super().validate()
+
+    def traversal_rules(self) -> TraversalRules:
+        """How the agent runs and is rewarded on sub-tasks (validated)."""
+        return TraversalRules(
+            tau_max=self.tau_max,
+            step_limit=self.step_limit,
+            after_failure=self.after_failure,
+            subtask_reward=self.subtask_reward,
+            reward_scale=self.reward_scale,
+            agent_collision=self.agent_collision,
+            agent_collision_penalty=self.agent_collision_penalty,
+            agent_input=self.agent_input,
+        )
 
     def collision_penalty_value(self) -> float:
         """`collision_penalty`, or its default for `collision_cost` (10 per segment, 100 per length)."""
@@ -218,7 +286,32 @@ class CoPilotConfig(SACConfig):
             raise bad("tree_depth", self.tree_depth, "use an integer in [0, 10] (0: no planner, plain SAC)")
         positive_int("repetitions", self.repetitions)
         positive_int("tau_max", self.tau_max)
+        for key, allowed in (
+            ("step_limit", STEP_LIMITS),
+            ("after_failure", AFTER_FAILURE),
+            ("subtask_reward", SUBTASK_REWARDS),
+            ("agent_collision", AGENT_COLLISIONS),
+            ("agent_input", AGENT_INPUTS),
+            ("failed_subtask_cost", FAILED_SUBTASK_COSTS),
+            ("traversal_tree", TRAVERSAL_TREES),
+            ("eval_action", EVAL_ACTIONS),
+        ):
+            if getattr(self, key) not in allowed:
+                raise bad(key, getattr(self, key), f"use one of {list(allowed)}")
+        for key, lower, strict in (("reward_scale", 0.0, True), ("agent_collision_penalty", 0.0, False)):
+            value = getattr(self, key)
+            if not (isinstance(value, int | float) and not isinstance(value, bool)) or not (
+                value > lower if strict else value >= lower
+            ):
+                raise bad(key, value, f"use a number {'>' if strict else '>='} {lower:g}")
+        if (
+            isinstance(self.planner_warm_start, bool)
+            or not isinstance(self.planner_warm_start, int)
+            or self.planner_warm_start < 0
+        ):
+            raise bad("planner_warm_start", self.planner_warm_start, "use an integer >= 0 (planner phases)")
         positive_int("task_batch_size", self.task_batch_size)
+        positive_int("planner_task_batch_size", self.planner_task_batch_size)
         positive_int("subtasks_per_sample", self.subtasks_per_sample)
         positive_int("eval_num_tasks", self.eval_num_tasks)
         if not isinstance(self.eval_interval, int) or self.eval_interval < 0:
@@ -261,7 +354,12 @@ class CoPilotConfig(SACConfig):
         for key in ("std", "lr", "clip"):
             if not self.planner[key] > 0:
                 raise bad(f"planner.{key}", self.planner[key], "use a number > 0")
-        for key in ("max_grad_norm", "target_kl"):
+        if self.planner["noise"] not in NOISE_MODES:
+            raise bad("planner.noise", self.planner["noise"], f"use one of {list(NOISE_MODES)}")
+        if not 0 < self.planner["clip"] < 1:
+            raise bad("planner.clip", self.planner["clip"], "use a number in (0, 1) (PPO's clip range)")
+        positive_int("planner.std_anneal_phases", self.planner["std_anneal_phases"])
+        for key in ("max_grad_norm", "target_kl", "std_final"):
             value = self.planner[key]
             if value is not None and not (
                 isinstance(value, int | float) and not isinstance(value, bool) and value > 0

@@ -2,11 +2,25 @@
 
 The driver loads sub-goal trees into the env (`load_plan`); every `reset` pops the next sub-task:
 for each task, layers k = K..0 in order, the 2^k sub-goals of layer k left to right. The first sub-task
-of a layer starts from the task's s0, every other one from wherever the agent stopped (a failed
-sub-task leaves the agent where it is). An episode terminates when the agent reaches its sub-goal
-(reward R / 2^k) and is truncated after `tau_max` steps. Because a sub-task is an ordinary episode,
-SAC's episodes, buffers and learners are reused unchanged, and the D_tau tuple of a sub-task is read
-off the last `info` of its episode - no side channel.
+of a layer starts from the task's s0, every other one from wherever the agent stopped. An episode
+terminates when the agent reaches its sub-goal (reward R / 2^k) and is truncated after `tau_max` steps.
+Because a sub-task is an ordinary episode, SAC's episodes, buffers and learners are reused unchanged,
+and the D_tau tuple of a sub-task is read off the last `info` of its episode - no side channel.
+
+Where the paper is silent or its literal reading starves the agent, `TraversalRules` holds the choice
+(each a CoPilotConfig knob; the paper's reading first):
+
+* `step_limit`: "fixed" (tau_max for every sub-task, the paper) or "scaled" (tau_max * 2^(K-k) for
+  layer k, whose segments span 2^(K-k) finest ones).
+* `after_failure`: "continue" (the next sub-task starts where the agent stopped, the paper), "restart"
+  (it starts at the missed sub-goal when that is free space, so one failure does not fail the rest of
+  the layer) or "abort_layer" (the rest of the layer is dropped: no env steps spent on a cascade).
+* `subtask_reward`: "halving" (R / 2^k, Eq. 6) or "uniform" (R for every sub-task); `reward_scale`
+  multiplies R, the goal env's reward.
+* `agent_collision`: "none" (a blocked move costs nothing, the paper), "penalty" (reward
+  -collision_penalty for each blocked move) or "terminate" (the episode ends there with that penalty).
+* `agent_input`: the observation is concat(observation, sub-goal) ("state_goal", the paper's
+  pi(a | s, g)) or that plus sub-goal - achieved goal ("state_goal_delta").
 
 The agent is conditioned on the current sub-goal: the observation is the flat vector
 concat(observation, sub-goal), which `flat_observation` also builds for evaluation.
@@ -16,20 +30,84 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from copilot_ray.algorithms.copilot.readings import (
+    AFTER_FAILURE,
+    AGENT_COLLISIONS,
+    AGENT_INPUTS,
+    STEP_LIMITS,
+    SUBTASK_REWARDS,
+)
 from copilot_ray.planning.subgoal_tree import layer_indices
 
 TRAVERSAL_ENV_ID = "copilot-traversal"
 
 
-def flat_observation(observation: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """The goal-conditioned agent's input: concat(observation, goal), batched or not."""
-    return np.concatenate([observation, goal], axis=-1).astype(np.float32)
+def flat_observation(
+    observation: np.ndarray, goal: np.ndarray, achieved: np.ndarray | None = None
+) -> np.ndarray:
+    """The goal-conditioned agent's input: concat(observation, goal), batched or not; with `achieved`
+    (agent_input="state_goal_delta") also goal - achieved."""
+    parts = [observation, goal] if achieved is None else [observation, goal, goal - achieved]
+    return np.concatenate(parts, axis=-1).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class TraversalRules:
+    """How sub-tasks are run and rewarded (see the module docstring); the defaults read the paper literally."""
+
+    tau_max: int = 25
+    step_limit: str = "fixed"
+    after_failure: str = "continue"
+    subtask_reward: str = "halving"
+    reward_scale: float = 1.0  # multiplies the goal env's reward R (paper: R = 1 in the maze)
+    agent_collision: str = "none"
+    agent_collision_penalty: float = 0.0
+    agent_input: str = "state_goal"
+
+    def __post_init__(self) -> None:
+        for key, value, allowed in (
+            ("step_limit", self.step_limit, STEP_LIMITS),
+            ("after_failure", self.after_failure, AFTER_FAILURE),
+            ("subtask_reward", self.subtask_reward, SUBTASK_REWARDS),
+            ("agent_collision", self.agent_collision, AGENT_COLLISIONS),
+            ("agent_input", self.agent_input, AGENT_INPUTS),
+        ):
+            if value not in allowed:
+                raise ValueError(f"{key}={value!r} is invalid: use one of {list(allowed)}")
+        if isinstance(self.tau_max, bool) or not isinstance(self.tau_max, int) or self.tau_max < 1:
+            raise ValueError(f"tau_max={self.tau_max!r} is invalid: use an integer >= 1")
+        if not self.reward_scale > 0:
+            raise ValueError(f"reward_scale={self.reward_scale!r} is invalid: use a number > 0")
+        if not self.agent_collision_penalty >= 0:
+            raise ValueError(
+                f"agent_collision_penalty={self.agent_collision_penalty!r} is invalid: use a number >= 0"
+            )
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> TraversalRules:
+        """The rules from a traversal env_config (keys of this class; missing ones keep the paper's)."""
+        return cls(**{k: config[k] for k in cls.__dataclass_fields__ if k in config})
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def step_limit_of(self, layer: int, depth: int) -> int:
+        """Steps a layer-`layer` sub-task of a depth-`depth` tree may take."""
+        if self.step_limit == "scaled":
+            return self.tau_max * 2 ** max(depth - layer, 0)
+        return self.tau_max
+
+    def reward_factor(self, layer: int) -> float:
+        """What the goal env's reward R is multiplied by in layer `layer`: 1 / 2^k (Eq. 6) or 1."""
+        if self.subtask_reward == "halving":
+            return self.reward_scale / 2**layer
+        return self.reward_scale
 
 
 @dataclass(frozen=True)
@@ -68,12 +146,18 @@ class TraversalEnv(gym.Env):
 
         self.goal_env = make(config["goal_env"], **dict(config.get("goal_env_config") or {}))
         self.inner = self.goal_env.unwrapped
-        self.tau_max = int(config["tau_max"])
+        self.rules = TraversalRules.from_config(config)
+        self.tau_max = self.rules.tau_max
         obs_space = self.goal_env.observation_space["observation"]
         goal_space = self.inner.goal_space
+        low, high = [obs_space.low, goal_space.low], [obs_space.high, goal_space.high]
+        self._with_delta = self.rules.agent_input == "state_goal_delta"
+        if self._with_delta:
+            low.append(goal_space.low - goal_space.high)
+            high.append(goal_space.high - goal_space.low)
         self.observation_space = gym.spaces.Box(
-            low=np.concatenate([obs_space.low, goal_space.low]).astype(np.float32),
-            high=np.concatenate([obs_space.high, goal_space.high]).astype(np.float32),
+            low=np.concatenate(low).astype(np.float32),
+            high=np.concatenate(high).astype(np.float32),
             dtype=np.float32,
         )
         self.action_space = self.goal_env.action_space
@@ -82,12 +166,17 @@ class TraversalEnv(gym.Env):
         self._position: np.ndarray | None = None  # the agent's configuration (goal space)
         self._start: np.ndarray | None = None
         self._steps = 0
+        self._limit = self.tau_max
+        self._depth = 0
+        self._missed: np.ndarray | None = None  # the sub-goal the last sub-task failed to reach
         self._idle_goal: np.ndarray | None = None
 
     # --- driver-facing -------------------------------------------------------------------------
     def load_plan(self, trees: np.ndarray, depth: int, task_ids: np.ndarray) -> int:
         """Replaces the queue with the traversal of `trees`; returns the number of sub-tasks."""
         self._queue = deque(traversal_queue(np.asarray(trees), int(depth), np.asarray(task_ids)))
+        self._depth = int(depth)
+        self._missed = None
         return len(self._queue)
 
     def remaining(self) -> int:
@@ -98,8 +187,9 @@ class TraversalEnv(gym.Env):
         super().reset(seed=seed)
         if self._queue:
             self._current = self._queue.popleft()
-            start = self._current.start if self._current.start is not None else self._position
+            start = self._current.start if self._current.start is not None else self._continue_from()
             goal = self._current.goal
+            self._limit = self.rules.step_limit_of(self._current.layer, self._depth)
             self._idle_goal = None
         else:
             # Nothing planned (RLlib resets envs at construction, and may sample before a plan is
@@ -108,21 +198,51 @@ class TraversalEnv(gym.Env):
             tasks = self.inner.tasks("train")
             start = self._position if self._position is not None else tasks[0][0]
             goal = tasks[1][0]
+            self._limit = self.tau_max
             self._idle_goal = goal
         obs, info = self.goal_env.reset(options={"start": np.asarray(start), "goal": np.asarray(goal)})
         self._position = obs["achieved_goal"].copy()
         self._start = self._position.copy()
         self._steps = 0
-        return flat_observation(obs["observation"], obs["desired_goal"]), {}
+        return self._flat(obs), {}
+
+    def _flat(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        achieved = obs["achieved_goal"] if self._with_delta else None
+        return flat_observation(obs["observation"], obs["desired_goal"], achieved)
+
+    def _continue_from(self) -> np.ndarray:
+        """Where a sub-task that is not the first of its layer starts (see `after_failure`)."""
+        missed, self._missed = self._missed, None
+        if missed is not None and self.rules.after_failure == "restart" and self._is_free(missed):
+            return missed
+        return self._position
+
+    def _is_free(self, config: np.ndarray) -> bool:
+        clearance = getattr(self.inner, "is_free", None)
+        return bool(clearance(config)) if clearance is not None else True
+
+    def _drop_rest_of_layer(self) -> None:
+        cur = self._current
+        while self._queue and self._queue[0].task_id == cur.task_id and self._queue[0].layer == cur.layer:
+            if self._queue[0].start is not None:  # the same layer of the next repetition of this task
+                break
+            self._queue.popleft()
 
     def step(self, action):
         obs, reward, reached, _, info = self.goal_env.step(action)
         self._steps += 1
         self._position = obs["achieved_goal"].copy()
         layer = self._current.layer if self._current is not None else 0
-        truncated = (not reached) and self._steps >= self.tau_max
-        out_info = {"collision": bool(info.get("collision", False))}
-        if reached or truncated:
+        collision = bool(info.get("collision", False))
+        # Sub-task reward (paper Eq. 6: R / 2^k, so every layer's traversal is worth R in total).
+        reward = float(reward) * self.rules.reward_factor(layer)
+        terminated = bool(reached)
+        if collision and self.rules.agent_collision != "none":
+            reward -= self.rules.agent_collision_penalty
+            terminated = terminated or self.rules.agent_collision == "terminate"
+        truncated = (not terminated) and self._steps >= self._limit
+        out_info = {"collision": collision}
+        if terminated or truncated:
             out_info.update(
                 subtask_idle=self._current is None,
                 subtask_task=-1 if self._current is None else self._current.task_id,
@@ -130,15 +250,19 @@ class TraversalEnv(gym.Env):
                 subtask_index=0 if self._current is None else self._current.index,
                 subtask_start=self._start.copy(),
                 subtask_end=self._position.copy(),
+                subtask_goal=np.asarray(obs["desired_goal"], np.float32).copy(),
                 subtask_steps=self._steps,
                 subtask_reached=bool(reached),
+                subtask_collided=collision and not reached,
             )
-        # Sub-task reward R / 2^k (paper Eq. 6): every layer's traversal is worth R in total.
-        reward = float(reward) / float(2**layer)
+            if not reached and self._current is not None:
+                self._missed = self._current.goal.copy()
+                if self.rules.after_failure == "abort_layer":
+                    self._drop_rest_of_layer()
         return (
-            flat_observation(obs["observation"], obs["desired_goal"]),
+            self._flat(obs),
             reward,
-            bool(reached),
+            terminated,
             bool(truncated),
             out_info,
         )

@@ -141,6 +141,12 @@ class GoalMazeEnv(gym.Env):
         """[N, d], [N, d] -> float [N]: how much of the straight motion is in collision (0: free or touching)."""
         return self.agent_geometry.motion_collision_lengths(self.obstacles, a, b)
 
+    def is_free(self, config: np.ndarray) -> bool:
+        """Whether the agent can stand at `config` [d] (inside the maze, touching nothing)."""
+        return bool(
+            self.agent_geometry.clearance(self.obstacles, np.asarray(config, np.float64)[None])[0] > 0.0
+        )
+
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None) -> Any:
         """Sparse: goal_reward within success_radius, else 0. [N, d] -> [N]; [d] -> float."""
         reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
