@@ -293,6 +293,7 @@ def diagnostics(configs: list[ConfigSummary], path: Path) -> Path | None:
         for _, style, label in lines:  # the line styles' legend, in black
             ax.plot([], [], style, color="black", label=label)
         ax.set_title(title, fontsize=9)
+        ax.set_xlabel("environment steps", fontsize=7)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
         ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))

@@ -1,8 +1,8 @@
 """MLflow -> plain Python/numpy structures for one sweep.
 
-The layout read here is the sweep runner's contract (DESIGN.md section 7 and `copilot_ray.sweep`): one
+The layout read here is the sweep runner's contract (ARCHITECTURE.md, "Metrics", and `copilot_ray.sweep`): one
 parent run per sweep (tag `copilot.role=sweep`), one child run per trial (tags `mlflow.parentRunId`,
-`copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `preset`, `K`, `b`,
+`copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `variant`, `preset`, `K`, `b`,
 `alpha_schedule`), success metrics logged with `step` = environment steps, and sub-goal tree snapshots as
 `copilot_trees/trees_iterNNNNNN.npz` artifacts.
 """
@@ -27,7 +27,7 @@ WALL_TIME = "time_total_s"
 ENV_STEPS = "env_runners/num_env_steps_sampled_lifetime"
 TREES_DIR = "copilot_trees"
 # Tags that name a sweep axis, in the order they are shown in labels.
-AXIS_TAGS = ("algorithm", "env", "preset", "K", "b", "alpha_schedule")
+AXIS_TAGS = ("algorithm", "env", "variant", "preset", "K", "b", "alpha_schedule")
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
 # KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
 USABLE_STATUSES = ("FINISHED", "RUNNING")
@@ -88,7 +88,7 @@ class Sweep:
 
 def resolve_tracking_uri(arg: str | None, cwd: str | Path = ".", experiment: str | None = None) -> str:
     """`--tracking-uri`, else `$MLFLOW_TRACKING_URI`, else an existing SQLite store that holds the
-    experiment: `./mlflow.db` (DESIGN.md section 8) or `./results/*/mlflow.db` (the sweep spec's default
+    experiment: `./mlflow.db` (ARCHITECTURE.md, "Conventions") or `./results/*/mlflow.db` (the sweep spec's default
     `tracking.storage`). Never a fresh empty store: MLflow would create one silently and then report that
     the experiment does not exist, which hides the real mistake (a wrong directory).
     """

@@ -1,14 +1,19 @@
 """Sample efficiency on the maze: success on the 100 held-out test tasks against environment steps.
 
-Compares CO-PILOT with plain goal-conditioned SAC (the same learner, no planner: tree_depth 0, one
-episode of 2^K * tau_max steps per task, i.e. the step budget of one finest traversal) on the same
-env-step budget. Prints a table and writes a PNG; this is a measurement, not a test.
+Runs CO-PILOT under one or more presets (readings of the paper: `default`, the measured defaults;
+`paper_literal`; `plain_sac`, the same SAC learner with no planner) on the same env-step budget, one
+process, no Tune. Every iteration prints one line with the test success and the diagnostics that say
+why a run does (not) learn; rows.json is rewritten after every iteration (a killed run keeps them) and
+a PNG and a table are written at the end. A measurement, not a test.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --env-steps 100000
-    PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --seeds 0 1 2 --methods copilot sac
+    PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --env-steps 80000
+    PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --presets default --set after_failure=continue
+    PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --presets paper_literal plain_sac --seeds 0 1
 
-The paper's budget is 1.8 M env steps per run; at about 100 SAC updates/s on two CPU cores (one
-update per env step) that is about 5 hours per run, so the default here is much smaller.
+`--set KEY=VALUE` takes the keys of a sweep spec's `config` (copilot_ray/spec.py COPILOT_KNOBS, e.g.
+`planner.std_final=0.015`, `initial_alpha=1e-3`); values are read as YAML. The multi-seed evidence
+for the README comes from `sweeps/maze_learning.yaml` through `analysis.report`; this script is for
+quick probes of one knob.
 """
 
 from __future__ import annotations
@@ -21,62 +26,89 @@ from pathlib import Path
 
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 
+# Printed per iteration: (label, metric key under copilot/, format); <K> is the tree depth.
+COLUMNS = (
+    ("planned", "eval/success_planned", "{:.2f}"),
+    ("direct", "eval/success_direct", "{:.2f}"),
+    ("reached", "eval/reached_planned", "{:.2f}"),
+    ("subgoals", "eval/subgoals_reached_planned", "{:.2f}"),
+    ("plan free", "eval/planned_collision_free", "{:.2f}"),
+    ("sub-task K", "agent/subtask_success_layer_<K>", "{:.2f}"),
+    ("after failed", "diag/success_after_failed", "{:.2f}"),
+    ("unreachable K", "diag/segment_unreachable_layer_<K>", "{:.2f}"),
+    ("Q", "diag/q_mean", "{:.2f}"),
+)
 
-def build(method: str, args, seed: int):
+
+def parse_sets(items: list[str]) -> dict:
+    from copilot_ray.spec import COPILOT_KNOBS, load_yaml_value
+
+    out = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--set {item!r}: use KEY=VALUE")
+        if key not in COPILOT_KNOBS:
+            raise SystemExit(f"--set {key}: unknown key; known: {', '.join(sorted(COPILOT_KNOBS))}")
+        value = load_yaml_value(text)
+        if problem := COPILOT_KNOBS[key].problem(key, value):
+            raise SystemExit(f"--set {key}={text}: {problem}")
+        out[key] = value
+    return out
+
+
+def build(preset: str, args, seed: int, sets: dict):
     from copilot_ray.algorithms.copilot import CoPilotConfig
+    from copilot_ray.spec import COPILOT_KNOBS
 
     config = (
         CoPilotConfig()
         .environment("maze-point", env_config={"layout": args.layout})
         .env_runners(num_env_runners=0)
+        .resources(num_cpus_for_main_process=1)
         .debugging(seed=seed)
-        .copilot(eval_num_tasks=100, updates_per_env_step=args.updates_per_env_step)
+        .copilot(preset=preset)
+        .copilot(task_batch_size=args.task_batch_size, eval_num_tasks=100, eval_tree_tasks=0)
     )
-    if method == "copilot":
-        config.copilot(
-            tree_depth=args.tree_depth,
-            repetitions=args.repetitions,
-            task_batch_size=args.task_batch_size,
-            tau_max=args.tau_max,
-        )
-    elif method == "sac":
-        config.copilot(
-            tree_depth=0,
-            repetitions=1,
-            task_batch_size=args.task_batch_size,
-            tau_max=args.tau_max * 2**args.tree_depth,
-        )
-    else:
-        raise SystemExit(f"unknown method {method!r}: use copilot or sac")
+    copilot, nested, training = {}, {"planner": {}, "cost_model": {}}, {}
+    for key, value in sets.items():
+        target = COPILOT_KNOBS[key].target
+        if target in nested:
+            nested[target][key.split(".", 1)[1]] = value
+        elif target == "training":
+            training[key] = value
+        else:
+            copilot[key] = value
+    config.copilot(**copilot, **{k: v for k, v in nested.items() if v})
+    if training:
+        config.training(**training)
     return config.build_algo()
 
 
-def run_one(method: str, args, seed: int, rows_path: Path, done: list[dict]) -> list[dict]:
-    algo = build(method, args, seed)
+def run_one(preset: str, args, seed: int, sets: dict, rows_path: Path, done: list[dict]) -> list[dict]:
+    algo = build(preset, args, seed, sets)
+    depth = algo.config.tree_depth
     rows = []
     started = time.time()
     try:
         while True:
             result = algo.train()
             steps = int(result["env_runners"]["num_env_steps_sampled_lifetime"])
-            ev = result.get("copilot", {}).get("eval", {})
+            flat = _flatten(result.get("copilot", {}))
             row = {
-                "method": method,
+                "preset": preset,
                 "seed": seed,
                 "iteration": result["training_iteration"],
                 "env_steps": steps,
-                "success_planned": float(ev.get("success_planned", float("nan"))),
-                "success_direct": float(ev.get("success_direct", float("nan"))),
-                "wall_s": time.time() - started,
-                "planning_share": float(result["copilot"]["time"]["planning_share"]),
             }
+            row["wall_s"] = time.time() - started
+            for label, key, _ in COLUMNS:
+                row[label] = flat.get(key.replace("<K>", str(depth)), float("nan"))
             rows.append(row)
-            # Written every iteration: a killed benchmark keeps what it measured.
-            rows_path.write_text(json.dumps(done + rows, indent=1))
+            rows_path.write_text(json.dumps(done + rows, indent=1))  # a killed run keeps its rows
+            cells = "  ".join(f"{label} {fmt.format(row[label])}" for label, _, fmt in COLUMNS)
             print(
-                f"{method:8s} seed {seed}  iter {row['iteration']:3d}  env_steps {steps:8d}  "
-                f"planned {row['success_planned']:.2f}  direct {row['success_direct']:.2f}  "
-                f"wall {row['wall_s']:7.1f}s  planning share {row['planning_share']:.1%}",
+                f"{preset:13s} s{seed} it {row['iteration']:3d} steps {steps:7d}  {cells}  {row['wall_s']:6.0f}s",
                 flush=True,
             )
             if steps >= args.env_steps:
@@ -86,6 +118,16 @@ def run_one(method: str, args, seed: int, rows_path: Path, done: list[dict]) -> 
     return rows
 
 
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}/"))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
 def plot(rows: list[dict], path: Path) -> None:
     import matplotlib
 
@@ -93,13 +135,13 @@ def plot(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    for ax, key in zip(axes, ("success_planned", "success_direct"), strict=True):
-        for method, seed in sorted({(r["method"], r["seed"]) for r in rows}):
-            pts = [r for r in rows if r["method"] == method and r["seed"] == seed]
+    for ax, key in zip(axes, ("planned", "direct"), strict=True):
+        for preset, seed in sorted({(r["preset"], r["seed"]) for r in rows}):
+            pts = [r for r in rows if r["preset"] == preset and r["seed"] == seed]
             ax.plot(
-                [r["env_steps"] for r in pts], [r[key] for r in pts], marker="o", label=f"{method} s{seed}"
+                [r["env_steps"] for r in pts], [r[key] for r in pts], marker="o", label=f"{preset} s{seed}"
             )
-        ax.set_title(key.replace("_", " "))
+        ax.set_title(f"success, {key}")
         ax.set_xlabel("environment steps")
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
@@ -114,37 +156,40 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--layout", default="four-rooms")
     p.add_argument("--env-steps", type=int, default=60_000, help="budget per run")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
-    p.add_argument("--methods", nargs="+", default=["copilot", "sac"])
-    p.add_argument("--tree-depth", type=int, default=5)
-    p.add_argument("--repetitions", type=int, default=5)
-    p.add_argument("--task-batch-size", type=int, default=4, help="tasks per iteration (paper: 30)")
-    p.add_argument("--tau-max", type=int, default=25)
-    p.add_argument("--updates-per-env-step", type=float, default=1.0)
+    p.add_argument("--presets", nargs="+", default=["default", "plain_sac"])
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--task-batch-size", type=int, default=2, help="tasks traversed per iteration")
     p.add_argument("--out", default="results/benchmarks/maze_learning")
     args = p.parse_args(argv)
+    from copilot_ray.algorithms.copilot.readings import PRESETS
+
+    unknown = [name for name in args.presets if name not in PRESETS]
+    if unknown:
+        raise SystemExit(f"--presets {unknown[0]!r}: unknown; known: {', '.join(PRESETS)}")
+    sets = parse_sets(args.sets)
 
     import ray
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     rows: list[dict] = []
     try:
         for seed in args.seeds:
-            for method in args.methods:
-                rows += run_one(method, args, seed, out / "rows.json", rows)
+            for preset in args.presets:
+                rows += run_one(preset, args, seed, sets, out / "rows.json", rows)
     finally:
         ray.shutdown()
 
     plot(rows, out / "success_vs_env_steps.png")
-    print("\nmethod    seed  env_steps  final planned  final direct  best planned  wall_s")
-    for method, seed in sorted({(r["method"], r["seed"]) for r in rows}):
-        pts = [r for r in rows if r["method"] == method and r["seed"] == seed]
+    print("\npreset         seed  env_steps  final planned  final direct  best planned  wall_s")
+    for preset, seed in sorted({(r["preset"], r["seed"]) for r in rows}):
+        pts = [r for r in rows if r["preset"] == preset and r["seed"] == seed]
         last = pts[-1]
-        best = max(r["success_planned"] for r in pts)
+        best = max(r["planned"] for r in pts)
         print(
-            f"{method:8s}  {seed:4d}  {last['env_steps']:9d}  {last['success_planned']:13.2f}  "
-            f"{last['success_direct']:12.2f}  {best:12.2f}  {last['wall_s']:6.0f}"
+            f"{preset:13s}  {seed:4d}  {last['env_steps']:9d}  {last['planned']:13.2f}  "
+            f"{last['direct']:12.2f}  {best:12.2f}  {last['wall_s']:6.0f}"
         )
     print(f"\nwrote {out / 'success_vs_env_steps.png'} and {out / 'rows.json'}")
 

@@ -1,19 +1,25 @@
-"""Planner only: the paper's indicator collision cost against the graded length-in-collision cost.
+"""Planner only: collision costs (the paper's indicator, the graded length-in-collision cost) and the
+planner's exploration std (constant, as the reference code, or annealed).
 
 No agent: the planner pi_p is trained with alpha = 1 (Euclidean segment cost plus the collision term)
-on the maze's training tasks, as CO-PILOT's planner phase does before any time cost is learned, and
-its deterministic (mean) trees on the held-out test tasks are scored on the geometry alone:
+on the maze's training tasks, as CO-PILOT's planner warm start does before any time cost is learned,
+and its deterministic (mean) trees on the held-out test tasks are scored:
 
     collision_free  share of test tasks whose finest path (layer K) touches no obstacle
     length_ratio    finest path length / exact shortest collision-free path length, over the
                     collision-free plans (1.0 = optimal)
+    oracle_follow   share of test tasks an oracle agent (heads straight for each sub-goal at full
+                    speed) completes following the finest path with --tau-max steps per sub-goal and
+                    no collision: what a perfect agent could get out of these plans
 
 Usage (from the repository root):
 
     PYTHONPATH=. .venv/bin/python benchmarks/planner_collision.py --iterations 400 --seeds 0 1
+    PYTHONPATH=. .venv/bin/python benchmarks/planner_collision.py --collision-costs indicator \
+        --iterations 1600 --std-final 0.015 --anneal-phases 1200
 
 Prints one line per evaluation and a table at the end; the last line is
-`collision_free indicator=<x> length=<y>` (means over seeds at the last evaluation).
+`collision_free <cost>=<x> ...` (means over seeds at the last evaluation).
 """
 
 from __future__ import annotations
@@ -28,25 +34,39 @@ import torch
 from copilot_ray.algorithms.copilot.config import DEFAULT_PLANNER, build_planner
 from copilot_ray.envs import make
 from copilot_ray.envs.maze.env import shortest_path_lengths
+from copilot_ray.evaluation import follow_waypoints
 from copilot_ray.planning import SegmentCost, construct_trees
 from copilot_ray.planning.subgoal_tree import layer_indices
 
 
-def evaluate(planner, env, starts, goals, depth, shortest):
+def oracle_policy(speed: float):
+    """Heads straight for the sub-goal (obs = [position, sub-goal]), never overshooting it."""
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        d = obs[:, 2:4] - obs[:, :2]
+        n = np.linalg.norm(d, axis=1, keepdims=True)
+        return d / np.maximum(n, 1e-12) * np.minimum(1.0, n / speed)
+
+    return act
+
+
+def evaluate(planner, env, starts, goals, depth, shortest, envs, tau_max):
     trees = planner.sample(starts, goals, deterministic=True)
     path = trees[:, layer_indices(depth, depth)]
     a, b = path[:, :-1].reshape(-1, 2), path[:, 1:].reshape(-1, 2)
     free = ~env.segments_collide(a, b).reshape(len(trees), -1).any(axis=1)
     length = np.linalg.norm(np.diff(path, axis=1), axis=-1).sum(axis=1)
     ratio = float(np.mean(length[free] / shortest[free])) if free.any() else float("nan")
-    return float(free.mean()), ratio
+    follow = follow_waypoints(envs, oracle_policy(env.nominal_step_distance), path, tau_max)
+    return float(free.mean()), ratio, float(follow.success.mean())
 
 
-def run(collision_cost: str, seed: int, args, env, test, shortest) -> list[tuple[int, float, float, float]]:
+def run(collision_cost: str, seed: int, args, env, test, shortest, envs) -> list[tuple]:
     torch.manual_seed(seed)
     low, high = env.goal_space.low, env.goal_space.high
     # CO-PILOT's planner defaults (the gradient clip keeps PPO from diverging at K = 5).
     planner = build_planner(DEFAULT_PLANNER, env.goal_dim, args.depth, low, high, seed)
+    std0 = float(DEFAULT_PLANNER["std"])
     cost = SegmentCost(
         alpha=1.0,
         segments_collide=env.segments_collide,
@@ -59,6 +79,9 @@ def run(collision_cost: str, seed: int, args, env, test, shortest) -> list[tuple
     rng = np.random.default_rng(seed)
     rows, t0 = [], time.perf_counter()
     for it in range(1, args.iterations + 1):
+        if args.std_final is not None:  # CO-PILOT's annealing: linear over the first anneal_phases phases
+            frac = min(1.0, (it - 1) / args.anneal_phases)
+            planner.set_std(std0 + frac * (args.std_final - std0))
         idx = rng.choice(len(train_starts), size=args.task_batch_size, replace=False)
         construct_trees(
             planner,
@@ -70,11 +93,11 @@ def run(collision_cost: str, seed: int, args, env, test, shortest) -> list[tuple
             rng=rng,
         )
         if it % args.eval_every == 0 or it == args.iterations:
-            free, ratio = evaluate(planner, env, *test, args.depth, shortest)
-            rows.append((it, free, ratio, time.perf_counter() - t0))
+            free, ratio, follow = evaluate(planner, env, *test, args.depth, shortest, envs, args.tau_max)
+            rows.append((it, free, ratio, follow, time.perf_counter() - t0))
             print(
                 f"{collision_cost:9s} seed {seed} iter {it:4d}: collision_free {free:.2f} "
-                f"length_ratio {ratio:.2f}  ({rows[-1][3]:.0f} s)",
+                f"length_ratio {ratio:.2f} oracle_follow {follow:.2f}  ({rows[-1][4]:.0f} s)",
                 flush=True,
             )
     return rows
@@ -90,33 +113,48 @@ def main() -> None:
     p.add_argument("--eval-every", type=int, default=100)
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument("--collision-costs", nargs="+", default=["indicator", "length"])
+    p.add_argument(
+        "--std-final", type=float, default=None, help="anneal the planner std to this (default: off)"
+    )
+    p.add_argument("--anneal-phases", type=int, default=1000, help="phases over which the std is annealed")
+    p.add_argument("--tau-max", type=int, default=25, help="oracle's steps per sub-goal")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
 
     env = make("maze-point", layout=args.layout).unwrapped
     test = env.tasks("test")
     shortest = shortest_path_lengths(env, *test)
+    anneal = (
+        "constant"
+        if args.std_final is None
+        else f"{DEFAULT_PLANNER['std']} -> {args.std_final} over {args.anneal_phases}"
+    )
     print(
         f"layout={args.layout} K={args.depth} iterations={args.iterations} B={args.task_batch_size} "
-        f"samples={args.num_samples} seeds={args.seeds} test tasks={len(test[0])}"
+        f"samples={args.num_samples} seeds={args.seeds} test tasks={len(test[0])} std {anneal}"
     )
-    final: dict[str, list[tuple[float, float]]] = {}
-    for collision_cost in ("indicator", "length"):
+    envs = [make("maze-point", layout=args.layout) for _ in range(len(test[0]))]
+    final: dict[str, list[tuple[float, float, float]]] = {}
+    for collision_cost in args.collision_costs:
         for seed in args.seeds:
-            rows = run(collision_cost, seed, args, env, test, shortest)
-            final.setdefault(collision_cost, []).append(rows[-1][1:3])
+            rows = run(collision_cost, seed, args, env, test, shortest, envs)
+            final.setdefault(collision_cost, []).append(rows[-1][1:4])
 
-    print("\n| collision_cost | seeds | collision-free plans (mean) | per seed | length / shortest |")
-    print("|---|---|---|---|---|")
+    print(
+        "\n| collision_cost | seeds | collision-free plans (mean) | per seed | length / shortest | oracle follows |"
+    )
+    print("|---|---|---|---|---|---|")
     means = {}
     for name, results in final.items():
-        frees = [f for f, _ in results]
-        ratios = [r for _, r in results if not np.isnan(r)]
+        frees = [f for f, _, _ in results]
+        ratios = [r for _, r, _ in results if not np.isnan(r)]
         means[name] = statistics.fmean(frees)
         ratio = f"{statistics.fmean(ratios):.2f}" if ratios else "-"
         per_seed = ", ".join(f"{f:.2f}" for f in frees)
-        print(f"| {name} | {len(results)} | {means[name]:.2f} | {per_seed} | {ratio} |")
-    print(f"collision_free indicator={means['indicator']:.2f} length={means['length']:.2f}")
+        follow = statistics.fmean(o for _, _, o in results)
+        print(f"| {name} | {len(results)} | {means[name]:.2f} | {per_seed} | {ratio} | {follow:.2f} |")
+    print("collision_free " + " ".join(f"{name}={value:.2f}" for name, value in means.items()))
 
 
 if __name__ == "__main__":

@@ -9,6 +9,9 @@
       repetitions: 5
       planner.std: 0.05
       alpha_schedule: paper_per_task    # a preset name or a mapping
+    variants:                           # optional, grid only: named fixed overrides of `config`, one
+      paper: {preset: paper_literal}    #   configuration each (an ablation: one reading per variant)
+      restart: {after_failure: restart}
     search:                             # parameter -> one domain (same dotted keys as `config`)
       tree_depth: {grid: [1, 2, 3, 4, 5, 6]}
     seeds: [0, 1, 2]                    # every configuration runs once per seed
@@ -45,6 +48,9 @@ Decisions (also in the report of the change that added this module):
   sampled), the schedule is built from the dotted fields alone; otherwise the dotted fields override
   ``alpha_schedule`` (or CoPilotConfig's default ``paper_per_task``). Setting both ``alpha_schedule`` and
   ``alpha_schedule.kind`` is rejected.
+* ``variants`` are a grid axis of their own (trial param ``variant``): every variant runs every grid
+  point and seed; a variant's keys override ``config`` and may not be searched. They exist because a
+  cartesian grid cannot say "the defaults, and each reading back to the paper's one at a time".
 * The searched space stays flat (ray issue 28753): a trial's parameters are a flat dict of dotted keys
   plus ``seed``; ``build_algorithm_config(flat, spec)`` turns it into the RLlib config.
 * Optuna and seeds: Tune's searchers cannot repeat one sampled configuration over seeds, so an optuna
@@ -53,7 +59,7 @@ Decisions (also in the report of the change that added this module):
 * Nothing here imports Ray at module level; ``ray.tune`` is imported inside the ``to_tune_*`` functions
   only, and the CoPilotConfig import happens in ``build_algorithm_config``. A rejected spec has imported
   no Ray. Validation builds the env once (``copilot_ray.envs.make``), which imports numpy/torch.
-* Relative ``tracking.storage`` is resolved against the working directory at load time (DESIGN 8: the
+* Relative ``tracking.storage`` is resolved against the working directory at load time (ARCHITECTURE.md, "Conventions": the
   default store lives in the working directory).
 """
 
@@ -86,6 +92,7 @@ __all__ = [
     "SweepSpec",
     "build_algorithm_config",
     "load_spec",
+    "load_yaml_value",
     "optuna_define_by_run",
     "parse_spec",
     "register_algorithm",
@@ -94,7 +101,7 @@ __all__ = [
     "tune_stop",
 ]
 
-# Tune's time attribute for schedulers and stopping: environment steps (DESIGN 7: curves are per env step).
+# Tune's time attribute for schedulers and stopping: environment steps (curves are per env step).
 TIME_ATTR = "env_runners/num_env_steps_sampled_lifetime"
 ITERATION_ATTR = "training_iteration"
 MAX_TREE_DEPTH = 10
@@ -187,8 +194,14 @@ def _int(target: str, lo: int, hi: int | None = None, note: str = "") -> Knob:
     return Knob("int", target, lambda v: _is_int(v) and v >= lo and (hi is None or v <= hi), rule + note)
 
 
-def _float(target: str, lo: float, hi: float | None = None, *, lo_open: bool = False, hi_open=False) -> Knob:
+def _float(
+    target: str, lo: float, hi: float | None = None, *, lo_open: bool = False, hi_open=False, optional=False
+) -> Knob:
+    """A number in a range; `optional`: null (None, "off") too."""
+
     def check(v: Any) -> bool:
+        if v is None:
+            return optional
         if not _is_num(v):
             return False
         above = v > lo if lo_open else v >= lo
@@ -199,7 +212,7 @@ def _float(target: str, lo: float, hi: float | None = None, *, lo_open: bool = F
         rule = f"a number {'>' if lo_open else '>='} {lo:g}"
     else:
         rule = f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
-    return Knob("float", target, check, rule)
+    return Knob("float", target, check, rule + (" or null (off)" if optional else ""))
 
 
 def _bool(target: str) -> Knob:
@@ -262,7 +275,7 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "repetitions": _int("copilot", 1),
     "tau_max": _int("copilot", 1),
     "task_batch_size": _int("copilot", 1),
-    "collision_penalty": _float("copilot", 0.0),
+    "collision_penalty": _float("copilot", 0.0, optional=True),
     "collision_cost": _choice("copilot", ("indicator", "length")),  # planning.segment_cost.COLLISION_COSTS
     "updates_per_env_step": _float("copilot", 0.0, lo_open=True),
     "fast_learner": _bool("copilot"),
@@ -304,14 +317,15 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "planner.hidden": _int_list("planner"),
     "planner.std": _float("planner", 0.0, lo_open=True),
     "planner.noise": _choice("planner", NOISE_MODES),
-    "planner.std_final": _float("planner", 0.0, lo_open=True),
+    "planner.std_final": _float("planner", 0.0, lo_open=True, optional=True),
     "planner.std_anneal_phases": _int("planner", 1),
     "planner.lr": _float("planner", 0.0, lo_open=True),
     "planner.clip": _float("planner", 0.0, 1.0, lo_open=True, hi_open=True),
     "planner.epochs": _int("planner", 1),
     "planner.num_samples": _int("planner", 1),
-    "planner.max_grad_norm": _float("planner", 0.0, lo_open=True),
-    "planner.target_kl": _float("planner", 0.0, lo_open=True),
+    "planner.max_grad_norm": _float("planner", 0.0, lo_open=True, optional=True),
+    "planner.target_kl": _float("planner", 0.0, lo_open=True, optional=True),
+    "planner.max_kl": _float("planner", 0.0, lo_open=True, optional=True),
     "cost_model.hidden": _int_list("cost_model"),
     "cost_model.lr": _float("cost_model", 0.0, lo_open=True),
     "cost_model.capacity": _int("cost_model", 1),
@@ -333,7 +347,7 @@ COPILOT_KNOBS: dict[str, Knob] = {
     "num_steps_sampled_before_learning_starts": _int("training", 0),
 }
 
-# DESIGN.md section 7 plus RLlib's own; `<k>` is a tree layer (0..K).
+# ARCHITECTURE.md "Metrics" plus RLlib's own; `<k>` is a tree layer (0..K).
 COPILOT_METRICS: tuple[str, ...] = (
     "copilot/eval/success_planned",
     "copilot/eval/success_direct",
@@ -403,8 +417,13 @@ def _build_copilot_config(flat: dict[str, Any], spec: SweepSpec) -> Any:
     from copilot_ray.algorithms.copilot import CoPilotConfig
 
     knobs = ALGORITHMS[spec.algorithm].knobs
-    trial = {k: v for k, v in flat.items() if k != "seed"}
-    merged = {**spec.config, **trial}
+    trial = {k: v for k, v in flat.items() if k not in ("seed", "variant")}
+    variant = flat.get("variant")
+    if variant is not None and variant not in spec.variants:
+        raise SpecError(
+            [f"trial.variant: {variant!r} is invalid: the spec's variants are {list(spec.variants)}"]
+        )
+    merged = spec.merged(flat)
     problems = [
         _Issue(f"trial.{k}", v, f"unknown key{_did_you_mean(k, knobs)}")
         for k, v in trial.items()
@@ -720,6 +739,7 @@ class SweepSpec(_Model):
     env: EnvSpec
     algorithm: str = "copilot"
     config: dict[str, Any] = Field(default_factory=dict)
+    variants: dict[str, dict[str, Any]] = Field(default_factory=dict)
     search: dict[str, ParamSearch] = Field(default_factory=dict)
     seeds: list[int] = Field(default_factory=lambda: [0])
     searcher: SearcherSpec = Field(default_factory=SearcherSpec)
@@ -749,6 +769,7 @@ class SweepSpec(_Model):
         entry = ALGORITHMS[self.algorithm]
         issues += self._check_env()
         issues += self._check_config(entry.knobs)
+        issues += self._check_variants(entry.knobs)
         issues += self._check_search(entry.knobs)
         issues += self._check_seeds()
         issues += self._check_searcher(entry)
@@ -816,6 +837,28 @@ class SweepSpec(_Model):
                     "give either alpha_schedule (preset or mapping) or alpha_schedule.kind with its fields, not both",
                 )
             )
+        return issues
+
+    def _check_variants(self, knobs: Mapping[str, Knob]) -> list[_Issue]:
+        issues = []
+        if self.variants and self.searcher.type != "grid":
+            issues.append(_Issue("variants", list(self.variants), "variants need searcher type: grid"))
+        for name, overrides in self.variants.items():
+            if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
+                issues.append(_Issue(f"variants.{name}", name, "use letters, digits, '_', '-', '.'"))
+            if not isinstance(overrides, dict):
+                issues.append(_Issue(f"variants.{name}", overrides, "must be a mapping of config keys"))
+                continue
+            for key, value in overrides.items():
+                path = f"variants.{name}.{key}"
+                if key not in knobs:
+                    issues.append(
+                        _Issue(path, value, f"unknown key{_did_you_mean(key, knobs)}", show_value=False)
+                    )
+                elif msg := knobs[key].problem(key, value):
+                    issues.append(_Issue(path, value, msg))
+                elif key in self.search:
+                    issues.append(_Issue(path, value, f"{key} is also searched; keep one"))
         return issues
 
     def _check_search(self, knobs: Mapping[str, Knob]) -> list[_Issue]:
@@ -913,14 +956,14 @@ class SweepSpec(_Model):
         issues = []
         points = self._grid_points() if self.searcher.type == "grid" else _representative_points(self.search)
         for point in points:
-            merged = {**self.config, **point}
+            merged = self.merged(point)
             if "updates_per_env_step" in merged and "training_intensity" in merged:
                 where = "search" if {"updates_per_env_step", "training_intensity"} & set(point) else "config"
                 both = {k: merged[k] for k in ("updates_per_env_step", "training_intensity")}
                 issues.append(_Issue(where, both, "both set the update-to-data ratio; set one"))
                 break
         for point in points:
-            merged = {**self.config, **point}
+            merged = self.merged(point)
             if not any(k.startswith("alpha_schedule") for k in merged):
                 continue
             try:
@@ -949,11 +992,24 @@ class SweepSpec(_Model):
     def _grid_points(self) -> list[dict[str, Any]]:
         keys = list(self.search)
         values = [self.search[k].values for k in keys]
-        return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*values)]
+        points = [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*values)]
+        return self._with_variants(points)
+
+    def _with_variants(self, points: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        if not self.variants:
+            return points
+        return [
+            {"variant": name, **p} for name in self.variants for p in points if "variant" not in p
+        ] or points
+
+    def merged(self, point: Mapping[str, Any]) -> dict[str, Any]:
+        """A trial's effective fixed keys: ``config``, its variant's overrides, then its own values."""
+        rest = {k: v for k, v in point.items() if k not in ("variant", "seed")}
+        return {**self.config, **self.variants.get(point.get("variant"), {}), **rest}
 
     def num_configurations(self) -> int:
         if self.searcher.type == "grid":
-            return math.prod(len(ps.values) for ps in self.search.values())
+            return max(1, len(self.variants)) * math.prod(len(ps.values) for ps in self.search.values())
         return int(self.searcher.num_samples or 0)
 
     def trial_plan(self) -> list[dict[str, Any]]:
@@ -991,10 +1047,13 @@ class SweepSpec(_Model):
         lines.append(f"  MLflow experiment {self.experiment!r} at {self.tracking.uri}")
         if self.config:
             lines.append("  fixed: " + ", ".join(f"{k}={v!r}" for k, v in self.config.items()))
+        for name, overrides in self.variants.items():
+            text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "(config as it is)"
+            lines.append(f"  variant {name}: {text}")
         seeds = ", ".join(str(s) for s in self.seeds)
         if self.searcher.type == "grid":
             points = self._grid_points()
-            keys = list(self.search)
+            keys = (["variant"] if self.variants else []) + list(self.search)
             header = ["#", *keys, "seeds"]
             rows = [[str(i + 1), *(_cell(p[k]) for k in keys), seeds] for i, p in enumerate(points)]
             widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
@@ -1141,6 +1200,11 @@ def _format_validation_error(err: ValidationError, source: str) -> list[str]:
     return lines
 
 
+def load_yaml_value(text: str) -> Any:
+    """One value written as in a spec (YAML, with ``1e-3`` read as a float, as a reader expects)."""
+    return yaml.load(text, Loader=_SpecLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def parse_spec(data: Any, source: str = "<spec>") -> SweepSpec:
     """Validate an already-parsed spec (a mapping); raises SpecError naming ``source``."""
     if not isinstance(data, dict):
@@ -1219,6 +1283,8 @@ def to_tune_search_space(spec: SweepSpec) -> dict[str, Any]:
             space[key] = tune.quniform(v[0], v[1], ps.step)
         else:
             space[key] = tune.uniform(v[0], v[1])
+    if spec.variants:
+        space["variant"] = tune.grid_search(list(spec.variants))
     if spec.searcher.type == "grid":
         space["seed"] = tune.grid_search(list(spec.seeds))
     return space

@@ -117,7 +117,7 @@ class MlflowRun:
 #                                artifacts  spec.yaml (as given), spec.resolved.yaml (what ran), summary.md
 #   child run (one per trial)    tags  mlflow.parentRunId, copilot.role=trial, copilot.sweep,
 #                                      copilot.trial_id, copilot.config_key, algorithm, env, K, b,
-#                                      alpha_schedule, preset, seed, git_commit
+#                                      alpha_schedule, preset, variant, seed, git_commit
 #                                params  every knob of the algorithm at its effective value, seed, env.*
 #                                metrics  metrics_from_result + time_total_s + training_iteration,
 #                                         step = env steps (ENV_STEPS_KEY)
@@ -292,7 +292,7 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
     spec = _load_spec_cached(str(config[SPEC_PATH_KEY]))
     flat = trial_flat(config)
     algo_config = build_algorithm_config(flat, spec)
-    merged = {**spec.config, **{k: v for k, v in flat.items() if k != "seed"}}
+    merged = spec.merged(flat)
     seed = flat.get("seed", spec.seeds[0])
     return {
         "spec": spec,
@@ -305,6 +305,7 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "b": getattr(algo_config, "repetitions", None),
         "alpha_schedule": alpha_schedule_label(merged),
         "preset": getattr(algo_config, "preset", None) or "default",
+        "variant": flat.get("variant", ""),
         "seed": seed,
         "knobs": effective_knobs(algo_config, spec),
     }
@@ -481,6 +482,7 @@ def _make_mlflow_callback():
                 "b": str(info["b"]),
                 "alpha_schedule": info["alpha_schedule"],
                 "preset": info["preset"],
+                "variant": info["variant"],
                 "seed": str(info["seed"]),
                 "git_commit": self._commit,
             }

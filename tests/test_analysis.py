@@ -46,6 +46,29 @@ def _metrics(client, run_id, planned, steps, wall=None, direct_scale=0.5):
     client.log_batch(run_id, metrics=ms)
 
 
+# diagnostics of config tree_depth=2 (depth 2): the value at each of STEPS
+DIAG = {
+    "copilot/diag/segment_length_layer_2": [0.05, 0.04, 0.03, 0.03],
+    "copilot/diag/reachable_length_layer_2": [0.0875] * 4,
+    "copilot/diag/segment_unreachable_layer_2": [0.3, 0.2, 0.1, 0.05],
+    "copilot/diag/subgoal_in_obstacle_layer_2": [0.2, 0.1, 0.0, 0.0],
+    "copilot/diag/success_after_reached": [0.5, 0.6, 0.8, 0.9],
+    "copilot/diag/success_after_failed": [0.1, 0.2, 0.4, 0.6],
+    "copilot/diag/q_mean": [0.1, 0.3, 0.5, 0.6],
+    "copilot/eval/sampled/success_planned": [0.2, 0.4, 0.7, 0.9],
+}
+
+
+def _diag_metrics(client, run_id):
+    from mlflow.entities import Metric
+
+    now = int(time.time() * 1000)
+    client.log_batch(
+        run_id,
+        metrics=[Metric(k, v, now, s) for k, vals in DIAG.items() for s, v in zip(STEPS, vals, strict=True)],
+    )
+
+
 def _child(client, exp_id, parent_id, key, k, seed):
     tags = {
         "mlflow.parentRunId": parent_id,
@@ -81,6 +104,8 @@ def _tree_npz(path: Path, iteration: int, rng) -> None:
         subtask_steps=steps,
         subtask_reached=reached,
         layout="u-maze",
+        tau_hat_length=np.array([0.0125, 0.025, 0.05, 0.1]),
+        tau_hat=np.array([0.05, 0.06, 0.08, 0.11]) - iteration * 0.001,
     )
 
 
@@ -100,6 +125,7 @@ def store(tmp_path_factory):
     for seed, vals in A_PLANNED.items():
         rid = _child(client, exp_id, pid, "tree_depth=2", 2, seed)
         _metrics(client, rid, vals, STEPS, A_WALL[seed])
+        _diag_metrics(client, rid)
         client.set_terminated(rid, "FINISHED")
     for seed, vals in B_PLANNED.items():
         rid = ids[f"B{seed}"] = _child(client, exp_id, pid, "tree_depth=3", 3, seed)
@@ -213,6 +239,36 @@ def test_pngs_exist_and_are_not_blank(store):
         img = mpimg.imread(p)
         assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100
         assert img[..., :3].std() > 0.02, f"{p.name} looks blank"
+
+
+def test_diagnostics_page_draws_the_diag_curves_and_tau_hat(store):
+    names = {p.name for p in store["out"].glob("*.png")}
+    assert {"diagnostics.png", "tau_hat.png"} <= names
+    report = (store["out"] / "report.md").read_text()
+    assert "## Diagnostics" in report and "## Learned time cost tau_hat against segment length" in report
+
+
+def test_diag_curves_and_tau_hat_are_loaded(store):
+    from analysis.load import load_sweep, load_tree_snapshots
+
+    sweep = load_sweep(store["uri"], EXP)
+    trial = next(t for t in sweep.trials if t.config_key == "tree_depth=2")
+    steps, values = trial.curves["copilot/diag/q_mean"]
+    np.testing.assert_allclose(steps, STEPS)
+    np.testing.assert_allclose(values, DIAG["copilot/diag/q_mean"])
+    b0 = next(t for t in sweep.trials if t.run_id == store["ids"]["B0"])
+    snap = load_tree_snapshots(store["uri"], b0.run_id, b0.tree_artifacts[:1])[0]
+    np.testing.assert_allclose(snap.tau_hat_length, [0.0125, 0.025, 0.05, 0.1])
+    np.testing.assert_allclose(snap.tau_hat, np.array([0.05, 0.06, 0.08, 0.11]) - 0.005)
+
+
+@pytest.mark.parametrize(
+    ("depth", "layers"), [(5, [2, 3, 4]), (4, [2, 3, 4]), (3, [1, 2, 3]), (2, [1, 2]), (1, [1])]
+)
+def test_tree_figure_shows_the_papers_layers(depth, layers):
+    from analysis.figures import tree_figure_layers
+
+    assert tree_figure_layers(depth) == layers
 
 
 def test_report_references_every_png(store):

@@ -120,6 +120,29 @@ def test_set_std_changes_the_spread_and_survives_a_state_dict_round_trip():
         planner.set_std(0.0)
 
 
+def test_max_kl_rolls_back_an_update_that_leaves_the_trust_region():
+    starts, goals = np.full((8, 2), 0.2), np.full((8, 2), 0.8)
+    costs = np.arange(8.0)
+
+    def one_update(max_kl):
+        planner = SubgoalPlanner(2, 1, low=0.0, high=1.0, seed=0, max_kl=max_kl)
+        trees = planner.sample(starts, goals, rng=np.random.default_rng(0))
+        before = [p.detach().clone() for p in planner.parameters()]
+        stats = planner.update(trees, costs, upto_layer=1)
+        moved = any(not torch.equal(a, b) for a, b in zip(before, planner.parameters(), strict=True))
+        return stats, moved, planner
+
+    stats, moved, _ = one_update(None)
+    assert moved and stats["rolled_back"] == 0.0
+    stats, moved, planner = one_update(1e-12)  # any step leaves a region this small
+    assert not moved and stats["rolled_back"] == 1.0
+    assert all(not s for s in planner.optimizer.state.values())  # Adam's moments are undone too
+    stats, moved, _ = one_update(1e3)
+    assert moved and stats["rolled_back"] == 0.0
+    with pytest.raises(ValueError, match="max_kl"):
+        SubgoalPlanner(2, 1, max_kl=0.0)
+
+
 def test_group_baseline():
     costs = np.array([1.0, 3.0, 10.0, 20.0, 30.0])
     np.testing.assert_allclose(group_baseline(costs, np.array([0, 0, 1, 1, 1])), [2, 2, 20, 20, 20])

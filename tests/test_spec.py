@@ -585,3 +585,86 @@ def test_spec_is_a_pydantic_model():
     assert isinstance(spec, SweepSpec)
     again = parse_spec(spec.model_dump(by_alias=True, exclude_none=True))
     assert again.trial_plan() == spec.trial_plan()
+
+
+# ------------------------------------------------------------------------------------------ variants
+def _variants_spec(**changes):
+    return spec_with(
+        config={"tree_depth": 2, "tau_max": 20},
+        variants={"base": {}, "paper": {"preset": "paper_literal"}, "short": {"tau_max": 5}},
+        **changes,
+    )
+
+
+def test_variants_are_a_grid_axis_over_every_point_and_seed():
+    spec = parse_spec(_variants_spec())
+    plan = spec.trial_plan()
+    assert len(plan) == 3 * 2 * 2  # variants x repetitions grid x seeds
+    assert plan[0] == {"variant": "base", "repetitions": 1, "seed": 0}
+    assert {p["variant"] for p in plan} == {"base", "paper", "short"}
+    assert spec.num_configurations() == 6
+    assert spec.merged({"variant": "short", "repetitions": 2, "seed": 0}) == {
+        "tree_depth": 2,
+        "tau_max": 5,  # the variant overrides config
+        "repetitions": 2,
+    }
+    text = spec.format_plan()
+    assert "variant short: tau_max=5" in text and "variant base: (config as it is)" in text
+    from ray.tune.search.sample import Categorical  # noqa: F401 - Tune importable
+
+    space = to_tune_search_space(spec)
+    assert space["variant"] == {"grid_search": ["base", "paper", "short"]}
+
+
+def test_variants_build_their_configs():
+    reason = _copilot_importable()
+    if reason:
+        pytest.skip(reason)
+    spec = parse_spec(_variants_spec())
+    short = build_algorithm_config({"variant": "short", "repetitions": 1, "seed": 0}, spec)
+    paper = build_algorithm_config({"variant": "paper", "repetitions": 1, "seed": 0}, spec)
+    base = build_algorithm_config({"variant": "base", "repetitions": 1, "seed": 0}, spec)
+    assert short.tau_max == 5 and base.tau_max == 20 and paper.tau_max == 20  # config wins over the preset
+    assert paper.preset == "paper_literal" and paper.after_failure == "continue"
+    assert base.after_failure == "restart"
+    with pytest.raises(SpecError, match=r"trial.variant: 'nope' is invalid"):
+        build_algorithm_config({"variant": "nope", "seed": 0}, spec)
+
+
+@pytest.mark.parametrize(
+    ("changes", "expected"),
+    [
+        ({"variants": {"a": {"tau_mx": 3}}}, "variants.a.tau_mx: unknown key; did you mean 'tau_max'?"),
+        ({"variants": {"a": {"tau_max": 0}}}, "variants.a.tau_max: 0 is invalid"),
+        ({"variants": {"a b": {}}}, "variants.a b: 'a b' is invalid"),
+        (
+            {"variants": {"a": {"repetitions": 2}}},
+            "variants.a.repetitions: 2 is invalid: repetitions is also searched",
+        ),
+        (
+            {
+                "variants": {"a": {}},
+                "searcher": _optuna(),
+                "search": {"repetitions": {"categorical": [1, 2]}},
+            },
+            "variants: ['a'] is invalid: variants need searcher type: grid",
+        ),
+    ],
+)
+def test_bad_variants_are_rejected_naming_the_key(changes, expected):
+    assert expected in rejected(spec_with(**changes))
+
+
+def test_optional_knobs_take_null():
+    spec = parse_spec(
+        spec_with(config={"tree_depth": 2, "planner.std_final": None, "planner.max_grad_norm": None})
+    )
+    assert spec.config["planner.std_final"] is None
+    assert "config.planner.std: None is invalid" in rejected(spec_with(config={"planner.std": None}))
+
+
+def test_shipped_ablation_spec_has_the_paper_reading_and_one_revert_per_variant():
+    spec = load_spec(ROOT / "sweeps/readings_ablation.yaml")
+    assert spec.variants["paper_literal"] == {"preset": "paper_literal"}
+    assert spec.variants["default"] == {}
+    assert all(len(v) == 1 for name, v in spec.variants.items() if name != "default")

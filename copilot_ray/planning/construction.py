@@ -128,6 +128,7 @@ def construct_trees(
             stats[f"clip_fraction_layer_{k}"] = s["clip_fraction"]
             stats[f"epochs_layer_{k}"] = s["epochs_run"]
             stats["nonfinite_skipped"] = stats.get("nonfinite_skipped", 0.0) + s["nonfinite_skipped"]
+            stats["rolled_back"] = stats.get("rolled_back", 0.0) + s["rolled_back"]
         planner.extend(trees, k, deterministic=deterministic, rng=rng)
     if cost_fn is not None:
         layer_costs, total = tree_cost(trees, K, K, cost_fn)

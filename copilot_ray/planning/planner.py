@@ -1,6 +1,6 @@
 """The sub-goal planning policy pi_p(g | g_i, g_j) (paper Sec. 3.3, Eq. 7 and 10).
 
-Follows the SGT-PG planner that the paper's public code copies (see ``reference/facts.md``):
+Follows the SGT-PG planner that the paper's public code copies (Shuang-AO/CO-PILOT, tomjur/SGT-PG):
 
 * one small MLP per tree layer (``shared_across_layers=False``, the default) or one for all layers;
 * Gaussian with mean ``(g_i + g_j) / 2 + MLP([g_i, g_j])`` and a fixed standard deviation (0.05);
@@ -104,6 +104,8 @@ class SubgoalPlanner:
         max_grad_norm: optional gradient-norm clip (None: off, as in the reference).
         target_kl: stop an ``update``'s epochs early once the approximate KL between the sampling
             policy and the current one exceeds 1.5 x this (as SB3's PPO); None: run all epochs.
+        max_kl: undo an ``update`` (weights and optimiser state) whose final approximate KL from the
+            sampling policy exceeds this, as a trust-region line search rejects a step; None: never.
         normalize_advantages: divide the baselined advantages by their standard deviation.
         augment_reversed: ask ``construct_trees`` to also train on every sample with start and goal
             swapped (the reference code does this); costs of reversed trees are re-evaluated there, so an
@@ -127,6 +129,7 @@ class SubgoalPlanner:
         epochs: int = 4,
         max_grad_norm: float | None = None,
         target_kl: float | None = None,
+        max_kl: float | None = None,
         normalize_advantages: bool = True,
         augment_reversed: bool = False,
         last_init_scale: float = 0.01,
@@ -161,6 +164,9 @@ class SubgoalPlanner:
         if target_kl is not None and not float(target_kl) > 0:
             raise ValueError(f"target_kl must be > 0 or None, got target_kl={target_kl!r}")
         self.target_kl = None if target_kl is None else float(target_kl)
+        if max_kl is not None and not float(max_kl) > 0:
+            raise ValueError(f"max_kl must be > 0 or None, got max_kl={max_kl!r}")
+        self.max_kl = None if max_kl is None else float(max_kl)
         self.normalize_advantages = bool(normalize_advantages)
         self.augment_reversed = bool(augment_reversed)
         self.last_init_scale = float(last_init_scale)
@@ -209,6 +215,7 @@ class SubgoalPlanner:
             "epochs": self.epochs,
             "max_grad_norm": self.max_grad_norm,
             "target_kl": self.target_kl,
+            "max_kl": self.max_kl,
             "normalize_advantages": self.normalize_advantages,
             "augment_reversed": self.augment_reversed,
             "last_init_scale": self.last_init_scale,
@@ -364,6 +371,8 @@ class SubgoalPlanner:
         lo, hi = 1.0 - self.clip_eps, 1.0 + self.clip_eps
         loss_v = kl_v = clip_v = 0.0
         epochs_run = skipped = 0
+        if self.max_kl is not None:
+            before = (copy.deepcopy(self.nets.state_dict()), copy.deepcopy(self.optimizer.state_dict()))
         for _ in range(self.epochs if epochs is None else int(epochs)):
             logp = self.log_prob(trees, layers)
             # A tree's log-probability sums 2^(k+1) - 2 sub-goals x d dims at std 0.05, so one epoch can
@@ -389,6 +398,19 @@ class SubgoalPlanner:
             self.optimizer.step()
             loss_v = float(loss.detach())
             epochs_run += 1
+        rolled_back = 0.0
+        if self.max_kl is not None and epochs_run:
+            with torch.no_grad():
+                log_ratio = (self.log_prob(trees, layers) - old_logp).clamp(-20.0, 20.0)
+                final_kl = float(((torch.exp(log_ratio) - 1.0) - log_ratio).mean())
+            if not final_kl <= self.max_kl:
+                # A trust-region step that left the region: undo it (weights and Adam's moments), as a
+                # line search would. Without this the tree-level ratio (2^(k+1) - 2 sub-goals x d dims at
+                # std 0.05) let one update move the policy so far that the next ones escalated: KL 0.2 ->
+                # 2 -> 14 -> 1e6 within 8 phases and every sub-goal of a layer on the border.
+                self.nets.load_state_dict(before[0])
+                self.optimizer.load_state_dict(before[1])
+                rolled_back = 1.0
         return {
             "loss": loss_v,
             "cost_mean": float(costs.mean()),
@@ -398,4 +420,5 @@ class SubgoalPlanner:
             "adv_std": adv_std,
             "epochs_run": float(epochs_run),
             "nonfinite_skipped": float(skipped),
+            "rolled_back": rolled_back,
         }

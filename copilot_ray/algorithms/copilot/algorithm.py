@@ -270,6 +270,7 @@ class CoPilot(SAC):
             max(built.stats[f"approx_kl_layer_{k}"] for k in range(1, cfg.tree_depth + 1))
         )
         stats["planner/nonfinite_skipped"].append(built.stats.get("nonfinite_skipped", 0.0))
+        stats["planner/rolled_back"].append(built.stats.get("rolled_back", 0.0))
         return built.trees
 
     def _add_to_dtau(self, subtasks: dict[str, np.ndarray]) -> None:

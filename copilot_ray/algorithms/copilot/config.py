@@ -39,7 +39,8 @@ from copilot_ray.planning.alpha_schedule import AlphaSchedule
 from copilot_ray.planning.planner import NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 
-# Paper Section 4.1 and the reference planner (facts.md), where the paper is silent.
+# Paper Section 4.1 and, where the paper is silent, the public reference planner (SGT-PG's, which the
+# paper's code copies).
 DEFAULT_PLANNER = {
     "hidden": [20, 20, 20],  # reference code: 3 x 20 tanh, one net per layer
     "std": 0.05,  # the reference code's absolute std; with noise="relative" a fraction of the parent segment
@@ -53,6 +54,7 @@ DEFAULT_PLANNER = {
     # 0.5 (SB3's PPO default) the same run reached 81-83 % collision-free test plans (2 seeds).
     "max_grad_norm": 0.5,
     "target_kl": None,  # optional early stop of the PPO epochs (SB3's target_kl); None: off
+    "max_kl": None,  # undo an update whose final approximate KL exceeds this; None: off
     # Annealing (not in the paper): the std moves linearly to std_final over the first
     # std_anneal_phases planner phases (warm-start phases included); std_final None: constant std.
     # CoPilotConfig's default anneals (readings.DEFAULTS).
@@ -76,6 +78,7 @@ def build_planner(planner: dict[str, Any], goal_dim: int, depth: int, low, high,
         epochs=planner["epochs"],
         max_grad_norm=planner["max_grad_norm"],
         target_kl=planner["target_kl"],
+        max_kl=planner["max_kl"],
         seed=seed,
     )
 
@@ -359,7 +362,7 @@ class CoPilotConfig(SACConfig):
         if not 0 < self.planner["clip"] < 1:
             raise bad("planner.clip", self.planner["clip"], "use a number in (0, 1) (PPO's clip range)")
         positive_int("planner.std_anneal_phases", self.planner["std_anneal_phases"])
-        for key in ("max_grad_norm", "target_kl", "std_final"):
+        for key in ("max_grad_norm", "target_kl", "std_final", "max_kl"):
             value = self.planner[key]
             if value is not None and not (
                 isinstance(value, int | float) and not isinstance(value, bool) and value > 0
