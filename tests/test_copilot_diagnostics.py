@@ -76,7 +76,7 @@ def test_traversal_diagnostics_splits_success_by_the_previous_subtask():
     assert diag["subtask_collided"] == pytest.approx(1 / 7)
     goals = np.array([[0.01, 0.0]] * 7)  # every first sub-goal within 0.05 of its start
     goals[4] = [0.5, 0.5]  # ... but task 0's layer-0 one
-    diag = traversal_diagnostics(shuffled, distance=euclid, success_radius=0.05, goals=goals)
+    diag = traversal_diagnostics({**shuffled, "goal": goals}, distance=euclid, success_radius=0.05)
     assert diag["first_subtask_trivial"] == pytest.approx(2 / 3)
 
 

@@ -227,3 +227,19 @@ def test_agent_collision_modes(mode, steps, total):
 def test_bad_traversal_rules_name_key_and_value(key, value):
     with pytest.raises(ValueError, match=rf"{key}={value!r}"):
         make_ruled_env(**{key: value})
+
+
+def test_state_goal_delta_input_appends_subgoal_minus_position():
+    depth = 1
+    tree = straight_tree(depth)
+    env = make_ruled_env(agent_input="state_goal_delta")
+    assert env.observation_space.shape == (6,)
+    env.load_plan(tree[None], depth, np.array([0]))
+    obs, _ = env.reset()
+    np.testing.assert_allclose(obs[4:], obs[2:4] - obs[:2], atol=1e-6)
+    obs, *_ = env.step(np.array([1.0, 0.0], np.float32))
+    np.testing.assert_allclose(obs[:2], tree[0] + [0.01, 0.0], atol=1e-6)
+    np.testing.assert_allclose(obs[4:], tree[1] - obs[:2], atol=1e-6)
+    assert env.observation_space.contains(obs)
+    plain = make_ruled_env()
+    assert plain.observation_space.shape == (4,)

@@ -39,7 +39,7 @@ from copilot_ray.algorithms.copilot.diagnostics import (
     tau_hat_profile,
     traversal_diagnostics,
 )
-from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env, path_indices
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env
 from copilot_ray.algorithms.gc_sac import GradientStepSchedule
 from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
 from copilot_ray.planning import (
@@ -152,7 +152,7 @@ class CoPilot(SAC):
 
             subtasks = self._traverse(trees, idx[:n_tasks])
             t2 = time.perf_counter()
-            for key, value in self._traversal_diagnostics(subtasks, trees, idx[:n_tasks]).items():
+            for key, value in self._traversal_diagnostics(subtasks).items():
                 stats[f"diag/{key}"].append(value)
 
             if self.planner is not None:
@@ -287,23 +287,12 @@ class CoPilot(SAC):
         steps = self.rules.step_limit_of(layer, self.config.tree_depth)
         return steps * float(env.nominal_step_distance) + float(getattr(env, "success_radius", 0.0))
 
-    def _traversal_diagnostics(self, subtasks, trees: np.ndarray, task_ids: np.ndarray) -> dict[str, float]:
+    def _traversal_diagnostics(self, subtasks: dict[str, np.ndarray]) -> dict[str, float]:
         env = self.goal_env.unwrapped
-        # Each record's sub-goal, looked up in its task's tree, for the "trivial first sub-task" share.
-        row = {int(t): i for i, t in enumerate(task_ids)}
-        rows = np.array([row[int(t)] for t in subtasks["task"]])
-        depth = self.config.tree_depth
-        node = np.array(
-            [
-                path_indices(depth, int(k))[int(i)]
-                for k, i in zip(subtasks["layer"], subtasks["index"], strict=True)
-            ]
-        )
         return traversal_diagnostics(
             subtasks,
             distance=env.goal_distance,
             success_radius=float(getattr(env, "success_radius", 0.0)),
-            goals=trees[rows, node],
         )
 
     # ------------------------------------------------------------------------------ agent phase

@@ -21,15 +21,10 @@ from ray.rllib.algorithms.algorithm_config import NotProvided
 from ray.rllib.algorithms.sac import SACConfig
 
 from copilot_ray.algorithms.copilot.readings import (
-    AFTER_FAILURE,
-    AGENT_COLLISIONS,
-    AGENT_INPUTS,
     DEFAULTS,
     EVAL_ACTIONS,
     FAILED_SUBTASK_COSTS,
     PRESETS,
-    STEP_LIMITS,
-    SUBTASK_REWARDS,
     TRAVERSAL_TREES,
 )
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, TraversalRules
@@ -239,16 +234,7 @@ class CoPilotConfig(SACConfig):
 
     def traversal_rules(self) -> TraversalRules:
         """How the agent runs and is rewarded on sub-tasks (validated)."""
-        return TraversalRules(
-            tau_max=self.tau_max,
-            step_limit=self.step_limit,
-            after_failure=self.after_failure,
-            subtask_reward=self.subtask_reward,
-            reward_scale=self.reward_scale,
-            agent_collision=self.agent_collision,
-            agent_collision_penalty=self.agent_collision_penalty,
-            agent_input=self.agent_input,
-        )
+        return TraversalRules(**{name: getattr(self, name) for name in TraversalRules.__dataclass_fields__})
 
     def collision_penalty_value(self) -> float:
         """`collision_penalty`, or its default for `collision_cost` (10 per segment, 100 per length)."""
@@ -289,24 +275,17 @@ class CoPilotConfig(SACConfig):
             raise bad("tree_depth", self.tree_depth, "use an integer in [0, 10] (0: no planner, plain SAC)")
         positive_int("repetitions", self.repetitions)
         positive_int("tau_max", self.tau_max)
+        try:
+            self.traversal_rules()  # validates the traversal's own knobs
+        except ValueError as err:
+            raise ValueError(f"CoPilotConfig: {err}") from None
         for key, allowed in (
-            ("step_limit", STEP_LIMITS),
-            ("after_failure", AFTER_FAILURE),
-            ("subtask_reward", SUBTASK_REWARDS),
-            ("agent_collision", AGENT_COLLISIONS),
-            ("agent_input", AGENT_INPUTS),
             ("failed_subtask_cost", FAILED_SUBTASK_COSTS),
             ("traversal_tree", TRAVERSAL_TREES),
             ("eval_action", EVAL_ACTIONS),
         ):
             if getattr(self, key) not in allowed:
                 raise bad(key, getattr(self, key), f"use one of {list(allowed)}")
-        for key, lower, strict in (("reward_scale", 0.0, True), ("agent_collision_penalty", 0.0, False)):
-            value = getattr(self, key)
-            if not (isinstance(value, int | float) and not isinstance(value, bool)) or not (
-                value > lower if strict else value >= lower
-            ):
-                raise bad(key, value, f"use a number {'>' if strict else '>='} {lower:g}")
         if (
             isinstance(self.planner_warm_start, bool)
             or not isinstance(self.planner_warm_start, int)

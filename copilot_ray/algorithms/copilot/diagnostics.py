@@ -63,16 +63,10 @@ def plan_diagnostics(
 
 
 def traversal_diagnostics(
-    records: dict[str, np.ndarray],
-    *,
-    distance: ArrayFn,
-    success_radius: float,
-    goals: np.ndarray | None = None,
+    records: dict[str, np.ndarray], *, distance: ArrayFn, success_radius: float
 ) -> dict[str, float]:
-    """Figures of one agent phase's finished sub-tasks (the `_subtask_records` columns).
-
-    `goals` [N, d], when given, are the sub-goals of the records, for `first_subtask_trivial`.
-    """
+    """Figures of one agent phase's finished sub-tasks (the `_subtask_records` columns; `goal`, the
+    sub-goals, is optional and needed for `first_subtask_trivial`)."""
     task, layer, index = records["task"], records["layer"], records["index"]
     reached = records["reached"].astype(bool)
     # Traversal order: task by task, layers K..0, sub-goals left to right.
@@ -85,10 +79,10 @@ def traversal_diagnostics(
         out["success_after_reached"] = float(this_reached[prev_reached].mean())
     if (~prev_reached).any():
         out["success_after_failed"] = float(this_reached[~prev_reached].mean())
-    if goals is not None:
+    if "goal" in records:
         first = records["index"] == 1
         if first.any():
-            near = distance(records["start"][first], goals[first]) <= success_radius
+            near = distance(records["start"][first], records["goal"][first]) <= success_radius
             out["first_subtask_trivial"] = float(np.mean(near))
     if "collided" in records:
         out["subtask_collided"] = float(np.mean(records["collided"]))

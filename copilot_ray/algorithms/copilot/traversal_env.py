@@ -82,12 +82,11 @@ class TraversalRules:
                 raise ValueError(f"{key}={value!r} is invalid: use one of {list(allowed)}")
         if isinstance(self.tau_max, bool) or not isinstance(self.tau_max, int) or self.tau_max < 1:
             raise ValueError(f"tau_max={self.tau_max!r} is invalid: use an integer >= 1")
-        if not self.reward_scale > 0:
-            raise ValueError(f"reward_scale={self.reward_scale!r} is invalid: use a number > 0")
-        if not self.agent_collision_penalty >= 0:
-            raise ValueError(
-                f"agent_collision_penalty={self.agent_collision_penalty!r} is invalid: use a number >= 0"
-            )
+        for key, strict in (("reward_scale", True), ("agent_collision_penalty", False)):
+            value = getattr(self, key)
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (number and (value > 0 if strict else value >= 0)):
+                raise ValueError(f"{key}={value!r} is invalid: use a number {'>' if strict else '>='} 0")
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> TraversalRules:
