@@ -10,8 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from copilot_ray.keys import SUCCESS_METRICS
+
 from . import stats
-from .load import SUCCESS_METRICS, Sweep, Trial, natural_key
+from .load import CONFIG_KEY_AXIS, Sweep, Trial, natural_key
 
 THRESHOLDS = (0.5, 0.9)
 
@@ -95,7 +97,7 @@ class Missing:
 def config_label(trial: Trial, axes: list[str]) -> str:
     if not axes:
         return trial.config_key
-    if axes == ["config_key"]:
+    if axes == [CONFIG_KEY_AXIS]:
         return trial.config_key
     return ", ".join(f"{a}={trial.tags.get(a, '?')}" for a in axes)
 
@@ -155,7 +157,7 @@ def summarise(
 def _config_order(c: ConfigSummary, axes: list[str]):
     # Numeric axes (K, b) sort numerically so Fig. 2b reads K = 1, 2, ..., 10, not 1, 10, 2.
     t = c.all_trials[0]
-    return tuple(natural_key(t.tags.get(a, "") if a != "config_key" else c.key) for a in axes) + (c.key,)
+    return tuple(natural_key(t.tags.get(a, "") if a != CONFIG_KEY_AXIS else c.key) for a in axes) + (c.key,)
 
 
 def _metric_summary(trials: list[Trial], metric: str, grid: np.ndarray, reps: int, seed: int):

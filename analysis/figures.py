@@ -11,8 +11,23 @@ matplotlib.use("Agg")  # files only; never a display (the report runs on headles
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from copilot_ray.keys import (  # noqa: E402
+    AGENT_SUBTASK_SUCCESS_LAYER,
+    DIAG_Q_MEAN,
+    DIAG_SEGMENT_LENGTH_LAYER,
+    DIAG_SEGMENT_UNREACHABLE_LAYER,
+    DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
+    DIAG_SUCCESS_AFTER_FAILED,
+    DIAG_SUCCESS_AFTER_REACHED,
+    PLANNED_COLLISION_FREE,
+    REACHED_PLANNED,
+    SUCCESS_DIRECT,
+    SUCCESS_PLANNED,
+    eval_by_action,
+)
+
 from .aggregate import ConfigSummary  # noqa: E402
-from .load import SUCCESS_DIRECT, SUCCESS_PLANNED, TreeSnapshot  # noqa: E402
+from .load import TreeSnapshot  # noqa: E402
 
 TITLES = {
     SUCCESS_PLANNED: "agent following the planner's finest path",
@@ -212,61 +227,60 @@ def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str,
 
 
 # ---------------------------------------------------------------------------------------------- diagnostics
-# One panel per question, one colour per configuration, one line per seed. (metric, line style, label).
+# One panel per question, one colour per configuration, one line per seed. (metric, line style, label);
+# {K} / {K2} in a metric: the run's tree depth K / max(K - 2, 1).
 _DIAG_PANELS = (
     (
         "sub-goals inside obstacles",
         (
-            ("copilot/diag/subgoal_in_obstacle_layer_{K}", "-", "layer K"),
-            ("copilot/diag/subgoal_in_obstacle_layer_{K2}", ":", "layer K-2"),
+            (DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "{K}", "-", "layer K"),
+            (DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "{K2}", ":", "layer K-2"),
         ),
     ),
     (
         "segments longer than one sub-task can cover",
         (
-            ("copilot/diag/segment_unreachable_layer_{K}", "-", "layer K"),
-            ("copilot/diag/segment_unreachable_layer_{K2}", ":", "layer K-2"),
+            (DIAG_SEGMENT_UNREACHABLE_LAYER + "{K}", "-", "layer K"),
+            (DIAG_SEGMENT_UNREACHABLE_LAYER + "{K2}", ":", "layer K-2"),
         ),
     ),
     (
         "training sub-task success by layer",
         (
-            ("copilot/agent/subtask_success_layer_{K}", "-", "layer K"),
-            ("copilot/agent/subtask_success_layer_{K2}", "--", "layer K-2"),
-            ("copilot/agent/subtask_success_layer_0", ":", "layer 0"),
+            (AGENT_SUBTASK_SUCCESS_LAYER + "{K}", "-", "layer K"),
+            (AGENT_SUBTASK_SUCCESS_LAYER + "{K2}", "--", "layer K-2"),
+            (AGENT_SUBTASK_SUCCESS_LAYER + "0", ":", "layer 0"),
         ),
     ),
     (
         "sub-task success after the previous one was...",
         (
-            ("copilot/diag/success_after_reached", "-", "reached"),
-            ("copilot/diag/success_after_failed", ":", "failed"),
+            (DIAG_SUCCESS_AFTER_REACHED, "-", "reached"),
+            (DIAG_SUCCESS_AFTER_FAILED, ":", "failed"),
         ),
     ),
-    ("critic's mean Q", (("copilot/diag/q_mean", "-", "mean Q"),)),
+    ("critic's mean Q", ((DIAG_Q_MEAN, "-", "mean Q"),)),
     (
         "test: planned path collision-free / followed",
         (
-            ("copilot/eval/planned_collision_free", ":", "plan collision-free"),
-            ("copilot/eval/deterministic/reached_planned", "--", "reached (collisions allowed)"),
-            ("copilot/eval/deterministic/success_planned", "-", "success"),
+            (PLANNED_COLLISION_FREE, ":", "plan collision-free"),
+            (eval_by_action(REACHED_PLANNED, "deterministic"), "--", "reached (collisions allowed)"),
+            (eval_by_action(SUCCESS_PLANNED, "deterministic"), "-", "success"),
         ),
     ),
     (
         "test success: deterministic vs sampled actions",
         (
-            ("copilot/eval/deterministic/success_planned", "-", "deterministic, planned"),
-            ("copilot/eval/sampled/success_planned", "--", "sampled, planned"),
-            ("copilot/eval/sampled/success_direct", ":", "sampled, direct"),
+            (eval_by_action(SUCCESS_PLANNED, "deterministic"), "-", "deterministic, planned"),
+            (eval_by_action(SUCCESS_PLANNED, "sampled"), "--", "sampled, planned"),
+            (eval_by_action(SUCCESS_DIRECT, "sampled"), ":", "sampled, direct"),
         ),
     ),
 )
 
 
 def depth_of(trial) -> int:
-    layers = [
-        int(k.rsplit("_", 1)[1]) for k in trial.curves if k.startswith("copilot/diag/segment_length_layer_")
-    ]
+    layers = [int(k.rsplit("_", 1)[1]) for k in trial.curves if k.startswith(DIAG_SEGMENT_LENGTH_LAYER)]
     return max(layers, default=0)
 
 
@@ -274,7 +288,7 @@ def diagnostics(configs: list[ConfigSummary], path: Path) -> Path | None:
     """Why runs (do not) learn: the `copilot/diag/...` curves and their evaluation counterparts against
     env steps. Returns None when no run logged diagnostics."""
     shown, _ = _select(configs)
-    trials = [(c, t) for c in shown for t in c.trials if depth_of(t) > 0 or "copilot/diag/q_mean" in t.curves]
+    trials = [(c, t) for c in shown for t in c.trials if depth_of(t) > 0 or DIAG_Q_MEAN in t.curves]
     if not trials:
         return None
     colors = dict(zip([c.key for c in shown], _colors(len(shown)), strict=True))

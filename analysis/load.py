@@ -17,17 +17,30 @@ from pathlib import Path
 
 import numpy as np
 
-SUCCESS_PLANNED = "copilot/eval/success_planned"
-SUCCESS_DIRECT = "copilot/eval/success_direct"
-SUCCESS_METRICS = (SUCCESS_PLANNED, SUCCESS_DIRECT)
+from copilot_ray.keys import (
+    AGENT_SUBTASK_SUCCESS_LAYER,
+    AXIS_TAGS,
+    CONFIG_KEY_TAG,
+    DIAG_PREFIX,
+    EVAL_PREFIX,
+    PARENT_TAG,
+    REPORT_ARTIFACT,
+    ROLE_SWEEP,
+    ROLE_TAG,
+    ROLE_TRIAL,
+    SEED_PARAM,
+    SEED_TAG,
+    SUCCESS_METRICS,
+    SWEEP_TAG,
+    TIME_TOTAL_S,
+    TREES_DIR,
+)
+
 # Curves for the diagnostics page (copilot_ray.algorithms.copilot.diagnostics): every metric under these
 # prefixes that a run logged.
-DIAGNOSTIC_PREFIXES = ("copilot/diag/", "copilot/eval/", "copilot/agent/subtask_success_layer_")
-WALL_TIME = "time_total_s"
-ENV_STEPS = "env_runners/num_env_steps_sampled_lifetime"
-TREES_DIR = "copilot_trees"
-# Tags that name a sweep axis, in the order they are shown in labels.
-AXIS_TAGS = ("algorithm", "env", "variant", "preset", "K", "b", "alpha_schedule")
+DIAGNOSTIC_PREFIXES = (DIAG_PREFIX, EVAL_PREFIX, AGENT_SUBTASK_SUCCESS_LAYER)
+# The pseudo-axis that labels configurations by their config key when no axis tag tells them apart.
+CONFIG_KEY_AXIS = "config_key"
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
 # KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
 USABLE_STATUSES = ("FINISHED", "RUNNING")
@@ -79,7 +92,7 @@ class Sweep:
         labels = {tuple(tr.tags.get(t, "") for t in varying) for tr in self.trials}
         # The named axes must tell the configurations apart (a K x lr grid varies an untagged knob too).
         if len(keys) > 1 and len(labels) < len(keys):
-            varying = ["config_key"]
+            varying = [CONFIG_KEY_AXIS]
         return varying
 
 
@@ -157,7 +170,7 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         )
     runs = _all_runs(client, exp.experiment_id)
     parents = sorted(
-        (r for r in runs if r.data.tags.get("copilot.role") == "sweep"),
+        (r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_SWEEP),
         key=lambda r: r.info.start_time or 0,
         reverse=True,
     )
@@ -173,17 +186,17 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         parent = parents[0] if parents else None
 
     if parent is not None:
-        children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == parent.info.run_id]
+        children = [r for r in runs if r.data.tags.get(PARENT_TAG) == parent.info.run_id]
     else:
-        children = [r for r in runs if r.data.tags.get("copilot.role") == "trial"]
+        children = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
     if not children:
         where = f"sweep run {parent.info.run_id}" if parent else f"experiment {experiment!r}"
         raise AnalysisError(f"{where} has no child (trial) runs at {tracking_uri}")
 
     trials = [_trial(client, r) for r in children]
     trials.sort(key=lambda t: (t.config_key, natural_key(t.seed), t.run_id))
-    sweep_name = (parent.data.tags.get("copilot.sweep") if parent else None) or (
-        children[0].data.tags.get("copilot.sweep", experiment)
+    sweep_name = (parent.data.tags.get(SWEEP_TAG) if parent else None) or (
+        children[0].data.tags.get(SWEEP_TAG, experiment)
     )
     return Sweep(
         tracking_uri=tracking_uri,
@@ -204,8 +217,8 @@ def _trial(client, run) -> Trial:
         run_id=run.info.run_id,
         run_name=run.info.run_name or run.info.run_id[:8],
         status=run.info.status,
-        config_key=tags.get("copilot.config_key", "default"),
-        seed=tags.get("seed", run.data.params.get("seed", "?")),
+        config_key=tags.get(CONFIG_KEY_TAG, "default"),
+        seed=tags.get(SEED_TAG, run.data.params.get(SEED_PARAM, "?")),
         tags=tags,
     )
     wanted = set(SUCCESS_METRICS) | {k for k in run.data.metrics if k.startswith(DIAGNOSTIC_PREFIXES)}
@@ -216,7 +229,7 @@ def _trial(client, run) -> Trial:
             values = np.array([m.value for m in hist], dtype=np.float64)
             order = np.argsort(steps, kind="stable")
             trial.curves[key] = (steps[order], values[order])
-    trial.wall_time_s = float(run.data.metrics.get(WALL_TIME, float("nan")))
+    trial.wall_time_s = float(run.data.metrics.get(TIME_TOTAL_S, float("nan")))
     try:
         trial.tree_artifacts = sorted(
             f.path for f in client.list_artifacts(run.info.run_id, TREES_DIR) if f.path.endswith(".npz")
@@ -282,5 +295,7 @@ def load_tree_snapshots(tracking_uri: str, run_id: str, paths: list[str]) -> lis
     return out
 
 
-def log_report_artifacts(tracking_uri: str, parent_run_id: str, out_dir: Path, artifact_path: str = "report"):
+def log_report_artifacts(
+    tracking_uri: str, parent_run_id: str, out_dir: Path, artifact_path: str = REPORT_ARTIFACT
+):
     _client(tracking_uri).log_artifacts(parent_run_id, str(out_dir), artifact_path)

@@ -26,10 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
+from copilot_ray.keys import GIT_COMMIT_TAG, SUCCESS_PLANNED, TREES_DIR
+
 from . import figures, stats, tables
 from .aggregate import ConfigSummary, Missing, summarise
 from .load import (
-    SUCCESS_PLANNED,
     AnalysisError,
     Sweep,
     Trial,
@@ -146,7 +147,7 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
         )
         candidates = [c for c in candidates if c.key in best]
     if not candidates:
-        notes.append("No run has sub-goal tree snapshots (copilot_trees/*.npz): no tree figure.")
+        notes.append(f"No run has sub-goal tree snapshots ({TREES_DIR}/*.npz): no tree figure.")
     result = []
     loaded: list[tuple[str, list]] = []
     for c in candidates:
@@ -210,7 +211,7 @@ def _document(sweep, configs, missing: Missing, axis_name, figs, tree_figs, tabl
     statuses: dict[str, int] = {}
     for t in sweep.trials:
         statuses[t.status] = statuses.get(t.status, 0) + 1
-    commits = sorted({t.tags.get("git_commit", "")[:10] for t in sweep.trials} - {""})
+    commits = sorted({t.tags.get(GIT_COMMIT_TAG, "")[:10] for t in sweep.trials} - {""})
     doc: list[tuple] = [("h1", f"Sweep report: {sweep.experiment}")]
     doc.append(
         (

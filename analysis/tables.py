@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from copilot_ray.keys import SUCCESS_DIRECT, SUCCESS_PLANNED
+
 from .aggregate import THRESHOLDS, ConfigSummary
-from .load import SUCCESS_DIRECT, SUCCESS_PLANNED
 
 SHORT = {SUCCESS_PLANNED: "planned", SUCCESS_DIRECT: "direct"}
 NOT_REACHED = "not reached"

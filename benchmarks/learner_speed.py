@@ -9,7 +9,7 @@ package is not importable). Everything runs in one process with the same torch t
         `PrioritizedEpisodeReplayBuffer.sample(...)` -> `learner_group.update(episodes=...)`
         (learner connector included), one gradient step per call. Priority updates are left out
         (they would only make it slower).
-    (b) ours: `use_fast_gc_sac(SACConfig())` + `FlatTransitionBuffer` + `update_from_buffer` with
+    (b) ours: `use_fast_learner(SACConfig())` + `FlatTransitionBuffer` + `update_from_buffer` with
         `--steps-per-call` gradient steps per `learner_group.update(batch=...)` call.
     (c) SB3: `SAC("MlpPolicy", ...)` with net_arch [256, 256], `model.train(gradient_steps=1,
         batch_size=256)` per update, i.e. SB3's default `train_freq=1, gradient_steps=1` loop.
@@ -167,9 +167,9 @@ def build_ours(obs_space, act_space, episodes, steps_per_call: int, torch_thread
     from ray.rllib.algorithms.sac import SACConfig
     from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer, use_fast_gc_sac
+    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer, use_fast_learner
 
-    config = use_fast_gc_sac(
+    config = use_fast_learner(
         SACConfig().environment(observation_space=obs_space, action_space=act_space),
         hidden=HIDDEN,
         torch_threads=torch_threads,
@@ -228,7 +228,8 @@ def copilot_end_to_end(iterations: int = 2) -> dict[str, float]:
     in the planner and cost-model phases. Evaluation is off; the first iteration is warm-up."""
     import ray
 
-    from copilot_ray.algorithms.copilot import CoPilotConfig
+    from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
+    from copilot_ray.keys import ENV_STEPS, PLANNING_SHARE, metric_path, result_value
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
@@ -243,12 +244,12 @@ def copilot_end_to_end(iterations: int = 2) -> dict[str, float]:
         out = {}
         for _ in range(iterations):
             t0 = time.perf_counter()
-            before = algo.metrics.peek(("env_runners", "num_env_steps_sampled_lifetime"), default=0)
+            before = algo.metrics.peek(metric_path(ENV_STEPS), default=0)
             result = algo.train()
-            steps = result["env_runners"]["num_env_steps_sampled_lifetime"] - before
+            steps = result_value(result, ENV_STEPS) - before
             out = {
                 "env_steps_per_s": steps / (time.perf_counter() - t0),
-                "planning_share": float(result["copilot"]["time"]["planning_share"]),
+                "planning_share": float(result_value(result, PLANNING_SHARE)),
                 "env_steps": float(steps),
             }
         algo.stop()

@@ -10,7 +10,7 @@ a PNG and a table are written at the end. A measurement, not a test.
     PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --presets default --set after_failure=continue
     PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --presets paper_literal plain_sac --seeds 0 1
 
-`--set KEY=VALUE` takes the keys of a sweep spec's `config` (copilot_ray/spec.py COPILOT_KNOBS, e.g.
+`--set KEY=VALUE` takes the keys of a sweep spec's `config` (the settings of copilot_ray/algorithms/copilot/settings.py, e.g.
 `planner.std_final=0.015`, `initial_alpha=1e-3`); values are read as YAML. The multi-seed evidence
 for the README comes from `sweeps/maze_learning.yaml` through `analysis.report`; this script is for
 quick probes of one knob.
@@ -24,65 +24,69 @@ import os
 import time
 from pathlib import Path
 
+from copilot_ray.keys import (
+    AGENT_SUBTASK_SUCCESS_LAYER,
+    COPILOT_PREFIX,
+    DIAG_Q_MEAN,
+    DIAG_SEGMENT_UNREACHABLE_LAYER,
+    DIAG_SUCCESS_AFTER_FAILED,
+    ENV_STEPS,
+    PLANNED_COLLISION_FREE,
+    REACHED_PLANNED,
+    SUBGOALS_REACHED_PLANNED,
+    SUCCESS_DIRECT,
+    SUCCESS_PLANNED,
+    TRAINING_ITERATION,
+    result_value,
+)
+
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 
-# Printed per iteration: (label, metric key under copilot/, format); <K> is the tree depth.
+# Printed per iteration: (label, metric key, format); <K> is the tree depth.
 COLUMNS = (
-    ("planned", "eval/success_planned", "{:.2f}"),
-    ("direct", "eval/success_direct", "{:.2f}"),
-    ("reached", "eval/reached_planned", "{:.2f}"),
-    ("subgoals", "eval/subgoals_reached_planned", "{:.2f}"),
-    ("plan free", "eval/planned_collision_free", "{:.2f}"),
-    ("sub-task K", "agent/subtask_success_layer_<K>", "{:.2f}"),
-    ("after failed", "diag/success_after_failed", "{:.2f}"),
-    ("unreachable K", "diag/segment_unreachable_layer_<K>", "{:.2f}"),
-    ("Q", "diag/q_mean", "{:.2f}"),
+    ("planned", SUCCESS_PLANNED, "{:.2f}"),
+    ("direct", SUCCESS_DIRECT, "{:.2f}"),
+    ("reached", REACHED_PLANNED, "{:.2f}"),
+    ("subgoals", SUBGOALS_REACHED_PLANNED, "{:.2f}"),
+    ("plan free", PLANNED_COLLISION_FREE, "{:.2f}"),
+    ("sub-task K", AGENT_SUBTASK_SUCCESS_LAYER + "<K>", "{:.2f}"),
+    ("after failed", DIAG_SUCCESS_AFTER_FAILED, "{:.2f}"),
+    ("unreachable K", DIAG_SEGMENT_UNREACHABLE_LAYER + "<K>", "{:.2f}"),
+    ("Q", DIAG_Q_MEAN, "{:.2f}"),
 )
 
 
 def parse_sets(items: list[str]) -> dict:
-    from copilot_ray.spec import COPILOT_KNOBS, load_yaml_value
+    """`--set KEY=VALUE` items as setting values (YAML values, as in a spec); exits naming a bad one."""
+    from copilot_ray.algorithms.copilot.settings import SETTINGS
+    from copilot_ray.settings import problems
+    from copilot_ray.spec import load_yaml_value
 
     out = {}
     for item in items:
         key, sep, text = item.partition("=")
         if not sep:
             raise SystemExit(f"--set {item!r}: use KEY=VALUE")
-        if key not in COPILOT_KNOBS:
-            raise SystemExit(f"--set {key}: unknown key; known: {', '.join(sorted(COPILOT_KNOBS))}")
-        value = load_yaml_value(text)
-        if problem := COPILOT_KNOBS[key].problem(key, value):
-            raise SystemExit(f"--set {key}={text}: {problem}")
-        out[key] = value
+        out[key] = load_yaml_value(text)
+    for key, value, why in problems(SETTINGS, out):
+        known = f"; known: {', '.join(sorted(SETTINGS))}" if why == "unknown key" else ""
+        raise SystemExit(f"--set {key}={value!r}: {why}{known}")
     return out
 
 
 def build(preset: str, args, seed: int, sets: dict):
-    from copilot_ray.algorithms.copilot import CoPilotConfig
-    from copilot_ray.spec import COPILOT_KNOBS
+    from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
+    from copilot_ray.algorithms.registry import RunContext
 
-    config = (
-        CoPilotConfig()
-        .environment("maze-point", env_config={"layout": args.layout})
-        .env_runners(num_env_runners=0)
-        .resources(num_cpus_for_main_process=1)
-        .debugging(seed=seed)
-        .copilot(preset=preset)
-        .copilot(task_batch_size=args.task_batch_size, eval_num_tasks=100, eval_tree_tasks=0)
-    )
-    copilot, nested, training = {}, {"planner": {}, "cost_model": {}}, {}
-    for key, value in sets.items():
-        target = COPILOT_KNOBS[key].target
-        if target in nested:
-            nested[target][key.split(".", 1)[1]] = value
-        elif target == "training":
-            training[key] = value
-        else:
-            copilot[key] = value
-    config.copilot(**copilot, **{k: v for k, v in nested.items() if v})
-    if training:
-        config.training(**training)
-    return config.build_algo()
+    run = RunContext("maze-point", {"layout": args.layout}, seed=seed, num_cpus_for_main_process=1)
+    values = {
+        "preset": preset,
+        "task_batch_size": args.task_batch_size,
+        "eval_num_tasks": 100,
+        "eval_tree_tasks": 0,
+        **sets,
+    }
+    return CoPilotConfig.from_settings(values, run).build_algo()
 
 
 def run_one(preset: str, args, seed: int, sets: dict, rows_path: Path, done: list[dict]) -> list[dict]:
@@ -93,12 +97,12 @@ def run_one(preset: str, args, seed: int, sets: dict, rows_path: Path, done: lis
     try:
         while True:
             result = algo.train()
-            steps = int(result["env_runners"]["num_env_steps_sampled_lifetime"])
-            flat = _flatten(result.get("copilot", {}))
+            steps = int(result_value(result, ENV_STEPS))
+            flat = _flatten(result.get("copilot", {}), COPILOT_PREFIX)
             row = {
                 "preset": preset,
                 "seed": seed,
-                "iteration": result["training_iteration"],
+                "iteration": result[TRAINING_ITERATION],
                 "env_steps": steps,
             }
             row["wall_s"] = time.time() - started
@@ -161,7 +165,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--task-batch-size", type=int, default=2, help="tasks traversed per iteration")
     p.add_argument("--out", default="results/benchmarks/maze_learning")
     args = p.parse_args(argv)
-    from copilot_ray.algorithms.copilot.readings import PRESETS
+    from copilot_ray.algorithms.copilot.settings import PRESETS
 
     unknown = [name for name in args.presets if name not in PRESETS]
     if unknown:

@@ -31,12 +31,14 @@ import time
 import numpy as np
 import torch
 
-from copilot_ray.algorithms.copilot.config import DEFAULT_PLANNER, build_planner
+from copilot_ray.algorithms.copilot.settings import defaults
 from copilot_ray.envs import make
 from copilot_ray.envs.maze.env import shortest_path_lengths
 from copilot_ray.evaluation import follow_waypoints
-from copilot_ray.planning import SegmentCost, construct_trees
+from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees
 from copilot_ray.planning.subgoal_tree import layer_indices
+
+PLANNER = defaults("planner")  # CO-PILOT's planner settings
 
 
 def oracle_policy(speed: float):
@@ -65,8 +67,8 @@ def run(collision_cost: str, seed: int, args, env, test, shortest, envs) -> list
     torch.manual_seed(seed)
     low, high = env.goal_space.low, env.goal_space.high
     # CO-PILOT's planner defaults (the gradient clip keeps PPO from diverging at K = 5).
-    planner = build_planner(DEFAULT_PLANNER, env.goal_dim, args.depth, low, high, seed)
-    std0 = float(DEFAULT_PLANNER["std"])
+    planner = SubgoalPlanner.from_settings(PLANNER, env.goal_dim, args.depth, low, high, seed)
+    std0 = float(PLANNER["std"])
     cost = SegmentCost(
         alpha=1.0,
         segments_collide=env.segments_collide,
@@ -128,7 +130,7 @@ def main() -> None:
     anneal = (
         "constant"
         if args.std_final is None
-        else f"{DEFAULT_PLANNER['std']} -> {args.std_final} over {args.anneal_phases}"
+        else f"{PLANNER['std']} -> {args.std_final} over {args.anneal_phases}"
     )
     print(
         f"layout={args.layout} K={args.depth} iterations={args.iterations} B={args.task_batch_size} "

@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from copilot_ray.algorithms.copilot.traversal_env import flat_observation, path_indices
+from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.planning.subgoal_tree import path_indices
 
 Policy = Callable[[np.ndarray], np.ndarray]
 

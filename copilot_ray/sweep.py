@@ -12,7 +12,8 @@
   studies). The grid searcher runs one Tune experiment ``<name>`` over configurations x seeds; the optuna
   searcher runs one experiment per seed, ``<name>-seed<s>`` (study ``<name>-seed<s>``, sampler seed
   ``searcher.seed + index``), one after the other.
-* The trainable is ``CoPilotTrial``, a subclass of ``CoPilot`` built from a FLAT Tune config (the
+* The trainable is ``CoPilotTrial`` (``copilot_ray.tune_runtime``, with the Tune callbacks: the one
+  module here that imports Ray), a subclass of ``CoPilot`` built from a FLAT Tune config (the
   trial's dotted params + ``seed`` + ``_spec_path``) with ``build_algorithm_config``; RLlib's own
   ``save_checkpoint`` / ``load_checkpoint`` carry the whole state, so a trial that fails (up to 2 times)
   or is resumed continues from its last checkpoint.
@@ -33,23 +34,31 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from copilot_ray.tracking import (
-    ENV_STEPS_KEY,
-    SPEC_PATH_KEY,
-    config_key,
-    describe_trial,
-    result_value,
-    trial_flat,
-)
+import yaml
 
-SUCCESS_KEYS = ("copilot/eval/success_planned", "copilot/eval/success_direct")
-CHECKPOINT_FREQUENCY = 1  # iterations between checkpoints (and the synced copilot_trees/)
-MAX_FAILURES = 2
+from copilot_ray import tracking
+from copilot_ray.keys import (
+    ALGORITHM_TAG,
+    ENV_STEPS,
+    ENV_TAG,
+    EVAL_FRESH,
+    RESOLVED_SPEC_ARTIFACT,
+    SEED_PARAM,
+    SPEC_ARTIFACT,
+    SUCCESS_DIRECT,
+    SUCCESS_PLANNED,
+    TIME_TOTAL_S,
+    TUNE_PATH_TAG,
+    result_value,
+)
+from copilot_ray.spec import SpecError, SpecLoader, format_plan, load_spec, parse_spec
+from copilot_ray.tracking import config_key, trial_flat
+
 EXIT_INTERRUPTED = 130
 
 
@@ -71,11 +80,7 @@ def experiment_names(spec) -> list[tuple[str, int | None]]:
 
 def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None) -> Path:
     """The spec as it runs: absolute storage, the tracking URI and layout files resolved, re-validated."""
-    import yaml
-
-    from copilot_ray.spec import _SpecLoader, parse_spec
-
-    data = yaml.load(Path(spec.source).read_text(), Loader=_SpecLoader)  # noqa: S506 - SafeLoader subclass
+    data = yaml.load(Path(spec.source).read_text(), Loader=SpecLoader)  # noqa: S506 - SafeLoader subclass
     data.setdefault("tracking", {})
     data["tracking"] = {**(data["tracking"] or {}), "storage": spec.tracking.storage}
     data["tracking"]["uri"] = tracking_uri or spec.tracking.uri
@@ -88,248 +93,9 @@ def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None
         f"# {spec.name}: resolved copy of {Path(spec.source).resolve()} (written by copilot_ray.sweep)\n"
         + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
     )
-    parse_spec(yaml.load(text, Loader=_SpecLoader), str(destination))  # noqa: S506 - still valid?
+    parse_spec(yaml.load(text, Loader=SpecLoader), str(destination))  # noqa: S506 - still valid?
     destination.write_text(text)
     return destination
-
-
-# ================================================================================================ Tune parts
-def _make_trial_class():
-    from copilot_ray.algorithms.copilot import CoPilot
-
-    class CoPilotTrial(CoPilot):
-        """CoPilot built from a flat Tune config: ``{dotted params..., "seed": s, "_spec_path": p}``.
-
-        ``__init__`` and ``default_resource_request`` turn the flat dict into the RLlib config with
-        ``build_algorithm_config(flat, spec)`` (spec loaded from ``_spec_path``), so Tune's placement
-        group fits the env runners and RLlib's checkpointing is untouched.
-
-        Every result carries ``copilot/eval/success_*`` (Tune's strict metric check and Optuna need the
-        searched metric in every result): iterations without an evaluation repeat the last evaluated
-        value (NaN before the first one) and set ``copilot/eval/fresh`` to 0 (1 when evaluated now).
-        """
-
-        def __init__(self, config=None, **kwargs):
-            if isinstance(config, dict) and SPEC_PATH_KEY in config:
-                config = _algorithm_config(config)
-            self._last_eval: dict[str, float] = {}
-            super().__init__(config=config, **kwargs)
-
-        @classmethod
-        def default_resource_request(cls, config):
-            if isinstance(config, dict) and SPEC_PATH_KEY in config:
-                config = _algorithm_config(config)
-            return super().default_resource_request(config)
-
-        def step(self):
-            result = super().step()
-            copilot = result.setdefault("copilot", {})
-            ev = copilot.setdefault("eval", {})
-            # RLlib reports a window-1 stat logged in an earlier iteration as NaN: not an evaluation.
-            fresh = all(_is_number(ev.get(k.rsplit("/", 1)[1])) for k in SUCCESS_KEYS)
-            for key in SUCCESS_KEYS:
-                name = key.rsplit("/", 1)[1]
-                if fresh:
-                    self._last_eval[name] = float(ev[name])
-                else:
-                    ev[name] = self._last_eval.get(name, float("nan"))
-            ev["fresh"] = 1.0 if fresh else 0.0
-            return result
-
-        def get_state(self, *args, **kwargs):
-            state = super().get_state(*args, **kwargs)
-            state["copilot_trial_last_eval"] = dict(getattr(self, "_last_eval", {}))
-            return state
-
-        def set_state(self, state):
-            super().set_state(state)
-            self._last_eval = dict(state.get("copilot_trial_last_eval", {}))
-
-    CoPilotTrial.__module__ = __name__
-    CoPilotTrial.__qualname__ = "CoPilotTrial"
-    return CoPilotTrial
-
-
-def _algorithm_config(config: Mapping[str, Any]):
-    from copilot_ray.spec import build_algorithm_config
-    from copilot_ray.tracking import _load_spec_cached
-
-    spec = _load_spec_cached(str(config[SPEC_PATH_KEY]))
-    return build_algorithm_config(trial_flat(config), spec)
-
-
-def _make_progress_printer():
-    from ray.tune import Callback
-
-    class ProgressPrinter(Callback):
-        """One line per trial event; replaces Tune's table (which dumps the whole RLlib config)."""
-
-        def __init__(self):
-            self._info: dict[str, dict[str, Any]] = {}
-
-        def __getstate__(self):
-            return {}
-
-        def __setstate__(self, state):
-            self._info = {}
-
-        def _head(self, trial) -> str:
-            info = self._info.get(trial.trial_id)
-            if info is None:
-                try:
-                    d = describe_trial(trial.config)
-                    info = {k: d[k] for k in ("config_key", "K", "b", "alpha_schedule", "seed")}
-                except Exception as err:  # noqa: BLE001 - a progress line must not fail the sweep
-                    info = {
-                        "config_key": f"? ({err})",
-                        "K": "?",
-                        "b": "?",
-                        "alpha_schedule": "?",
-                        "seed": "?",
-                    }
-                self._info[trial.trial_id] = info
-            i = info
-            return (
-                f"[{trial.trial_id}] {i['config_key']:<18} K={i['K']} b={i['b']} "
-                f"alpha={i['alpha_schedule']} seed={i['seed']}"
-            )
-
-        def on_trial_start(self, iteration, trials, trial, **info):
-            _say(f"{self._head(trial)}  started")
-
-        def on_trial_result(self, iteration, trials, trial, result, **info):
-            ev = result.get("copilot", {}).get("eval", {})
-            steps = result_value(result, ENV_STEPS_KEY, 0)
-            mark = "" if ev.get("fresh", 1.0) else " (last eval)"
-            _say(
-                f"{self._head(trial)}  iter {result.get('training_iteration', 0):4d}  "
-                f"env_steps {int(steps):8d}  success planned {_fmt(ev.get('success_planned'))} "
-                f"direct {_fmt(ev.get('success_direct'))}{mark}  {result.get('time_total_s', 0.0):7.1f}s"
-            )
-
-        def on_trial_complete(self, iteration, trials, trial, **info):
-            _say(f"{self._head(trial)}  done")
-
-        def on_trial_recover(self, iteration, trials, trial, **info):
-            _say(f"{self._head(trial)}  failed, retrying from its last checkpoint ({trial.error_file})")
-
-        def on_trial_error(self, iteration, trials, trial, **info):
-            _say(f"{self._head(trial)}  ERROR, see {trial.error_file}")
-
-    ProgressPrinter.__module__ = __name__
-    ProgressPrinter.__qualname__ = "ProgressPrinter"
-    return ProgressPrinter
-
-
-class _OptunaSpace:
-    """``OptunaSearch(space=...)`` define-by-run function; a picklable class (Tune pickles the searcher)."""
-
-    def __init__(self, spec_path: str):
-        self.spec_path = spec_path
-        self._fn = None
-
-    def __getstate__(self):
-        return {"spec_path": self.spec_path}
-
-    def __setstate__(self, state):
-        self.spec_path, self._fn = state["spec_path"], None
-
-    def __call__(self, trial):
-        if self._fn is None:
-            from copilot_ray.spec import optuna_define_by_run
-            from copilot_ray.tracking import _load_spec_cached
-
-            self._fn = optuna_define_by_run(_load_spec_cached(self.spec_path))
-        return self._fn(trial)
-
-
-_LAZY = {"CoPilotTrial": _make_trial_class, "ProgressPrinter": _make_progress_printer}
-
-
-def __getattr__(name: str):  # PEP 562: Ray-based classes exist only once asked for (no Ray for --check)
-    if name in _LAZY:
-        return _lazy(name)
-    raise AttributeError(name)
-
-
-def _lazy(name: str):
-    """The one class object for ``name`` (built once: pickling by reference needs a stable identity)."""
-    cls = globals().get(name)
-    if cls is None:
-        cls = globals()[name] = _LAZY[name]()
-    return cls
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and not math.isnan(v)
-
-
-def _say(line: str) -> None:
-    print(line, flush=True)
-
-
-def _fmt(v: Any) -> str:
-    return f"{v:.2f}" if isinstance(v, int | float) and not math.isnan(v) else "  - "
-
-
-def _searcher(spec, spec_path: Path, index: int, seed: int):
-    import optuna
-    from ray.tune.search.optuna import OptunaSearch
-
-    s = spec.searcher
-    sampler_seed = (s.seed or 0) + index
-    sampler = {
-        "tpe": lambda: optuna.samplers.TPESampler(seed=sampler_seed),
-        "random": lambda: optuna.samplers.RandomSampler(seed=sampler_seed),
-        "cmaes": lambda: optuna.samplers.CmaEsSampler(seed=sampler_seed),
-    }[s.sampler or "tpe"]()
-    storage = optuna.storages.RDBStorage(f"sqlite:///{sweep_root(spec) / 'optuna.db'}")
-    return OptunaSearch(
-        space=_OptunaSpace(str(spec_path)),
-        metric=s.metric,
-        mode=s.mode,
-        sampler=sampler,
-        study_name=f"{spec.name}-seed{seed}",
-        storage=storage,
-    )
-
-
-def _build_tuner(spec, spec_path: Path, exp_name: str, seed: int | None, index: int, callbacks: list):
-    from ray import tune
-
-    from copilot_ray.spec import to_tune_scheduler, to_tune_search_space, tune_stop
-
-    trainable = _lazy("CoPilotTrial")
-    if spec.searcher.type == "grid":
-        param_space = {**to_tune_search_space(spec), SPEC_PATH_KEY: str(spec_path)}
-        search_alg, num_samples = None, 1
-    else:
-        param_space = {"seed": seed, SPEC_PATH_KEY: str(spec_path)}
-        search_alg, num_samples = _searcher(spec, spec_path, index, seed), spec.searcher.num_samples
-    return tune.Tuner(
-        trainable,
-        param_space=param_space,
-        tune_config=tune.TuneConfig(
-            search_alg=search_alg,
-            scheduler=to_tune_scheduler(spec),
-            num_samples=num_samples,
-            max_concurrent_trials=spec.resources.max_concurrent_trials,
-            reuse_actors=False,
-        ),
-        run_config=tune.RunConfig(
-            name=exp_name,
-            storage_path=str(sweep_root(spec) / "tune"),
-            stop=tune_stop(spec),
-            checkpoint_config=tune.CheckpointConfig(
-                checkpoint_frequency=CHECKPOINT_FREQUENCY, checkpoint_at_end=True, num_to_keep=2
-            ),
-            failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
-            # copilot_trees/ is written to the trial's working dir; sync it into the trial folder.
-            sync_config=tune.SyncConfig(sync_artifacts=True),
-            callbacks=callbacks,
-            verbose=0,
-        ),
-    )
 
 
 # ================================================================================================ summary
@@ -372,8 +138,8 @@ def rows_from_grid(grid) -> list[TrialRow]:
         flat = trial_flat(trial.config or {})
         m = trial.last_result or {}
         df = analysis.trial_dataframes.get(trial.trial_id)
-        if df is not None and "copilot/eval/fresh" in df.columns:
-            df = df[df["copilot/eval/fresh"] == 1.0]  # the evaluations themselves
+        if df is not None and EVAL_FRESH in df.columns:
+            df = df[df[EVAL_FRESH] == 1.0]  # the evaluations themselves
         # After Ctrl-C, Tune's cleanup marks stopped trials TERMINATED too: finished means a final result.
         if trial.status == "ERROR":
             status = "error"
@@ -383,12 +149,12 @@ def rows_from_grid(grid) -> list[TrialRow]:
             TrialRow(
                 trial_id=trial.trial_id,
                 config_key=config_key(flat),
-                seed=flat.get("seed"),
+                seed=flat.get(SEED_PARAM),
                 status=status,
-                success_planned=_last_valid(df, SUCCESS_KEYS[0]),
-                success_direct=_last_valid(df, SUCCESS_KEYS[1]),
-                env_steps=int(result_value(m, ENV_STEPS_KEY, 0) or 0),
-                wall_s=float(m.get("time_total_s", 0.0) or 0.0),
+                success_planned=_last_valid(df, SUCCESS_PLANNED),
+                success_direct=_last_valid(df, SUCCESS_DIRECT),
+                env_steps=int(result_value(m, ENV_STEPS, 0) or 0),
+                wall_s=float(m.get(TIME_TOTAL_S, 0.0) or 0.0),
             )
         )
     return rows
@@ -444,6 +210,23 @@ def summary_table(rows: Sequence[TrialRow]) -> str:
 
 
 # ================================================================================================ running
+@dataclass
+class SweepRun:
+    """A sweep about to run (resolved, not yet started)."""
+
+    spec: Any  # as it runs: read back from saved_spec
+    uri: str  # MLflow tracking URI
+    resume: bool
+    given: Path  # the spec file as given
+    root: Path  # <tracking.storage>/<name>
+    saved_spec: Path  # root/spec.yaml
+    experiments: list[tuple[str, int | None]]  # (Tune experiment name, seed or None)
+
+    @property
+    def tune_root(self) -> Path:
+        return self.root / "tune"
+
+
 def run_sweep(
     spec,
     *,
@@ -459,12 +242,38 @@ def run_sweep(
     callbacks it pickled with the experiment.
     """
     started = time.time()
+    run = resolve_sweep(spec, resume=resume, tracking_uri=tracking_uri)
+    runtime = _import_runtime()
+    own_ray = runtime.start_ray(address)
+    exp_id, parent_id = open_tracking(run)
+    rows, interrupted, tune_paths = run_experiments(run, runtime, exp_id, parent_id, extra_callbacks)
+    outcome = report_sweep(run, rows, interrupted, tune_paths, parent_id, wall=time.time() - started)
+    if own_ray:
+        runtime.stop_ray()
+    return outcome
+
+
+def resolve_sweep(spec, *, resume: bool, tracking_uri: str | None) -> SweepRun:
+    """Checks that ``resume`` matches what is on disk and settles the spec the sweep runs with: on resume
+    the saved ``spec.yaml``, otherwise ``spec`` written there resolved (``write_resolved_spec``)."""
     root = sweep_root(spec)
-    tune_root = root / "tune"
     experiments = experiment_names(spec)
-    existing = [name for name, _ in experiments if (tune_root / name).exists()]
+    _check_resume(root, experiments, resume)
     saved_spec = root / "spec.yaml"
-    original = Path(spec.source)
+    if resume and saved_spec.is_file():
+        running = load_spec(saved_spec)
+        if running.model_dump(exclude={"tracking"}) != spec.model_dump(exclude={"tracking"}):
+            _say(f"note: {spec.source} differs from the spec this sweep ran with; resuming with {saved_spec}")
+    else:
+        write_resolved_spec(spec, saved_spec, tracking_uri)
+        running = load_spec(saved_spec)
+    uri = tracking_uri or running.tracking.uri
+    return SweepRun(running, uri, resume, Path(spec.source), root, saved_spec, experiments)
+
+
+def _check_resume(root: Path, experiments: list[tuple[str, int | None]], resume: bool) -> None:
+    tune_root = root / "tune"
+    existing = [name for name, _ in experiments if (tune_root / name).exists()]
     if not resume and existing:
         raise SweepError(
             f"{tune_root / existing[0]} already holds this sweep's results: add --resume to continue it, "
@@ -472,115 +281,114 @@ def run_sweep(
         )
     if resume and not existing:
         raise SweepError(f"nothing to resume: no Tune experiment under {tune_root}")
-    if resume and saved_spec.is_file():
-        from copilot_ray.spec import load_spec
 
-        saved = load_spec(saved_spec)
-        given = spec.model_dump(exclude={"tracking"})
-        if saved.model_dump(exclude={"tracking"}) != given:
-            _say(f"note: {spec.source} differs from the spec this sweep ran with; resuming with {saved_spec}")
-        spec = saved
-        tracking_uri = tracking_uri or spec.tracking.uri
-    else:
-        write_resolved_spec(spec, saved_spec, tracking_uri)
-        from copilot_ray.spec import load_spec
 
-        spec = load_spec(saved_spec)
-        tracking_uri = tracking_uri or spec.tracking.uri
-    uri = tracking_uri
-
+def _import_runtime():
+    """``copilot_ray.tune_runtime``, which imports Ray: only ever called with a validated spec."""
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     # On Ctrl-C Tune waits for each trial's current iteration to end before stopping it, by default up
     # to 600 s (one demo iteration takes minutes); the state is saved already, so stop them sooner.
     os.environ.setdefault("TUNE_FORCE_TRIAL_CLEANUP_S", "20")
-    import ray
-    from ray import tune
+    from copilot_ray import tune_runtime
 
-    from copilot_ray import tracking
+    return tune_runtime
 
-    own_ray = not ray.is_initialized()
-    if own_ray:
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:
-            ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False)
 
+def open_tracking(run: SweepRun) -> tuple[str, str]:
+    """The sweep's MLflow parent run (the same one on resume) with the spec files: (experiment id, run id)."""
+    spec = run.spec
     exp_id, parent_id, reused = tracking.open_sweep_run(
-        uri,
+        run.uri,
         spec.experiment,
         spec.name,
-        resume=resume,
-        tags={tracking.TUNE_PATH_TAG: str(tune_root), "algorithm": spec.algorithm, "env": spec.env.id},
-        params={
-            "algorithm": spec.algorithm,
-            "env.id": spec.env.id,
-            **{f"env.config.{k}": v for k, v in spec.env.config.items()},
-            "searcher": spec.searcher.type,
-            "seeds": list(spec.seeds),
-            "trials": len(spec.trial_plan()),
-            "stop.env_steps": spec.stop.env_steps,
-            "stop.iterations": spec.stop.iterations,
-            "searched": ",".join(spec.searched_keys) or "-",
-        },
-        artifact_location=tracking.local_artifact_location(uri, root / "mlartifacts"),
+        resume=run.resume,
+        tags={TUNE_PATH_TAG: str(run.tune_root), ALGORITHM_TAG: spec.algorithm, ENV_TAG: spec.env.id},
+        params=_sweep_params(spec),
+        artifact_location=tracking.local_artifact_location(run.uri, run.root / "mlartifacts"),
     )
     if not reused:
-        files = {"spec.resolved.yaml": saved_spec}
-        if not resume and original.is_file():
-            files["spec.yaml"] = original
-        tracking.log_sweep_files(uri, parent_id, files)
+        files = {RESOLVED_SPEC_ARTIFACT: run.saved_spec}
+        if not run.resume and run.given.is_file():
+            files[SPEC_ARTIFACT] = run.given
+        tracking.log_sweep_files(run.uri, parent_id, files)
     _say(
-        f"sweep {spec.name!r}: {len(spec.trial_plan())} trial(s); Tune results in {tune_root}; "
-        f"MLflow {uri} (parent run {parent_id}{', resumed' if reused else ''})"
+        f"sweep {spec.name!r}: {len(spec.trial_plan())} trial(s); Tune results in {run.tune_root}; "
+        f"MLflow {run.uri} (parent run {parent_id}{', resumed' if reused else ''})"
     )
+    return exp_id, parent_id
 
+
+def _sweep_params(spec) -> dict[str, Any]:
+    """The sweep's shape, as the parent run's params."""
+    return {
+        "algorithm": spec.algorithm,
+        **tracking.env_params(spec),
+        "searcher": spec.searcher.type,
+        "seeds": list(spec.seeds),
+        "trials": len(spec.trial_plan()),
+        "stop.env_steps": spec.stop.env_steps,
+        "stop.iterations": spec.stop.iterations,
+        "searched": ",".join(spec.searched_keys) or "-",
+    }
+
+
+def run_experiments(
+    run: SweepRun, runtime, exp_id: str, parent_id: str, extra_callbacks: Sequence[Any]
+) -> tuple[list[TrialRow], bool, list[str]]:
+    """Fits the sweep's Tune experiments one after the other: (rows, interrupted, Tune paths).
+
+    Stops at the first experiment that did not run all its trials (Ctrl-C / SIGTERM)."""
     previous_term = None
     if threading.current_thread() is threading.main_thread():
         # Tune handles SIGINT (save state, stop trials); route SIGTERM the same way.
         previous_term = signal.signal(signal.SIGTERM, lambda *_: os.kill(os.getpid(), signal.SIGINT))
-
     rows: list[TrialRow] = []
-    interrupted = False
-    tune_paths = []
+    tune_paths: list[str] = []
     try:
-        for index, (exp_name, seed) in enumerate(experiments):
-            path = tune_root / exp_name
-            tune_paths.append(str(path))
-            if resume and path.exists() and tune.Tuner.can_restore(str(path)):
-                tuner = tune.Tuner.restore(str(path), trainable=_lazy("CoPilotTrial"), resume_errored=True)
-            else:
-                callbacks = [
-                    _lazy("ProgressPrinter")(),
-                    tracking.mlflow_callback_class()(uri, exp_id, spec.name, parent_id),
-                    *extra_callbacks,
-                ]
-                tuner = _build_tuner(spec, saved_spec, exp_name, seed, index, callbacks)
-            grid = tuner.fit()
-            new_rows = rows_from_grid(grid)
+        for index, (exp_name, seed) in enumerate(run.experiments):
+            tune_paths.append(str(run.tune_root / exp_name))
+            tuner = _tuner(run, runtime, index, exp_name, seed, exp_id, parent_id, extra_callbacks)
+            new_rows = rows_from_grid(tuner.fit())
             rows.extend(new_rows)
-            expected = len(spec.trial_plan()) if seed is None else spec.searcher.num_samples
+            expected = len(run.spec.trial_plan()) if seed is None else run.spec.searcher.num_samples
             # Unfinished trials, or trials never created (Tune creates them lazily): interrupted.
             if len(new_rows) < expected or any(r.status == "unfinished" for r in new_rows):
-                interrupted = True
-                break
+                return rows, True, tune_paths
     finally:
         if previous_term is not None:
             signal.signal(signal.SIGTERM, previous_term)
+    return rows, False, tune_paths
 
+
+def _tuner(run: SweepRun, runtime, index, exp_name, seed, exp_id, parent_id, extra_callbacks):
+    """The experiment restored from its Tune state (resume), or built fresh with the sweep's callbacks."""
+    if run.resume:
+        tuner = runtime.restore_tuner(run.tune_root / exp_name)
+        if tuner is not None:
+            return tuner
+    callbacks = [
+        runtime.ProgressPrinter(),
+        runtime.MlflowSweepCallback(run.uri, exp_id, run.spec.name, parent_id),
+        *extra_callbacks,
+    ]
+    root = sweep_root(run.spec)
+    return runtime.build_tuner(run.spec, run.saved_spec, root, exp_name, seed, index, callbacks)
+
+
+def report_sweep(
+    run: SweepRun, rows: list[TrialRow], interrupted: bool, tune_paths: list[str], parent_id: str, wall: float
+) -> SweepOutcome:
+    """Ends the parent run with the summary table and prints it, where the results are and what next."""
+    spec, uri = run.spec, run.uri
     summary = summary_table(rows)
     errored = any(r.status == "error" for r in rows)
     status = "interrupted" if interrupted else ("errored" if errored else "finished")
-    wall = time.time() - started
     header = (
         f"# sweep {spec.name}: {status}\n\n{len(rows)} trial(s), wall {wall:.0f}s (this session). "
         "Success = last evaluation of each trial; mean ± sample std over seeds.\n\n"
     )
-    tracking.end_sweep_run(
-        uri,
-        parent_id,
-        {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status],
-        header + summary + "\n",
-    )
+    mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
+    tracking.end_sweep_run(uri, parent_id, mlflow_status, header + summary + "\n")
     _say("")
     _say(summary)
     _say("")
@@ -594,10 +402,12 @@ def run_sweep(
             f"some trials failed; retry them from their last checkpoint with: "
             f"python -m copilot_ray.sweep {spec.source} --resume"
         )
-    if own_ray:
-        ray.shutdown()
     code = EXIT_INTERRUPTED if interrupted else (1 if errored else 0)
     return SweepOutcome(status, code, rows, summary, uri, parent_id, tune_paths, wall)
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
 
 
 # ================================================================================================ CLI
@@ -613,8 +423,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from copilot_ray.spec import SpecError, load_spec
-
     try:
         spec = load_spec(args.spec)
     except SpecError as err:
@@ -622,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
             print(line, file=sys.stderr)
         return 2
     if args.check:
-        print(spec.format_plan())
+        print(format_plan(spec))
         return 0
     try:
         outcome = run_sweep(spec, resume=args.resume, address=args.address, tracking_uri=args.tracking_uri)

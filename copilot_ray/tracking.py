@@ -1,7 +1,8 @@
 """MLflow wiring, in one place: where the store is, which metrics go there, and at which step.
 
 Every curve is plotted against environment steps, so metrics are logged with
-`step = num_env_steps_sampled_lifetime`.
+`step = num_env_steps_sampled_lifetime` (``keys.ENV_STEPS``). No Ray import: the Tune callback that drives
+``TrialRuns`` is ``copilot_ray.tune_runtime.MlflowSweepCallback``.
 """
 
 from __future__ import annotations
@@ -12,7 +13,39 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-ENV_STEPS_KEY = "env_runners/num_env_steps_sampled_lifetime"
+from copilot_ray.algorithms.registry import get_algorithm
+from copilot_ray.keys import (
+    ALGORITHM_TAG,
+    ALPHA_SCHEDULE_TAG,
+    B_TAG,
+    CHECKPOINT_ARTIFACT,
+    CONFIG_ARTIFACT,
+    CONFIG_KEY_TAG,
+    ENV_STEPS,
+    ENV_TAG,
+    ERROR_ARTIFACT,
+    GIT_COMMIT_TAG,
+    K_TAG,
+    PARENT_TAG,
+    PRESET_TAG,
+    ROLE_SWEEP,
+    ROLE_TAG,
+    ROLE_TRIAL,
+    SEED_PARAM,
+    SEED_TAG,
+    SPEC_PATH_KEY,
+    SUMMARY_ARTIFACT,
+    SWEEP_TAG,
+    TIME_TOTAL_S,
+    TRAINING_ITERATION,
+    TREES_DIR,
+    TRIAL_ID_TAG,
+    VARIANT_PARAM,
+    VARIANT_TAG,
+    result_value,
+)
+from copilot_ray.spec import build_algorithm_config, load_spec
+
 MLFLOW_PARAM_LIMIT = 500  # MLflow rejects longer param values
 
 
@@ -109,7 +142,7 @@ class MlflowRun:
 
 
 # ================================================================================================ sweeps
-# What a sweep writes to MLflow (copilot_ray.sweep), in one place:
+# What a sweep writes to MLflow (copilot_ray.sweep), in one place (the names: copilot_ray.keys):
 #
 #   parent run (one per sweep)   tags  copilot.sweep=<name>, copilot.role=sweep, copilot.tune_path,
 #                                      git_commit, mlflow.runName=<name>
@@ -120,16 +153,8 @@ class MlflowRun:
 #                                      alpha_schedule, preset, variant, seed, git_commit
 #                                params  every knob of the algorithm at its effective value, seed, env.*
 #                                metrics  metrics_from_result + time_total_s + training_iteration,
-#                                         step = env steps (ENV_STEPS_KEY)
+#                                         step = env steps (keys.ENV_STEPS)
 #                                artifacts  config.yaml, checkpoint/ (final), copilot_trees/*.npz
-
-SWEEP_TAG = "copilot.sweep"
-ROLE_TAG = "copilot.role"
-TRIAL_ID_TAG = "copilot.trial_id"
-CONFIG_KEY_TAG = "copilot.config_key"
-TUNE_PATH_TAG = "copilot.tune_path"
-PARENT_TAG = "mlflow.parentRunId"
-SPEC_PATH_KEY = "_spec_path"  # the fixed Tune param naming the (resolved) spec a trial belongs to
 
 
 def _client(tracking_uri: str):
@@ -200,13 +225,15 @@ def open_sweep_run(
     client = _client(tracking_uri)
     exp_id = ensure_experiment(client, experiment, artifact_location)
     if resume:
-        found = find_runs(client, exp_id, {SWEEP_TAG: sweep, ROLE_TAG: "sweep"})
+        found = find_runs(client, exp_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP})
         if found:
             run_id = found[-1].info.run_id
             client.update_run(run_id, status="RUNNING")
             return exp_id, run_id, True
     run = client.create_run(
-        exp_id, run_name=sweep, tags={SWEEP_TAG: sweep, ROLE_TAG: "sweep", "git_commit": git_commit(), **tags}
+        exp_id,
+        run_name=sweep,
+        tags={SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP, GIT_COMMIT_TAG: git_commit(), **tags},
     )
     run_id = run.info.run_id
     if params:
@@ -217,7 +244,7 @@ def open_sweep_run(
 def end_sweep_run(tracking_uri: str, run_id: str, status: str, summary_md: str | None = None) -> None:
     client = _client(tracking_uri)
     if summary_md is not None:
-        client.log_text(run_id, summary_md, "summary.md")
+        client.log_text(run_id, summary_md, SUMMARY_ARTIFACT)
     client.set_terminated(run_id, status=status)
 
 
@@ -237,9 +264,8 @@ def _log_params(client, run_id: str, params: Mapping[str, str]) -> None:
 
 
 # ------------------------------------------------------------------------------- what a trial is
-def _load_spec_cached(path: str):
-    from copilot_ray.spec import load_spec
-
+def load_spec_cached(path: str):
+    """The spec at ``path``, loaded once per process (trials and callbacks ask for it often)."""
     spec = _SPEC_CACHE.get(path)
     if spec is None:
         spec = _SPEC_CACHE[path] = load_spec(path)
@@ -264,14 +290,12 @@ def _fmt_value(value: Any) -> str:
 
 def config_key(flat: Mapping[str, Any]) -> str:
     """Names a configuration without its seed: sorted ``key=value`` of the searched params, or ``default``."""
-    items = sorted((k, v) for k, v in flat.items() if k != "seed")
+    items = sorted((k, v) for k, v in flat.items() if k != SEED_PARAM)
     return ",".join(f"{k}={_fmt_value(v)}" for k, v in items) or "default"
 
 
-def alpha_schedule_label(merged: Mapping[str, Any]) -> str:
-    """The preset name or kind of the alpha schedule a trial uses."""
-    from copilot_ray.spec import DEFAULT_ALPHA_PRESET
-
+def alpha_schedule_label(merged: Mapping[str, Any], default: str = "") -> str:
+    """The preset name or kind of the alpha schedule a trial uses (`default`: when none is given)."""
     whole = merged.get("alpha_schedule")
     dotted = sorted(k.split(".", 1)[1] for k in merged if str(k).startswith("alpha_schedule."))
     if "kind" in dotted:
@@ -281,19 +305,18 @@ def alpha_schedule_label(merged: Mapping[str, Any]) -> str:
     elif whole is not None:
         base = str(whole)
     else:
-        base = DEFAULT_ALPHA_PRESET
+        base = default
     return base + ("*" if dotted else "")  # '*': preset with some fields overridden
 
 
 def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
     """Everything the progress lines and the MLflow tags say about one trial (built on the driver)."""
-    from copilot_ray.spec import build_algorithm_config
-
-    spec = _load_spec_cached(str(config[SPEC_PATH_KEY]))
+    spec = load_spec_cached(str(config[SPEC_PATH_KEY]))
+    settings = get_algorithm(spec.algorithm).settings
     flat = trial_flat(config)
     algo_config = build_algorithm_config(flat, spec)
     merged = spec.merged(flat)
-    seed = flat.get("seed", spec.seeds[0])
+    seed = flat.get(SEED_PARAM, spec.seeds[0])
     return {
         "spec": spec,
         "flat": flat,
@@ -303,30 +326,29 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "env": spec.env.id,
         "K": getattr(algo_config, "tree_depth", None),
         "b": getattr(algo_config, "repetitions", None),
-        "alpha_schedule": alpha_schedule_label(merged),
+        "alpha_schedule": alpha_schedule_label(
+            merged, settings["alpha_schedule"].default if "alpha_schedule" in settings else ""
+        ),
         "preset": getattr(algo_config, "preset", None) or "default",
-        "variant": flat.get("variant", ""),
+        "variant": flat.get(VARIANT_PARAM, ""),
         "seed": seed,
-        "knobs": effective_knobs(algo_config, spec),
+        "knobs": effective_settings(algo_config, settings),
     }
 
 
-def effective_knobs(algo_config: Any, spec: Any) -> dict[str, Any]:
-    """Every settable key of the spec's algorithm (spec.ALGORITHMS knobs) at the value the run uses."""
-    from copilot_ray.spec import ALGORITHMS
-
+def effective_settings(algo_config: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
+    """Every setting of the trial's algorithm at the value the run uses (dotted keys read nested dicts)."""
     out: dict[str, Any] = {}
-    for key, knob in ALGORITHMS[spec.algorithm].knobs.items():
+    for key, setting in settings.items():
+        if key == "alpha_schedule":
+            continue  # its fields follow as alpha_schedule.<field>
         try:
-            if knob.target in ("copilot", "training"):
-                if key == "alpha_schedule":
-                    continue  # its fields follow as alpha_schedule.<field>
+            if "." not in key:
                 out[key] = getattr(algo_config, key)
             else:
-                field = key.split(".", 1)[1]
-                container = getattr(algo_config, knob.target)
-                if field in container:
-                    out[key] = container[field]
+                container = getattr(algo_config, setting.target)
+                if setting.field in container:
+                    out[key] = container[setting.field]
         except (AttributeError, TypeError, IndexError):
             continue
     return out
@@ -385,190 +407,161 @@ def trial_config_yaml(info: Mapping[str, Any]) -> str:
     return yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=120)
 
 
-# ------------------------------------------------------------------------------- the Tune callback
-def _tune_callback_base():
-    from ray.tune import Callback
-
-    return Callback
+def env_params(spec: Any) -> dict[str, Any]:
+    """The environment as MLflow params: ``env.id`` and ``env.config.<key>``."""
+    return {"env.id": spec.env.id, **{f"env.config.{k}": v for k, v in spec.env.config.items()}}
 
 
-def __getattr__(name: str):  # PEP 562: a ray.tune.Callback subclass only when asked for (no Ray import)
-    if name == "MlflowSweepCallback":
-        return mlflow_callback_class()
-    raise AttributeError(name)
+# ------------------------------------------------------------------------------- a sweep's child runs
+def result_metrics(result: Mapping[str, Any]) -> dict[str, float]:
+    """What a trial logs per result: ``metrics_from_result`` plus Tune's wall time and iteration."""
+    metrics = metrics_from_result(result)
+    for key in (TIME_TOTAL_S, TRAINING_ITERATION):
+        if isinstance(result.get(key), int | float):
+            metrics[key] = float(result[key])
+    return metrics
 
 
-def mlflow_callback_class():
-    """``MlflowSweepCallback`` (built once, so that pickling by reference finds the same class)."""
-    cls = globals().get("MlflowSweepCallback")
-    if cls is None:
-        cls = globals()["MlflowSweepCallback"] = _make_mlflow_callback()
-    return cls
+class TrialRuns:
+    """One MLflow child run per Tune trial under the sweep's parent run (see the table above).
 
+    ``copilot_ray.tune_runtime.MlflowSweepCallback`` calls it from Tune's hooks; ``trial`` is a Tune
+    trial (``trial_id``, ``config``, ``status``, ``last_result``, ``checkpoint``, ``error_file``, ...).
+    Stateless across a resume: a trial's run is found again by its ``copilot.trial_id`` tag, and metric
+    rows whose step (env steps) is <= the largest step already logged for that run are skipped (a trial
+    restored from a checkpoint replays the iterations after it). Pickled without its caches.
+    """
 
-def _make_mlflow_callback():
-    Callback = _tune_callback_base()
+    _STATE = ("tracking_uri", "experiment_id", "sweep", "parent_run_id")
 
-    class MlflowSweepCallback(Callback):
-        """One MLflow child run per Tune trial under the sweep's parent run (see the table above).
+    def __init__(self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str):
+        self.tracking_uri = tracking_uri
+        self.experiment_id = experiment_id
+        self.sweep = sweep
+        self.parent_run_id = parent_run_id
+        self._reset()
 
-        Stateless across a resume: a trial's run is found again by its ``copilot.trial_id`` tag, and
-        metric rows whose step (env steps) is <= the largest step already logged for that run are
-        skipped (a trial restored from a checkpoint replays the iterations after it).
-        """
+    def _reset(self) -> None:
+        self._client_obj = None
+        self._runs: dict[str, str] = {}  # tune trial id -> mlflow run id
+        self._last_step: dict[str, int] = {}  # mlflow run id -> largest step logged
+        self._commit: str | None = None
 
-        def __init__(self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str):
-            self.tracking_uri = tracking_uri
-            self.experiment_id = experiment_id
-            self.sweep = sweep
-            self.parent_run_id = parent_run_id
-            self._reset()
+    def __getstate__(self):
+        return {k: self.__dict__[k] for k in self._STATE}
 
-        def _reset(self) -> None:
-            self._client_obj = None
-            self._runs: dict[str, str] = {}  # tune trial id -> mlflow run id
-            self._last_step: dict[str, int] = {}  # mlflow run id -> largest step logged
-            self._commit: str | None = None
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._reset()
 
-        def __getstate__(self):
-            return {k: self.__dict__[k] for k in ("tracking_uri", "experiment_id", "sweep", "parent_run_id")}
+    @property
+    def client(self):
+        if self._client_obj is None:
+            self._client_obj = _client(self.tracking_uri)
+        return self._client_obj
 
-        def __setstate__(self, state):
-            self.__dict__.update(state)
-            self._reset()
-
-        @property
-        def _client(self):
-            if self._client_obj is None:
-                self._client_obj = _client(self.tracking_uri)
-            return self._client_obj
-
-        # ------------------------------------------------------------------ runs
-        def run_id(self, trial) -> str:
-            run_id = self._runs.get(trial.trial_id)
-            if run_id is not None:
-                return run_id
-            client = self._client
-            found = find_runs(
-                client,
-                self.experiment_id,
-                {PARENT_TAG: self.parent_run_id, TRIAL_ID_TAG: trial.trial_id},
-            )
-            if found:
-                run_id = found[0].info.run_id
-                if found[0].info.status != "RUNNING":
-                    client.update_run(run_id, status="RUNNING")
-                history = client.get_metric_history(run_id, "training_iteration")
-                self._last_step[run_id] = max((m.step for m in history), default=-1)
-            else:
+    # ---------------------------------------------------------------------- the run of a trial
+    def run_id(self, trial) -> str:
+        """The trial's run: cached, else found again (resume), else created."""
+        run_id = self._runs.get(trial.trial_id)
+        if run_id is None:
+            run_id = self._find_run(trial)
+            if run_id is None:
                 run_id = self._create_run(trial)
                 self._last_step[run_id] = -1
             self._runs[trial.trial_id] = run_id
-            return run_id
+        return run_id
 
-        def _create_run(self, trial) -> str:
-            info = describe_trial(trial.config)
-            if self._commit is None:
-                self._commit = git_commit()
-            tags = {
-                PARENT_TAG: self.parent_run_id,
-                ROLE_TAG: "trial",
-                SWEEP_TAG: self.sweep,
-                TRIAL_ID_TAG: trial.trial_id,
-                CONFIG_KEY_TAG: info["config_key"],
-                "algorithm": info["algorithm"],
-                "env": info["env"],
-                "K": str(info["K"]),
-                "b": str(info["b"]),
-                "alpha_schedule": info["alpha_schedule"],
-                "preset": info["preset"],
-                "variant": info["variant"],
-                "seed": str(info["seed"]),
-                "git_commit": self._commit,
-            }
-            name = f"{info['config_key']}-seed{info['seed']}"
-            run = self._client.create_run(self.experiment_id, run_name=name, tags=tags)
-            run_id = run.info.run_id
-            spec = info["spec"]
-            params = {
-                **info["knobs"],
-                "seed": info["seed"],
-                "env.id": spec.env.id,
-                **{f"env.config.{k}": v for k, v in spec.env.config.items()},
-            }
-            _log_params(self._client, run_id, params_for_mlflow(params))
-            self._client.log_text(run_id, trial_config_yaml(info), "config.yaml")
-            return run_id
+    def _find_run(self, trial) -> str | None:
+        found = find_runs(
+            self.client, self.experiment_id, {PARENT_TAG: self.parent_run_id, TRIAL_ID_TAG: trial.trial_id}
+        )
+        if not found:
+            return None
+        run_id = found[0].info.run_id
+        if found[0].info.status != "RUNNING":
+            self.client.update_run(run_id, status="RUNNING")
+        history = self.client.get_metric_history(run_id, TRAINING_ITERATION)
+        self._last_step[run_id] = max((m.step for m in history), default=-1)
+        return run_id
 
-        # ------------------------------------------------------------------ Tune hooks
-        def on_trial_start(self, iteration, trials, trial, **info):
-            self.run_id(trial)
+    def _create_run(self, trial) -> str:
+        info = describe_trial(trial.config)
+        name = f"{info['config_key']}-seed{info['seed']}"
+        run = self.client.create_run(self.experiment_id, run_name=name, tags=self._tags(trial, info))
+        run_id = run.info.run_id
+        params = {**info["knobs"], SEED_PARAM: info["seed"], **env_params(info["spec"])}
+        _log_params(self.client, run_id, params_for_mlflow(params))
+        self.client.log_text(run_id, trial_config_yaml(info), CONFIG_ARTIFACT)
+        return run_id
 
-        def on_trial_result(self, iteration, trials, trial, result, **info):
-            import time
+    def _tags(self, trial, info: Mapping[str, Any]) -> dict[str, str]:
+        if self._commit is None:
+            self._commit = git_commit()
+        return {
+            PARENT_TAG: self.parent_run_id,
+            ROLE_TAG: ROLE_TRIAL,
+            SWEEP_TAG: self.sweep,
+            TRIAL_ID_TAG: trial.trial_id,
+            CONFIG_KEY_TAG: info["config_key"],
+            ALGORITHM_TAG: info["algorithm"],
+            ENV_TAG: info["env"],
+            K_TAG: str(info["K"]),
+            B_TAG: str(info["b"]),
+            ALPHA_SCHEDULE_TAG: info["alpha_schedule"],
+            PRESET_TAG: info["preset"],
+            VARIANT_TAG: info["variant"],
+            SEED_TAG: str(info["seed"]),
+            GIT_COMMIT_TAG: self._commit,
+        }
 
-            from mlflow.entities import Metric
+    # ---------------------------------------------------------------------- what happens to it
+    def log_result(self, trial, result: Mapping[str, Any]) -> None:
+        """One metric row at step = env steps, unless a run restored from a checkpoint logged it already."""
+        run_id = self.run_id(trial)
+        step = int(result_value(result, ENV_STEPS, 0))
+        if step <= self._last_step.get(run_id, -1):
+            return
+        self._log_metrics(run_id, result_metrics(result), step)
+        self._last_step[run_id] = step
 
-            run_id = self.run_id(trial)
-            step = int(result_value(result, ENV_STEPS_KEY, 0))
-            if step <= self._last_step.get(run_id, -1):
-                return  # already logged before a restore from an earlier checkpoint
-            metrics = metrics_from_result(result)
-            for key in ("time_total_s", "training_iteration"):
-                if isinstance(result.get(key), int | float):
-                    metrics[key] = float(result[key])
-            now = int(time.time() * 1000)
-            items = [Metric(k, v, now, step) for k, v in metrics.items()]
-            for i in range(0, len(items), 500):
-                self._client.log_batch(run_id, metrics=items[i : i + 500])
-            self._last_step[run_id] = step
+    def _log_metrics(self, run_id: str, metrics: Mapping[str, float], step: int) -> None:
+        import time
 
-        def on_trial_complete(self, iteration, trials, trial, **info):
-            self._finish(trial, "FINISHED")
+        from mlflow.entities import Metric
 
-        def on_trial_error(self, iteration, trials, trial, **info):
-            self._finish(trial, "FAILED")
+        now = int(time.time() * 1000)
+        items = [Metric(k, v, now, step) for k, v in metrics.items()]
+        for i in range(0, len(items), 500):
+            self.client.log_batch(run_id, metrics=items[i : i + 500])
 
-        def on_experiment_end(self, trials, **info):
-            # Interrupted (Ctrl-C / SIGTERM): runs of unfinished trials wait, KILLED, for --resume.
-            for trial in trials:
-                run_id = self._runs.get(trial.trial_id)
-                done = trial.status == "ERROR" or (trial.last_result or {}).get("done")
-                if run_id is not None and not done:  # (cleanup marks stopped trials TERMINATED)
-                    self._client.set_terminated(run_id, status="KILLED")
+    def finish(self, trial, status: str) -> None:
+        """The final checkpoint, the sub-goal trees (and the error) as artifacts; the run ends ``status``."""
+        run_id = self.run_id(trial)
+        try:
+            self._log_final_artifacts(run_id, trial, status)
+        finally:
+            self.client.set_terminated(run_id, status=status)
+            self._runs.pop(trial.trial_id, None)
 
-        def _finish(self, trial, status: str) -> None:
-            run_id = self.run_id(trial)
-            client = self._client
-            try:
-                checkpoint = trial.checkpoint
-                if checkpoint is not None and Path(checkpoint.path).is_dir():
-                    client.log_artifacts(run_id, checkpoint.path, "checkpoint")
-                for tree_dir in _tree_dirs(trial):
-                    client.log_artifacts(run_id, str(tree_dir), "copilot_trees")
-                    break
-                error_file = getattr(trial, "error_file", None)
-                if status == "FAILED" and error_file and Path(error_file).is_file():
-                    client.log_artifact(run_id, error_file, "error")
-            finally:
-                client.set_terminated(run_id, status=status)
-                self._runs.pop(trial.trial_id, None)
+    def _log_final_artifacts(self, run_id: str, trial, status: str) -> None:
+        checkpoint = trial.checkpoint
+        if checkpoint is not None and Path(checkpoint.path).is_dir():
+            self.client.log_artifacts(run_id, checkpoint.path, CHECKPOINT_ARTIFACT)
+        for tree_dir in _tree_dirs(trial):
+            self.client.log_artifacts(run_id, str(tree_dir), TREES_DIR)
+            break
+        error_file = getattr(trial, "error_file", None)
+        if status == "FAILED" and error_file and Path(error_file).is_file():
+            self.client.log_artifact(run_id, error_file, ERROR_ARTIFACT)
 
-    MlflowSweepCallback.__module__ = __name__
-    MlflowSweepCallback.__qualname__ = "MlflowSweepCallback"
-    return MlflowSweepCallback
-
-
-def result_value(result: Mapping[str, Any], dotted: str, default: Any = None) -> Any:
-    """``result['a/b/c']`` from a nested or flattened result."""
-    if dotted in result:
-        return result[dotted]
-    node: Any = result
-    for part in dotted.split("/"):
-        if not isinstance(node, Mapping) or part not in node:
-            return default
-        node = node[part]
-    return node
+    def kill_unfinished(self, trials) -> None:
+        """Interrupted (Ctrl-C / SIGTERM): runs of unfinished trials wait, KILLED, for --resume."""
+        for trial in trials:
+            run_id = self._runs.get(trial.trial_id)
+            done = trial.status == "ERROR" or (trial.last_result or {}).get("done")
+            if run_id is not None and not done:  # (cleanup marks stopped trials TERMINATED)
+                self.client.set_terminated(run_id, status="KILLED")
 
 
 def _tree_dirs(trial) -> list[Path]:
@@ -585,6 +578,6 @@ def _tree_dirs(trial) -> list[Path]:
     except Exception:  # noqa: BLE001 - no storage context: nothing to look at
         pass
     for base in candidates:
-        if base and (Path(base) / "copilot_trees").is_dir() and any((Path(base) / "copilot_trees").iterdir()):
-            out.append(Path(base) / "copilot_trees")
+        if base and (Path(base) / TREES_DIR).is_dir() and any((Path(base) / TREES_DIR).iterdir()):
+            out.append(Path(base) / TREES_DIR)
     return out

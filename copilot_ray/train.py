@@ -3,8 +3,10 @@
     python -m copilot_ray.train --env maze-point --layout four-rooms --tree-depth 5 --repetitions 5 \
         --stop-env-steps 200000 --seed 0 [--tracking-uri sqlite:///mlflow.db]
 
-Prints one progress line per iteration, writes a checkpoint at the end (and on Ctrl-C), and logs to
-MLflow when a tracking URI is given. Bad arguments are reported before Ray starts (exit status 2).
+Every CO-PILOT setting is a flag (`--planner-std-final 0.015`, `--preset paper_literal`; values are
+written as in a sweep spec, so `null`, `[64, 64]` and `1e-3` work); `--help` lists them with their
+rules. Prints one progress line per iteration, writes a checkpoint at the end (and on Ctrl-C), and logs
+to MLflow when a tracking URI is given. Bad arguments are reported before Ray starts (exit status 2).
 """
 
 from __future__ import annotations
@@ -16,80 +18,97 @@ import time
 from pathlib import Path
 from typing import Any
 
+from copilot_ray import keys
+from copilot_ray.algorithms.registry import RunContext, get_algorithm
+from copilot_ray.envs import make
+from copilot_ray.settings import problems
+from copilot_ray.spec import load_yaml_value
+
+ALGORITHM = "copilot"
+# The flags of settings whose names changed, so that old command lines keep working.
+_ALIASES = {"eval_num_tasks": ["--eval-tasks"]}
+
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m copilot_ray.train", description=__doc__.split("\n\n")[0])
-    p.add_argument("--env", default="maze-point", help="goal-conditioned env id (see copilot_ray.envs)")
-    p.add_argument("--layout", default=None, help="maze layout: a built-in name or a layout file")
-    p.add_argument(
-        "--preset",
-        default=None,
-        help="readings of the paper's ambiguities, e.g. paper_literal (default: the measured defaults)",
+    run = p.add_argument_group("the run")
+    run.add_argument("--env", default="maze-point", help="goal-conditioned env id (see copilot_ray.envs)")
+    run.add_argument("--layout", default=None, help="maze layout: a built-in name or a layout file")
+    run.add_argument("--stop-env-steps", type=int, default=100_000, help="stop after this many env steps")
+    run.add_argument("--stop-iters", type=int, default=None, help="stop after this many iterations")
+    run.add_argument("--seed", type=int, default=0)
+    run.add_argument(
+        "--num-env-runners", type=int, default=0, help="remote env runners (0: sample on driver)"
     )
-    p.add_argument("--tree-depth", type=int, default=5, help="K (the paper uses 5)")
-    p.add_argument("--repetitions", type=int, default=5, help="b (the paper uses 5)")
-    p.add_argument("--alpha-schedule", default="paper_per_task", help="preset name of the alpha schedule")
-    p.add_argument("--tau-max", type=int, default=None, help="step budget of one sub-task (default 25)")
-    p.add_argument(
-        "--collision-cost",
-        choices=["indicator", "length"],
-        default="indicator",
-        help="planner's collision term: per colliding segment (paper) or per length in collision (reference code)",
-    )
-    p.add_argument("--task-batch-size", type=int, default=30, help="tasks per training iteration")
-    p.add_argument("--stop-env-steps", type=int, default=100_000, help="stop after this many env steps")
-    p.add_argument("--stop-iters", type=int, default=None, help="stop after this many iterations")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0: sample on driver)")
-    p.add_argument("--eval-interval", type=int, default=1, help="iterations between evaluations (0: never)")
-    p.add_argument("--eval-tasks", type=int, default=100, help="held-out test tasks per evaluation")
-    p.add_argument(
-        "--updates-per-env-step",
-        type=float,
-        default=None,
-        help="SAC gradient steps per env step (default 1.0)",
-    )
-    p.add_argument("--stock-learner", action="store_true", help="RLlib's stock SAC learner path (slow)")
-    p.add_argument("--checkpoint-dir", default="results/train", help="where checkpoints go")
-    p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI; none: no MLflow")
-    p.add_argument("--experiment", default="copilot-train", help="MLflow experiment name")
+    run.add_argument("--checkpoint-dir", default="results/train", help="where checkpoints go")
+    run.add_argument("--tracking-uri", default=None, help="MLflow tracking URI; none: no MLflow")
+    run.add_argument("--experiment", default="copilot-train", help="MLflow experiment name")
+    settings = p.add_argument_group("CO-PILOT settings (default: the setting's own; see the README's table)")
+    for s in get_algorithm(ALGORITHM).settings.values():
+        if s.on_cli:
+            default = "null" if s.default is None else s.default
+            settings.add_argument(
+                s.flag,
+                *_ALIASES.get(s.key, []),
+                dest=f"setting:{s.key}",
+                metavar="VALUE",
+                default=None,
+                type=_Value(s.key),
+                help=f"{s.doc} ({s.rule}; default {default})".replace("%", "%%"),
+            )
     return p.parse_args(argv)
 
 
-def build_config(args: argparse.Namespace):
-    """Builds and validates the CoPilotConfig; raises ValueError naming the bad value."""
-    from copilot_ray.algorithms.copilot import CoPilotConfig
-    from copilot_ray.envs import make
+class _Value:
+    """argparse `type`: the text as a spec value (YAML), kept apart from "flag not given" (None)."""
 
+    def __init__(self, key: str) -> None:
+        self.key = key
+        self.__name__ = key  # argparse names the type in its errors
+
+    def __call__(self, text: str) -> Any:
+        return _Given(load_yaml_value(text))
+
+
+class _Given:
+    def __init__(self, value: Any) -> None:
+        self.value = value
+
+
+def setting_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The settings given on the command line, as `{key: value}`."""
+    prefix = "setting:"
+    return {
+        name[len(prefix) :]: v.value
+        for name, v in vars(args).items()
+        if name.startswith(prefix) and v is not None
+    }
+
+
+def build_config(args: argparse.Namespace):
+    """Builds and validates the algorithm config; raises ValueError naming the bad flag and value."""
+    entry = get_algorithm(ALGORITHM)
+    values = setting_values(args)
+    found = problems(entry.settings, values)
+    found += [(involved[-1], value, why) for involved, value, why in entry.combination_problems(values)]
+    if found:
+        key, value, why = found[0]
+        raise ValueError(f"{entry.settings[key].flag} {value!r} is invalid: {why}")
     env_config: dict[str, Any] = {}
     if args.layout is not None:
         env_config["layout"] = args.layout
     # Building the env once here turns a bad env id, layout or env_config into an error now.
     make(args.env, **env_config).close()
-    config = (
-        CoPilotConfig()
-        .environment(args.env, env_config=env_config)
-        .env_runners(num_env_runners=args.num_env_runners)
+    run = RunContext(
+        env_id=args.env,
+        env_config=env_config,
+        seed=args.seed,
+        num_env_runners=args.num_env_runners,
         # Sampling (without runners) and the learner share this process: give it the cores the
         # runners leave free; CoPilotConfig sizes torch's thread pool from this.
-        .resources(num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners))
-        .debugging(seed=args.seed)
+        num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners),
     )
-    if args.preset is not None:
-        config.copilot(preset=args.preset)
-    if args.tau_max is not None:
-        config.copilot(tau_max=args.tau_max)
-    config.copilot(
-        tree_depth=args.tree_depth,
-        repetitions=args.repetitions,
-        alpha_schedule=args.alpha_schedule,
-        collision_cost=args.collision_cost,
-        task_batch_size=args.task_batch_size,
-        eval_interval=args.eval_interval,
-        eval_num_tasks=args.eval_tasks,
-        updates_per_env_step=args.updates_per_env_step,
-        fast_learner=not args.stock_learner,
-    )
+    config = entry.build_config(values, run)
     config.copy(copy_frozen=False).validate()
     return config
 
@@ -97,7 +116,7 @@ def build_config(args: argparse.Namespace):
 def progress_line(result: dict[str, Any], started: float) -> str:
     cop = result.get("copilot", {})
     ev = cop.get("eval", {})
-    steps = result.get("env_runners", {}).get("num_env_steps_sampled_lifetime", 0)
+    steps = keys.result_value(result, keys.ENV_STEPS) or 0
 
     def fmt(v):
         return f"{v:.2f}" if isinstance(v, float) else "  - "
@@ -132,19 +151,20 @@ def main(argv: list[str] | None = None) -> int:
         run = MlflowRun(
             args.tracking_uri,
             args.experiment,
-            run_name=f"{args.env}-K{args.tree_depth}-b{args.repetitions}-s{args.seed}",
+            run_name=f"{args.env}-K{config.tree_depth}-b{config.repetitions}-s{args.seed}",
             tags={
-                "algorithm": "copilot",
-                "env": args.env,
-                "K": str(args.tree_depth),
-                "b": str(args.repetitions),
-                "alpha_schedule": args.alpha_schedule,
-                "preset": args.preset or "default",
-                "seed": str(args.seed),
-                "git_commit": git_commit(),
+                keys.ALGORITHM_TAG: ALGORITHM,
+                keys.ENV_TAG: args.env,
+                keys.K_TAG: str(config.tree_depth),
+                keys.B_TAG: str(config.repetitions),
+                keys.ALPHA_SCHEDULE_TAG: str(setting_values(args).get("alpha_schedule", "paper_per_task")),
+                keys.PRESET_TAG: config.preset or "default",
+                keys.SEED_TAG: str(args.seed),
+                keys.GIT_COMMIT_TAG: git_commit(),
             },
         )
-        run.log_params(params_for_mlflow(vars(args)))
+        run_args = {k: v for k, v in vars(args).items() if not k.startswith("setting:")}
+        run.log_params(params_for_mlflow({**run_args, **config.setting_values()}))
     algo = config.build_algo()
     started = time.time()
     checkpoint_dir = Path(args.checkpoint_dir).resolve()
@@ -153,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         while True:
             result = algo.train()
             print(progress_line(result, started), flush=True)
-            steps = int(result.get("env_runners", {}).get("num_env_steps_sampled_lifetime", 0))
+            steps = int(keys.result_value(result, keys.ENV_STEPS) or 0)
             if run is not None:
                 run.log_metrics(metrics_from_result(result), step=steps)
             if steps >= args.stop_env_steps:
@@ -167,9 +187,9 @@ def main(argv: list[str] | None = None) -> int:
         algo.save_to_path(str(checkpoint_dir))
         print(f"checkpoint: {checkpoint_dir}")
         if run is not None:
-            trees = Path(algo.logdir) / "copilot_trees"
+            trees = Path(algo.logdir) / keys.TREES_DIR
             if trees.is_dir():
-                run.log_artifacts(trees, "copilot_trees")
+                run.log_artifacts(trees, keys.TREES_DIR)
             run.end(status)
         algo.stop()
         ray.shutdown()

@@ -14,6 +14,36 @@ import pytest
 
 from analysis import stats
 from analysis.report import main
+from copilot_ray.keys import (
+    ALGORITHM_TAG,
+    ALPHA_SCHEDULE_TAG,
+    B_TAG,
+    CONFIG_KEY_TAG,
+    DIAG_Q_MEAN,
+    DIAG_REACHABLE_LENGTH_LAYER,
+    DIAG_SEGMENT_LENGTH_LAYER,
+    DIAG_SEGMENT_UNREACHABLE_LAYER,
+    DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
+    DIAG_SUCCESS_AFTER_FAILED,
+    DIAG_SUCCESS_AFTER_REACHED,
+    ENV_STEPS,
+    ENV_TAG,
+    GIT_COMMIT_TAG,
+    K_TAG,
+    PARENT_TAG,
+    REPORT_ARTIFACT,
+    ROLE_SWEEP,
+    ROLE_TAG,
+    ROLE_TRIAL,
+    SEED_TAG,
+    SUCCESS_DIRECT,
+    SUCCESS_PLANNED,
+    SWEEP_TAG,
+    TIME_TOTAL_S,
+    TREES_DIR,
+    TRIAL_ID_TAG,
+    eval_by_action,
+)
 
 EXP = "copilot-test-sweep"
 STEPS = [1000, 2000, 3000, 4000]
@@ -37,25 +67,25 @@ def _metrics(client, run_id, planned, steps, wall=None, direct_scale=0.5):
     ms = []
     for s, v in zip(steps, planned, strict=True):
         ms += [
-            Metric("copilot/eval/success_planned", v, now, s),
-            Metric("copilot/eval/success_direct", v * direct_scale, now, s),
-            Metric("env_runners/num_env_steps_sampled_lifetime", s, now, s),
+            Metric(SUCCESS_PLANNED, v, now, s),
+            Metric(SUCCESS_DIRECT, v * direct_scale, now, s),
+            Metric(ENV_STEPS, s, now, s),
         ]
     if wall is not None:
-        ms.append(Metric("time_total_s", wall, now, steps[-1]))
+        ms.append(Metric(TIME_TOTAL_S, wall, now, steps[-1]))
     client.log_batch(run_id, metrics=ms)
 
 
 # diagnostics of config tree_depth=2 (depth 2): the value at each of STEPS
 DIAG = {
-    "copilot/diag/segment_length_layer_2": [0.05, 0.04, 0.03, 0.03],
-    "copilot/diag/reachable_length_layer_2": [0.0875] * 4,
-    "copilot/diag/segment_unreachable_layer_2": [0.3, 0.2, 0.1, 0.05],
-    "copilot/diag/subgoal_in_obstacle_layer_2": [0.2, 0.1, 0.0, 0.0],
-    "copilot/diag/success_after_reached": [0.5, 0.6, 0.8, 0.9],
-    "copilot/diag/success_after_failed": [0.1, 0.2, 0.4, 0.6],
-    "copilot/diag/q_mean": [0.1, 0.3, 0.5, 0.6],
-    "copilot/eval/sampled/success_planned": [0.2, 0.4, 0.7, 0.9],
+    DIAG_SEGMENT_LENGTH_LAYER + "2": [0.05, 0.04, 0.03, 0.03],
+    DIAG_REACHABLE_LENGTH_LAYER + "2": [0.0875] * 4,
+    DIAG_SEGMENT_UNREACHABLE_LAYER + "2": [0.3, 0.2, 0.1, 0.05],
+    DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "2": [0.2, 0.1, 0.0, 0.0],
+    DIAG_SUCCESS_AFTER_REACHED: [0.5, 0.6, 0.8, 0.9],
+    DIAG_SUCCESS_AFTER_FAILED: [0.1, 0.2, 0.4, 0.6],
+    DIAG_Q_MEAN: [0.1, 0.3, 0.5, 0.6],
+    eval_by_action(SUCCESS_PLANNED, "sampled"): [0.2, 0.4, 0.7, 0.9],
 }
 
 
@@ -71,18 +101,18 @@ def _diag_metrics(client, run_id):
 
 def _child(client, exp_id, parent_id, key, k, seed):
     tags = {
-        "mlflow.parentRunId": parent_id,
-        "copilot.role": "trial",
-        "copilot.sweep": "test_sweep",
-        "copilot.trial_id": f"{key}-{seed}",
-        "copilot.config_key": key,
-        "algorithm": "copilot",
-        "env": "maze-point",
-        "K": str(k),
-        "b": "5",
-        "alpha_schedule": "paper_per_task",
-        "seed": seed,
-        "git_commit": "abcdef1234567",
+        PARENT_TAG: parent_id,
+        ROLE_TAG: ROLE_TRIAL,
+        SWEEP_TAG: "test_sweep",
+        TRIAL_ID_TAG: f"{key}-{seed}",
+        CONFIG_KEY_TAG: key,
+        ALGORITHM_TAG: "copilot",
+        ENV_TAG: "maze-point",
+        K_TAG: str(k),
+        B_TAG: "5",
+        ALPHA_SCHEDULE_TAG: "paper_per_task",
+        SEED_TAG: seed,
+        GIT_COMMIT_TAG: "abcdef1234567",
     }
     return client.create_run(exp_id, run_name=f"{key}_s{seed}", tags=tags).info.run_id
 
@@ -117,9 +147,7 @@ def store(tmp_path_factory):
     uri = f"sqlite:///{root / 'mlflow.db'}"
     client = mlflow.MlflowClient(uri)
     exp_id = client.create_experiment(EXP, artifact_location=(root / "artifacts").as_uri())
-    parent = client.create_run(
-        exp_id, run_name="sweep", tags={"copilot.role": "sweep", "copilot.sweep": "test_sweep"}
-    )
+    parent = client.create_run(exp_id, run_name="sweep", tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "test_sweep"})
     pid = parent.info.run_id
     ids = {}
     for seed, vals in A_PLANNED.items():
@@ -143,18 +171,18 @@ def store(tmp_path_factory):
     ids["no_eval"] = _child(client, exp_id, pid, "tree_depth=4", 4, "2")
     # tree snapshots for config tree_depth=3, seed 0
     rng = np.random.default_rng(3)
-    tree_dir = root / "npz" / "copilot_trees"
+    tree_dir = root / "npz" / TREES_DIR
     tree_dir.mkdir(parents=True)
     for it in (5, 10, 15, 20):
         _tree_npz(tree_dir / f"trees_iter{it:06d}.npz", it, rng)
-    client.log_artifacts(ids["B0"], str(tree_dir), "copilot_trees")
+    client.log_artifacts(ids["B0"], str(tree_dir), TREES_DIR)
 
     # an experiment with a parent but no children, and one with children but no parent
     empty_id = client.create_experiment("empty-sweep", artifact_location=(root / "a2").as_uri())
-    client.create_run(empty_id, tags={"copilot.role": "sweep"})
+    client.create_run(empty_id, tags={ROLE_TAG: ROLE_SWEEP})
     orphan_id = client.create_experiment("orphans", artifact_location=(root / "a3").as_uri())
     rid = client.create_run(
-        orphan_id, tags={"copilot.role": "trial", "copilot.config_key": "default", "seed": "0"}
+        orphan_id, tags={ROLE_TAG: ROLE_TRIAL, CONFIG_KEY_TAG: "default", SEED_TAG: "0"}
     ).info.run_id
     _metrics(client, rid, [0.2, 0.4], STEPS[:2], 3.0)
     client.set_terminated(rid, "FINISHED")
@@ -253,9 +281,9 @@ def test_diag_curves_and_tau_hat_are_loaded(store):
 
     sweep = load_sweep(store["uri"], EXP)
     trial = next(t for t in sweep.trials if t.config_key == "tree_depth=2")
-    steps, values = trial.curves["copilot/diag/q_mean"]
+    steps, values = trial.curves[DIAG_Q_MEAN]
     np.testing.assert_allclose(steps, STEPS)
-    np.testing.assert_allclose(values, DIAG["copilot/diag/q_mean"])
+    np.testing.assert_allclose(values, DIAG[DIAG_Q_MEAN])
     b0 = next(t for t in sweep.trials if t.run_id == store["ids"]["B0"])
     snap = load_tree_snapshots(store["uri"], b0.run_id, b0.tree_artifacts[:1])[0]
     np.testing.assert_allclose(snap.tau_hat_length, [0.0125, 0.025, 0.05, 0.1])
@@ -310,7 +338,7 @@ def test_terminal_lists_missing(store, tmp_path, capsys):
 
 def test_parent_run_got_the_artifacts(store):
     client = store["client"]
-    names = {Path(f.path).name for f in client.list_artifacts(store["parent"], "report")}
+    names = {Path(f.path).name for f in client.list_artifacts(store["parent"], REPORT_ARTIFACT)}
     assert {
         "report.md",
         "report.html",

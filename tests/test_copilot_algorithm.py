@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from copilot_ray.algorithms.copilot import CoPilotConfig
+from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
 
 pytestmark = pytest.mark.ray
 

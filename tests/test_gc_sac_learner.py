@@ -22,7 +22,7 @@ from copilot_ray.algorithms.gc_sac import (
     gc_sac_settings,
     make_train_batch,
     update_from_buffer,
-    use_fast_gc_sac,
+    use_fast_learner,
 )
 
 OBS_SPACE = gym.spaces.Box(0.0, 1.0, (4,), np.float32)
@@ -33,7 +33,7 @@ def _config(hidden=(32, 32), **training):
     cfg = SACConfig().environment(observation_space=OBS_SPACE, action_space=ACT_SPACE).debugging(seed=0)
     if training:
         cfg.training(**training)
-    return use_fast_gc_sac(cfg, hidden=hidden, torch_threads=1)
+    return use_fast_learner(cfg, hidden=hidden, torch_threads=1)
 
 
 def _buffer(n=512, seed=0):
@@ -216,12 +216,12 @@ def test_stock_learner_accepts_the_same_batch_with_weights_and_n_step():
 
 
 def test_settings_and_gradient_step_schedule():
-    cfg = use_fast_gc_sac(SACConfig(), updates_per_env_step=0.25, critic_loss="mse")
+    cfg = use_fast_learner(SACConfig(), updates_per_env_step=0.25, critic_loss="mse")
     s = gc_sac_settings(cfg)
     assert s["updates_per_env_step"] == 0.25 and s["critic_loss"] == "mse" and s["torch_threads"] == 2
     assert cfg.torch_skip_nan_gradients is True
     with pytest.raises(ValueError):
-        use_fast_gc_sac(SACConfig(), critic_loss="l1")
+        use_fast_learner(SACConfig(), critic_loss="l1")
     sched = GradientStepSchedule(0.25, learning_starts=4)
     steps = [sched.on_env_steps(1) for _ in range(12)]
     assert steps == [0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1]  # 8 eligible steps -> 2 updates

@@ -1,12 +1,14 @@
-"""Tiny learning checks: open 2-D reach-the-goal, both SAC update paths driven through a real env runner.
+"""Tiny learning checks: open 2-D reach-the-goal, SAC trained through a real env runner.
 
-The env runner samples episodes, the agent updater CO-PILOT uses (`FastSACUpdater`: flat buffer + GC-SAC
-learner; `StockSACUpdater`: RLlib's prioritised episode buffer + stock SAC module and learner) stores
+The env runner samples episodes, the agent updater CO-PILOT uses (`FastLearnerUpdater`: flat buffer + GC-SAC
+learner; `StockLearnerUpdater`: RLlib's prioritised episode buffer + stock SAC module and learner) stores
 them and trains, and the runner gets the learner's weights back: the same calls CO-PILOT's
 training_step makes.
-"""
 
-import time
+The suite trains the fast path only, one seed, 7k env steps (about 25 s of one core). The slow
+comparison with RLlib's stock path (about 4 min per seed) is `benchmarks/learning_parity.py`; it
+imports `ReachGoal2D`, `train` and `success_rate` from this module so that both measure the same thing.
+"""
 
 import gymnasium as gym
 import numpy as np
@@ -16,8 +18,8 @@ from ray.rllib.core import COMPONENT_RL_MODULE, DEFAULT_MODULE_ID
 from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from copilot_ray.algorithms.copilot.agent_updates import FastSACUpdater, StockSACUpdater
-from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_gc_sac
+from copilot_ray.algorithms.copilot.agent_updates import FastLearnerUpdater, StockLearnerUpdater
+from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_learner
 
 
 class ReachGoal2D(gym.Env):
@@ -48,7 +50,8 @@ class ReachGoal2D(gym.Env):
         return self._obs(), 0.0 if success else -1.0, success, truncated, {"success": success}
 
 
-def _success_rate(module, episodes=50, seed=123):
+def success_rate(module, episodes=50, seed=123):
+    """Share of `episodes` fixed test episodes (20 steps each) the deterministic policy of `module` solves."""
     env = gym.wrappers.TimeLimit(ReachGoal2D(), max_episode_steps=20)
     wins = 0
     for i in range(episodes):
@@ -64,7 +67,12 @@ def _success_rate(module, episodes=50, seed=123):
     return wins / episodes
 
 
-def _train(fast: bool, env_steps: int, seed: int = 0):
+def train(fast: bool, env_steps: int, seed: int = 0, torch_threads: int = 1):
+    """Train one path for `env_steps` env steps; returns (learner module, env runner module, updater).
+
+    `env_steps=0` returns the untrained modules. The fast learner sets torch to `torch_threads` threads
+    (process-wide); the stock learner leaves torch's thread count as it finds it.
+    """
     config = (
         SACConfig()
         .environment(ReachGoal2D)
@@ -74,10 +82,12 @@ def _train(fast: bool, env_steps: int, seed: int = 0):
     )
     config.rl_module(model_config={"fcnet_hiddens": [64, 64], "fcnet_activation": "relu"})
     if fast:
-        use_fast_gc_sac(config, hidden=(64, 64), torch_threads=1, updates_per_env_step=1.0)
+        use_fast_learner(config, hidden=(64, 64), torch_threads=torch_threads, updates_per_env_step=1.0)
     runner = SingleAgentEnvRunner(config=config)
     learner_group = config.build_learner_group(env=runner.env)
-    updater = FastSACUpdater(config, learner_group) if fast else StockSACUpdater(config, learner_group)
+    updater = (
+        FastLearnerUpdater(config, learner_group) if fast else StockLearnerUpdater(config, learner_group)
+    )
     schedule = GradientStepSchedule(1.0, learning_starts=500)
     sampled = 0
     while sampled < env_steps:
@@ -98,7 +108,7 @@ def _train(fast: bool, env_steps: int, seed: int = 0):
 
 
 def test_env_runner_to_buffer_to_learner_to_env_runner_round_trip():
-    learner_module, runner_module, updater = _train(fast=True, env_steps=700)
+    learner_module, runner_module, updater = train(fast=True, env_steps=700)
     buffer = updater.buffer
     assert len(buffer) >= 700 and buffer.transitions()["terminateds"].any()
     learned = learner_module.state_dict()
@@ -106,19 +116,13 @@ def test_env_runner_to_buffer_to_learner_to_env_runner_round_trip():
         torch.testing.assert_close(value, learned[name])
 
 
-def test_fast_path_learns_as_well_as_the_stock_rllib_path():
-    """Same env, budget, batch, learning rates and update-to-data ratio; each path its own module,
-    learner and buffer (fast: SB3-shaped nets, flat uniform buffer; stock: RLlib's default SAC module
-    and learner, prioritised episode buffer). Trial runs at 10k env steps: both 1.00 on seeds 0 and 1
-    (fast ~35 s, stock ~240 s); at 6k steps both were still at 0.34-0.44."""
-    rates, seconds = {}, {}
-    for path in ("fast", "stock"):
-        t0 = time.perf_counter()
-        module, runner_module, _ = _train(fast=path == "fast", env_steps=10_000)
-        rates[path], seconds[path] = _success_rate(module), time.perf_counter() - t0
-        assert _success_rate(runner_module) == rates[path]  # the env runner got the trained weights
-    print(f"success after 10k env steps: {rates} in {seconds} s")
-    # Random actions reach about 0.1 of these goals.
-    assert rates["stock"] >= 0.7, rates
-    assert rates["fast"] >= 0.7, rates
-    assert rates["fast"] >= rates["stock"] - 0.15, rates
+def test_fast_path_learns_to_reach_goals():
+    """Fast path, seed 0, 7k env steps. Trial runs (seeds 0-4): the untrained policy solves 0.12-0.16 of
+    the test episodes and still 0.10-0.12 after 3k steps; at 6k steps 0.50-1.00, at 7k 0.88-1.00 (seed
+    0: 1.00), at 8k 1.00 (1-4). A policy that does not learn stays near its untrained score, far below 0.5."""
+    untrained = success_rate(train(fast=True, env_steps=0)[0])
+    module, runner_module, _ = train(fast=True, env_steps=7_000)
+    rate = success_rate(module)
+    assert success_rate(runner_module) == rate  # the env runner got the trained weights
+    assert untrained <= 0.3, untrained  # the task is not solved without training
+    assert rate >= 0.5 and rate >= untrained + 0.3, (untrained, rate)

@@ -344,12 +344,17 @@ def test_planner_at_paper_settings_stays_stable_on_four_rooms():
     time cost). Without a gradient-norm clip this run diverged by planner phase ~100 (approx. KL in the
     millions, test cost 440 -> 654, then NaN weights); with CO-PILOT's default clip of 0.5 the test cost
     fell to ~30 and 81-83 % of test plans were collision-free after 400 phases (seeds 0 and 1)."""
-    from copilot_ray.algorithms.copilot.config import DEFAULT_PLANNER
+    from copilot_ray.algorithms.copilot.settings import SETTINGS
     from copilot_ray.envs import make
 
     env = make("maze-point", layout="four-rooms").unwrapped
     planner = SubgoalPlanner(
-        2, 5, env.goal_space.low, env.goal_space.high, seed=0, max_grad_norm=DEFAULT_PLANNER["max_grad_norm"]
+        2,
+        5,
+        env.goal_space.low,
+        env.goal_space.high,
+        seed=0,
+        max_grad_norm=SETTINGS["planner.max_grad_norm"].default,
     )
     cost = SegmentCost(alpha=1.0, segments_collide=env.segments_collide, collision_penalty=10.0)
     train, test = env.tasks("train"), env.tasks("test")

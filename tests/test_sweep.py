@@ -15,9 +15,31 @@ from pathlib import Path
 import pytest
 import yaml
 
+from copilot_ray.keys import (
+    ALPHA_SCHEDULE_TAG,
+    B_TAG,
+    CHECKPOINT_ARTIFACT,
+    CONFIG_ARTIFACT,
+    CONFIG_KEY_TAG,
+    ENV_STEPS,
+    GIT_COMMIT_TAG,
+    K_TAG,
+    PARENT_TAG,
+    ROLE_SWEEP,
+    ROLE_TAG,
+    ROLE_TRIAL,
+    SEED_TAG,
+    SPEC_ARTIFACT,
+    SUCCESS_PLANNED,
+    SUMMARY_ARTIFACT,
+    SWEEP_TAG,
+    TRAINING_ITERATION,
+    TREES_DIR,
+    TRIAL_ID_TAG,
+)
+
 ROOT = Path(__file__).resolve().parent.parent
 SWEEPS = sorted((ROOT / "sweeps").glob("*.yaml"))
-STEPS = "env_runners/num_env_steps_sampled_lifetime"
 
 
 def _smoke_copy(tmp_path: Path, env_steps: int = 130) -> Path:
@@ -35,8 +57,8 @@ def _runs(spec):
     client = mlflow.MlflowClient(spec.tracking.uri)
     exp = client.get_experiment_by_name(spec.experiment)
     runs = client.search_runs([exp.experiment_id], max_results=1000)
-    parents = [r for r in runs if r.data.tags.get("copilot.role") == "sweep"]
-    children = [r for r in runs if r.data.tags.get("copilot.role") == "trial"]
+    parents = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_SWEEP]
+    children = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
     return client, parents, children
 
 
@@ -98,25 +120,25 @@ def test_smoke_sweep_is_tracked_in_mlflow(ray_session, tmp_path):
     client, parents, children = _runs(spec)
     assert len(parents) == 1 and len(children) == 2
     parent = parents[0]
-    assert parent.data.tags["copilot.sweep"] == "smoke" and parent.info.status == "FINISHED"
-    assert {a.path for a in client.list_artifacts(parent.info.run_id)} >= {"spec.yaml", "summary.md"}
+    assert parent.data.tags[SWEEP_TAG] == "smoke" and parent.info.status == "FINISHED"
+    assert {a.path for a in client.list_artifacts(parent.info.run_id)} >= {SPEC_ARTIFACT, SUMMARY_ARTIFACT}
     by_depth = {}
     for run in children:
         tags, params = run.data.tags, run.data.params
-        assert tags["mlflow.parentRunId"] == parent.info.run_id
-        assert tags["copilot.sweep"] == "smoke" and tags["seed"] == "0" and tags["b"] == "1"
-        assert tags["K"] == params["tree_depth"] and tags["copilot.config_key"] == f"tree_depth={tags['K']}"
-        assert tags["git_commit"] and tags["alpha_schedule"] == "paper_per_task"
+        assert tags[PARENT_TAG] == parent.info.run_id
+        assert tags[SWEEP_TAG] == "smoke" and tags[SEED_TAG] == "0" and tags[B_TAG] == "1"
+        assert tags[K_TAG] == params["tree_depth"] and tags[CONFIG_KEY_TAG] == f"tree_depth={tags[K_TAG]}"
+        assert tags[GIT_COMMIT_TAG] and tags[ALPHA_SCHEDULE_TAG] == "paper_per_task"
         assert run.info.status == "FINISHED"
-        success = client.get_metric_history(run.info.run_id, "copilot/eval/success_planned")
-        steps = client.get_metric_history(run.info.run_id, STEPS)
+        success = client.get_metric_history(run.info.run_id, SUCCESS_PLANNED)
+        steps = client.get_metric_history(run.info.run_id, ENV_STEPS)
         assert success and [m.step for m in success] == [int(m.value) for m in steps]
         got = [m.step for m in success]
         assert got == sorted(set(got))  # strictly increasing env steps
         assert success[-1].step >= 130
         arts = {a.path for a in client.list_artifacts(run.info.run_id)}
-        assert {"config.yaml", "checkpoint", "copilot_trees"} <= arts
-        assert client.list_artifacts(run.info.run_id, "checkpoint")
+        assert {CONFIG_ARTIFACT, CHECKPOINT_ARTIFACT, TREES_DIR} <= arts
+        assert client.list_artifacts(run.info.run_id, CHECKPOINT_ARTIFACT)
         by_depth[params["tree_depth"]] = run
     assert set(by_depth) == {"1", "2"}
 
@@ -162,10 +184,10 @@ def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path)
     client, parents, children = _runs(spec)
     assert len(parents) == 1 and parents[0].info.status == "FINISHED"
     assert len(children) == 2
-    assert len({c.data.tags["copilot.trial_id"] for c in children}) == 2
+    assert len({c.data.tags[TRIAL_ID_TAG] for c in children}) == 2
     for run in children:
         assert run.info.status == "FINISHED"
-        steps = [m.step for m in client.get_metric_history(run.info.run_id, "training_iteration")]
+        steps = [m.step for m in client.get_metric_history(run.info.run_id, TRAINING_ITERATION)]
         assert steps and len(steps) == len(set(steps)) and steps == sorted(steps)
 
 
@@ -182,7 +204,7 @@ def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
     data["searcher"] = {
         "type": "optuna",
         "sampler": "tpe",
-        "metric": "copilot/eval/success_planned",
+        "metric": SUCCESS_PLANNED,
         "mode": "max",
         "num_samples": 2,
         "seed": 0,
@@ -199,10 +221,10 @@ def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
 
     client, parents, children = _runs(spec)
     assert len(parents) == 1 and len(children) == 2
-    assert len({c.data.tags["copilot.trial_id"] for c in children}) == 2
+    assert len({c.data.tags[TRIAL_ID_TAG] for c in children}) == 2
     for run in children:
         assert run.info.status == "FINISHED"
-        steps = [m.step for m in client.get_metric_history(run.info.run_id, "training_iteration")]
+        steps = [m.step for m in client.get_metric_history(run.info.run_id, TRAINING_ITERATION)]
         assert steps and len(steps) == len(set(steps))
     storage = f"sqlite:///{sweep_root(spec) / 'optuna.db'}"
     (summary,) = optuna.get_all_study_summaries(storage)  # one study: one seed

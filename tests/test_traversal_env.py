@@ -3,8 +3,12 @@
 import numpy as np
 import pytest
 
-from copilot_ray.algorithms.copilot.traversal_env import TraversalEnv, traversal_queue
+from copilot_ray.algorithms.copilot.settings import PRESETS
+from copilot_ray.algorithms.copilot.traversal_env import TraversalEnv, TraversalRules, traversal_queue
 
+# These tests read the paper literally unless a test names a rule: (s, g) observations, R / 2^k
+# rewards, the next sub-task continues where the agent stopped.
+PAPER = {k: v for k, v in PRESETS["paper_literal"].items() if k in TraversalRules.__dataclass_fields__}
 S0 = np.array([0.1, 0.1], np.float32)
 G = np.array([0.9, 0.1], np.float32)
 
@@ -16,7 +20,12 @@ def straight_tree(depth: int) -> np.ndarray:
 
 def make_env(tau_max=50, speed=0.01):
     return TraversalEnv(
-        {"goal_env": "maze-point", "goal_env_config": {"layout": "empty", "speed": speed}, "tau_max": tau_max}
+        {
+            "goal_env": "maze-point",
+            "goal_env_config": {"layout": "empty", "speed": speed},
+            **PAPER,
+            "tau_max": tau_max,
+        }
     )
 
 
@@ -104,7 +113,12 @@ def test_observation_space_contains_observations(depth):
 
 
 def make_ruled_env(**rules):
-    config = {"goal_env": "maze-point", "goal_env_config": {"layout": "empty", "speed": 0.01}, "tau_max": 5}
+    config = {
+        "goal_env": "maze-point",
+        "goal_env_config": {"layout": "empty", "speed": 0.01},
+        **PAPER,
+        "tau_max": 5,
+    }
     return TraversalEnv({**config, **rules})
 
 
@@ -154,6 +168,7 @@ def test_after_failure_restart_falls_back_to_the_agent_position_when_the_subgoal
         {
             "goal_env": "maze-point",
             "goal_env_config": {"layout": "u-maze", "speed": 0.01},
+            **PAPER,
             "tau_max": 3,
             "after_failure": "restart",
         }

@@ -18,6 +18,7 @@ from .subgoal_tree import (
     layer_segments,
     new_layer_indices,
     parent_indices,
+    path_indices,
     tree_size,
 )
 from .time_cost import TimeCostDataset, TimeCostModel
@@ -42,6 +43,7 @@ __all__ = [
     "layer_segments",
     "new_layer_indices",
     "parent_indices",
+    "path_indices",
     "tree_cost",
     "tree_segments",
     "tree_size",

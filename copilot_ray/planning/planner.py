@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -112,6 +113,29 @@ class SubgoalPlanner:
             asymmetric time cost stays correct.
         seed: seed of the torch initialisation.
     """
+
+    @classmethod
+    def from_settings(
+        cls, settings: Mapping[str, Any], goal_dim: int, depth: int, low, high, seed: int | None = 0
+    ) -> SubgoalPlanner:
+        """pi_p from a `planner` settings dict (the `planner.*` settings of CO-PILOT: hidden, std, noise,
+        lr, clip, epochs, max_grad_norm, target_kl, max_kl; the others steer the algorithm, not pi_p)."""
+        return cls(
+            goal_dim,
+            depth,
+            low,
+            high,
+            hidden=tuple(settings["hidden"]),
+            std=settings["std"],
+            noise=settings["noise"],
+            lr=settings["lr"],
+            clip_eps=settings["clip"],
+            epochs=settings["epochs"],
+            max_grad_norm=settings["max_grad_norm"],
+            target_kl=settings["target_kl"],
+            max_kl=settings["max_kl"],
+            seed=seed,
+        )
 
     def __init__(
         self,

@@ -27,6 +27,7 @@ __all__ = [
     "layer_path",
     "layer_segments",
     "new_layer_indices",
+    "path_indices",
     "parent_indices",
     "tree_size",
 ]
@@ -161,3 +162,8 @@ class SubgoalTree:
 
     def layer_segments(self, trees, k: int):
         return layer_segments(trees, self.depth, k)
+
+
+def path_indices(depth: int, k: int) -> np.ndarray:
+    """Indices of layer k's path in a tree; depth 0 (no planner: the tree is [s0, g]) has only layer 0."""
+    return np.array([0, 1]) if depth == 0 else layer_indices(depth, k)

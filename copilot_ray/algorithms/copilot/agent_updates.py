@@ -1,9 +1,9 @@
 """How CO-PILOT's agent phase turns sampled sub-task episodes into SAC gradient steps.
 
 Two interchangeable paths (config `fast_learner`):
-- `FastSACUpdater` (default): flat transition buffer + SB3-shaped SAC learner, many gradient steps
+- `FastLearnerUpdater` (default): flat transition buffer + SB3-shaped SAC learner, many gradient steps
   per `learner_group.update` call (copilot_ray.algorithms.gc_sac). About 10x faster on CPU.
-- `StockSACUpdater`: RLlib's own episode replay buffer and learner connector, one gradient step per
+- `StockLearnerUpdater`: RLlib's own episode replay buffer and learner connector, one gradient step per
   call, exactly as RLlib's SAC does it; kept for comparison.
 """
 
@@ -22,7 +22,7 @@ from ray.rllib.utils.replay_buffers.utils import update_priorities_in_episode_re
 from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer
 
 
-class StockSACUpdater:
+class StockLearnerUpdater:
     """RLlib's SAC update path: its (prioritised) episode replay buffer, learner connector and
     one `learner_group.update(episodes=...)` per gradient step, with priority updates."""
 
@@ -74,7 +74,7 @@ def make_rllib_replay_buffer(config):
     return from_config(ReplayBuffer, buffer_config)
 
 
-class FastSACUpdater:
+class FastLearnerUpdater:
     """Flat transition buffer -> N gradient steps in one `learner_group.update(batch=...)` call."""
 
     def __init__(self, config, learner_group):
@@ -108,5 +108,5 @@ class FastSACUpdater:
 
 def make_agent_updater(algo):
     if algo.config.fast_learner:
-        return FastSACUpdater(algo.config, algo.learner_group)
-    return StockSACUpdater(algo.config, algo.learner_group, algo.local_replay_buffer)
+        return FastLearnerUpdater(algo.config, algo.learner_group)
+    return StockLearnerUpdater(algo.config, algo.learner_group, algo.local_replay_buffer)

@@ -1,4 +1,16 @@
-"""CoPilot: CO-PILOT (Algorithm 3 of the paper) as an RLlib Algorithm on the new API stack.
+"""CO-PILOT (Algorithm 3 of the paper) as an RLlib Algorithm on the new API stack: `CoPilotConfig` and
+`CoPilot`, kept together as RLlib keeps `SACConfig` and `SAC`.
+
+    config = (
+        CoPilotConfig()
+        .environment("maze-point", env_config={"layout": "four-rooms"})
+        .copilot(tree_depth=5, repetitions=5, alpha_schedule="paper_per_task")   # or preset="paper_literal"
+    )
+    algo = config.build_algo()
+
+Every CO-PILOT setting (name, default, rule, doc) is declared once in `settings.py`. The user names the
+goal-conditioned env (`maze-point`); `validate()` swaps in the traversal env that turns each planned
+sub-task into one RLlib episode and keeps the goal env's id and config in `goal_env` / `goal_env_config`.
 
 One `training_step` = one task mini-batch, repeated b times:
 
@@ -16,36 +28,52 @@ Besides the paper's metrics, `copilot/diag/...` says why a run does or does not 
 
 from __future__ import annotations
 
+import copy
+import difflib
 import time
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from ray.rllib.algorithms.sac import SAC
+from ray.rllib.algorithms.algorithm import Algorithm
+from ray.rllib.algorithms.dqn import DQN
+from ray.rllib.algorithms.sac import SAC, SACConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.utils.annotations import override
 from ray.rllib.utils.metrics import (
     ENV_RUNNER_RESULTS,
     LEARNER_RESULTS,
     NUM_AGENT_STEPS_SAMPLED_LIFETIME,
     NUM_ENV_STEPS_SAMPLED_LIFETIME,
 )
+from ray.tune.registry import register_env
 
 from copilot_ray.algorithms.copilot.agent_updates import make_agent_updater
-from copilot_ray.algorithms.copilot.config import build_planner
 from copilot_ray.algorithms.copilot.diagnostics import (
     plan_diagnostics,
     tau_hat_profile,
     traversal_diagnostics,
 )
-from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, make_traversal_env
-from copilot_ray.algorithms.gc_sac import GradientStepSchedule
+from copilot_ray.algorithms.copilot.settings import (
+    PRESETS,
+    SETTINGS,
+    alpha_schedule_from,
+    combination_problems,
+    defaults,
+)
+from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, TraversalRules, make_traversal_env
+from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_learner, uses_fast_learner
+from copilot_ray.algorithms.registry import RunContext
+from copilot_ray.envs import make
 from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
 from copilot_ray.planning import (
     AlphaClock,
     AlphaSchedule,
     SegmentCost,
+    SubgoalPlanner,
     TimeCostModel,
     construct_trees,
 )
@@ -57,27 +85,237 @@ WARM_START_TASKS = 30
 TAU_PROFILE_LENGTHS = np.array([0.0125, 0.025, 0.05, 0.1, 0.2, 0.4])
 
 
+# The nested settings dicts of the config (`planner.std` is `config.planner["std"]`).
+_NESTED = ("planner", "cost_model")
+# What `.copilot(...)` takes: its own settings, the nested dicts and the alpha schedule.
+_COPILOT_ARGS = (
+    {s.key for s in SETTINGS.values() if s.target == "copilot"} | set(_NESTED) | {"alpha_schedule"}
+)
+
+
+class CoPilotConfig(SACConfig):
+    """RLlib's `SACConfig` plus CO-PILOT's settings, set with `.copilot(...)` (see `settings.SETTINGS`)."""
+
+    @override(SACConfig)
+    def __init__(self, algo_class=None):
+        super().__init__(algo_class=algo_class or CoPilot)
+        # --- RLlib settings CO-PILOT needs ---
+        # One training_step is one task mini-batch x b repetitions: no minimum time or steps.
+        self.min_time_s_per_iteration = 0
+        self.min_sample_timesteps_per_iteration = 0
+        self.num_envs_per_env_runner = 1
+        self.num_env_runners = 0
+        self.goal_env: str | None = None  # set by validate(): the env the user named
+        self.goal_env_config: dict[str, Any] = {}
+        # --- every CO-PILOT setting at its declared default ---
+        for setting in SETTINGS.values():
+            if setting.target == "copilot":
+                setattr(self, setting.key, copy.deepcopy(setting.default))
+        for name in _NESTED:
+            setattr(self, name, defaults(name))
+        self.alpha_schedule: dict[str, Any] = AlphaSchedule.from_dict(
+            SETTINGS["alpha_schedule"].default
+        ).to_dict()
+        self.training(**defaults("training"))
+
+    @classmethod
+    def from_settings(cls, values: Mapping[str, Any], run: RunContext) -> CoPilotConfig:
+        """A config from flat setting `values` (dotted keys, as in a sweep spec) for one run.
+
+        `preset` is applied first; every other value overrides it. This is how sweeps, `train` and
+        benchmarks build CO-PILOT (the registry's `config` entry).
+        """
+        copilot: dict[str, Any] = {}
+        training: dict[str, Any] = {}
+        nested: dict[str, dict[str, Any]] = {name: {} for name in _NESTED}
+        for key, value in values.items():
+            setting = SETTINGS[key]
+            if setting.target == "copilot":
+                copilot[key] = value
+            elif setting.target in nested:
+                nested[setting.target][setting.field] = value
+            elif setting.target == "training":
+                training[key] = value
+        copilot.update({name: fields for name, fields in nested.items() if fields})
+        schedule = alpha_schedule_from(values)
+        if schedule is not None:
+            copilot["alpha_schedule"] = schedule
+        config = (
+            cls()
+            .environment(run.env_id, env_config=dict(run.env_config))
+            .env_runners(num_env_runners=run.num_env_runners)
+            # The run's own process (sampling when there are no runners, and the learner) gets the
+            # CPUs not taken by runners; validate() sizes torch's thread pool from it.
+            .resources(num_cpus_for_main_process=run.num_cpus_for_main_process)
+            .debugging(seed=run.seed)
+        )
+        if "preset" in copilot:
+            config.copilot(preset=copilot.pop("preset"))
+        config.copilot(**copilot)
+        if training:
+            config.training(**training)
+        return config
+
+    def copilot(self, **settings: Any) -> CoPilotConfig:
+        """Sets CO-PILOT's settings by name (`settings.SETTINGS` lists them with their rules).
+
+        preset: a key of `settings.PRESETS` (e.g. "paper_literal"), applied first; the other arguments of
+        the same call override it. planner / cost_model: dicts that update the current ones key by key.
+        alpha_schedule: a preset name ("paper_per_task": 0.9 -> 0.1 over every task's b episodes;
+        "paper_warm_start": 1 -> 0 over the first two episodes), a dict (see AlphaSchedule), or an
+        AlphaSchedule. Values are checked by `validate()`; unknown names are refused here.
+        """
+        unknown = sorted(set(settings) - _COPILOT_ARGS)
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], sorted(_COPILOT_ARGS), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            training = [k for k in unknown if k in SETTINGS and SETTINGS[k].target == "training"]
+            where = f"; {training[0]} is SAC's: set it with .training(...)" if training else ""
+            raise ValueError(f"CoPilotConfig.copilot: unknown setting {unknown[0]!r}{hint}{where}")
+        if "preset" in settings:
+            name = settings.pop("preset")
+            if name not in PRESETS:
+                raise ValueError(f"CoPilotConfig: preset={name!r} is invalid: use one of {sorted(PRESETS)}")
+            self.preset = name
+            self._apply_preset(PRESETS[name])
+        if "alpha_schedule" in settings:
+            schedule = settings["alpha_schedule"]
+            if isinstance(schedule, str):
+                schedule = AlphaSchedule.preset(schedule)
+            if isinstance(schedule, AlphaSchedule):
+                schedule = schedule.to_dict()
+            # Anything else is kept as given: validate() names it.
+            settings["alpha_schedule"] = dict(schedule) if isinstance(schedule, dict) else schedule
+        for name in _NESTED:
+            if name in settings:
+                settings[name] = {**getattr(self, name), **settings[name]}
+        for key, value in settings.items():
+            setattr(self, key, value)
+        return self
+
+    def _apply_preset(self, values: dict[str, Any]) -> None:
+        for key, value in values.items():
+            if key in _NESTED:
+                setattr(self, key, {**getattr(self, key), **value})
+            else:
+                setattr(self, key, copy.deepcopy(value))
+
+    @override(SACConfig)
+    def validate(self) -> None:
+        self._validate_copilot()
+        # The runners sample the traversal env; remember the goal env the user asked for.
+        if self.env != TRAVERSAL_ENV_ID:
+            self.goal_env = self.env
+            self.goal_env_config = copy.deepcopy(dict(self.env_config or {}))
+            self.env = TRAVERSAL_ENV_ID
+        self.env_config = {
+            "goal_env": self.goal_env,
+            "goal_env_config": self.goal_env_config,
+            **self.traversal_rules().to_dict(),
+        }
+        if self.fast_learner and not uses_fast_learner(self):
+            # One torch thread per CPU this process holds: more threads than cores make OpenMP spin
+            # against other trials and runners (measured 10-20x slower SAC updates on 2 busy cores).
+            threads = max(1, int(self.num_cpus_for_main_process or 1))
+            use_fast_learner(self, updates_per_env_step=self.utd_ratio(), torch_threads=threads)
+        register_traversal_env()
+        super().validate()
+
+    def traversal_rules(self) -> TraversalRules:
+        """How the agent runs and is rewarded on sub-tasks."""
+        return TraversalRules(**{name: getattr(self, name) for name in TraversalRules.__dataclass_fields__})
+
+    def collision_penalty_value(self) -> float:
+        """`collision_penalty`, or its default for `collision_cost` (10 per segment, 100 per length)."""
+        if self.collision_penalty is not None:
+            return float(self.collision_penalty)
+        return 100.0 if self.collision_cost == "length" else 10.0
+
+    def utd_ratio(self) -> float:
+        """SAC gradient steps per sampled env step.
+
+        `updates_per_env_step` if set; else RLlib's `training_intensity` (timesteps replayed per
+        timestep sampled, see SACConfig.training) divided by the train batch size, because one gradient
+        step replays one batch; else 1.0 (SB3's `train_freq=1, gradient_steps=1`).
+        """
+        if self.updates_per_env_step is not None:
+            return float(self.updates_per_env_step)
+        if self.training_intensity is not None:
+            return float(self.training_intensity) / float(self.total_train_batch_size)
+        return 1.0
+
+    def setting_values(self) -> dict[str, Any]:
+        """Every setting of `settings.SETTINGS` at its current value (dotted keys; schedule fields aside)."""
+        values = {}
+        for s in SETTINGS.values():
+            if s.target in _NESTED:
+                values[s.key] = getattr(self, s.target).get(s.field)
+            elif s.target != "alpha_schedule" or s.key == "alpha_schedule":
+                values[s.key] = getattr(self, s.key)
+        return values
+
+    def _validate_copilot(self) -> None:
+        def bad(key: str, value: Any, why: str) -> ValueError:
+            return ValueError(f"CoPilotConfig: {key}={value!r} is invalid: {why}")
+
+        for name in _NESTED:
+            given, known = getattr(self, name), defaults(name)
+            unknown = sorted(set(given) - set(known))
+            if unknown:
+                raise bad(f"{name}.{unknown[0]}", given[unknown[0]], f"known keys are {sorted(known)}")
+        try:
+            AlphaSchedule.from_dict(self.alpha_schedule)
+        except (ValueError, TypeError) as err:
+            raise bad("alpha_schedule", self.alpha_schedule, str(err)) from err
+        values = self.setting_values()
+        for key, value in values.items():
+            if key != "alpha_schedule" and (why := SETTINGS[key].problem(value)) is not None:
+                raise bad(key, value, why)
+        for involved, _, why in combination_problems(values):
+            given = " and ".join(f"{key}={values.get(key)!r}" for key in involved)
+            raise ValueError(f"CoPilotConfig: {given} do not go together: {why}")
+        if self.num_envs_per_env_runner != 1:
+            raise bad(
+                "num_envs_per_env_runner",
+                self.num_envs_per_env_runner,
+                "CO-PILOT traverses one sub-task queue per runner; use 1 and scale with num_env_runners",
+            )
+        if self.env is None:
+            raise bad("env", None, 'call .environment("maze-point", env_config={...})')
+
+
 def register_traversal_env() -> None:
     """Makes the traversal env known to Ray Tune's registry (idempotent, cheap)."""
-    from ray.tune.registry import register_env
-
     register_env(TRAVERSAL_ENV_ID, make_traversal_env)
 
 
 class CoPilot(SAC):
-    @classmethod
-    def get_default_config(cls):
-        from copilot_ray.algorithms.copilot.config import CoPilotConfig
+    """CO-PILOT: a sub-goal planner pi_p and a goal-conditioned SAC agent trained together.
 
+    An RLlib `SAC` whose `training_step` is Algorithm 3 of the paper (see `training_step`). RLlib
+    provides the agent's parts: the env runners (sampling `TraversalEnv`, where one episode is one
+    sub-task), the RLModule and the learner group (with `fast_learner=True`, the default, the
+    goal-conditioned SAC module and learner of `copilot_ray.algorithms.gc_sac`). The driver holds the
+    rest and checkpoints it with RLlib's state: the planner (`tree_depth` > 0 only), the time-cost
+    model tau_hat and its dataset D_tau, the alpha clock (`alpha_schedule`, `repetitions`), the agent's
+    replay buffer, the update-to-data schedule and the random generators. A copy of the goal env
+    (`goal_env`) supplies the geometry for the planner's costs and the train / test tasks.
+    Configure it with `CoPilotConfig` (`.copilot(...)` for its own knobs).
+    """
+
+    @classmethod
+    @override(SAC)
+    def get_default_config(cls):
+        """A fresh `CoPilotConfig`."""
         return CoPilotConfig()
 
     # ----------------------------------------------------------------------------------- setup
+    @override(DQN)
     def setup(self, config) -> None:
+        """SAC's setup, then the goal env, planner, cost model (D_tau seeded), alpha clock and tasks."""
         register_traversal_env()
         super().setup(config)
         cfg = self.config
-        from copilot_ray.envs import make
-
         # A driver-side copy of the goal env: geometry for the planner's cost, tasks, evaluation.
         self.goal_env = make(cfg.goal_env, **cfg.goal_env_config)
         env = self.goal_env.unwrapped
@@ -94,7 +332,7 @@ class CoPilot(SAC):
         self.planner = (
             None
             if cfg.tree_depth == 0
-            else build_planner(cfg.planner, env.goal_dim, cfg.tree_depth, low, high, seed)
+            else SubgoalPlanner.from_settings(cfg.planner, env.goal_dim, cfg.tree_depth, low, high, seed)
         )
         c = cfg.cost_model
         self.cost_model = TimeCostModel(
@@ -128,7 +366,63 @@ class CoPilot(SAC):
         self._artifact_dir: Path | None = None
 
     # --------------------------------------------------------------------------- training step
+    @override(DQN)
     def training_step(self) -> None:
+        """One CO-PILOT iteration: one task mini-batch, `repetitions` (b) episodes on it.
+
+        1. Warm start (first call only; skipped when `planner_warm_start` is 0, when `tree_depth` is
+           0, or after restoring a warm-started checkpoint): `planner_warm_start` planner phases
+           (step 3a), each on `WARM_START_TASKS` (30) fresh training tasks under alpha = 1 (distance
+           + collision cost, no tau_hat), output trees from the policy mean; no env steps. Logs
+           `copilot/planner/warm_start_s` and `warm_start_cost`.
+        2. Task mini-batch: `max(planner_task_batch_size, task_batch_size)` distinct training tasks
+           (s0, g) (at most the whole train set); the agent traverses the first `task_batch_size`,
+           the planner trains on all of them. All b repetitions use these tasks.
+        3. Each of the b repetitions, with alpha = the `alpha_schedule` value of the current episode
+           (and repetition):
+           a. Planner phase (`tree_depth` K > 0; with K = 0 the tree is just [s0, g]). With
+              `planner["std_final"]` set, the exploration std is first moved linearly from
+              `planner["std"]` towards it over `planner["std_anneal_phases"]` phases (warm start
+              included). Then for k = 1..K: sample `planner["num_samples"]` trees per task up to layer
+              k, cost them by J^k (layers 0..k) with c(a, b) = alpha * dist + (1 - alpha) * tau_hat
+              + collision term (`collision_cost`, `collision_penalty`), run one PPO update of pi_p
+              over all the planner's tasks (baseline: the mean cost of each task's samples;
+              `planner["epochs"]`, `["clip"]`, `["max_grad_norm"]`, `["target_kl"]`, `["max_kl"]`),
+              and fill layer k of the output trees (the policy mean, or a sample when
+              `traversal_tree="sampled"`).
+           b. Agent phase: the agent's trees are dealt round-robin to the env runners
+              (`num_env_runners`; 0: the local one), whose `TraversalEnv` queues the bottom-up
+              traversal: per task, layers K..0, each layer's 2^k sub-goals left to right, one RLlib
+              episode per sub-task (at most `tau_max` steps, times 2^(K-k) with
+              `step_limit="scaled"`; `after_failure`, `subtask_reward`, `reward_scale`,
+              `agent_collision`, `agent_input`). In rounds, every runner with sub-tasks left samples
+              up to `subtasks_per_sample` episodes (explore=True); the episodes go into the replay
+              buffer, the learner runs `utd_ratio()` gradient steps
+              per new env step (`updates_per_env_step` or `training_intensity`; the fraction carries
+              over; none before `num_steps_sampled_before_learning_starts`) on batches of
+              `train_batch_size_per_learner`, and the runners get the new weights. Until every
+              queue is empty.
+           c. Cost model (K > 0): D_tau gets one (start, end, steps) tuple per sub-task, failed ones
+              included (`failed_subtask_cost`), then tau_hat is fitted for `cost_model["fit_steps"]`
+              steps of `cost_model["batch_size"]`.
+           d. The alpha clock advances one episode.
+        4. Metrics. Means over the b repetitions: `copilot/alpha`, `copilot/planner/...` (std,
+           cost_layer_k, approx_kl_max, nonfinite_skipped, rolled_back), `copilot/diag/...` (plan
+           and traversal diagnostics), `copilot/cost_model/loss`, `copilot/agent/...`
+           (steps_layer_k, success_layer_k, subtask_success_layer_k). Then `copilot/dtau/size`,
+           `copilot/diag/q_mean` (once the learner has run) and `copilot/time/...` (planner_s,
+           agent_s, cost_model_s summed over the repetitions; planning_share). RLlib's env-runner and
+           learner results are aggregated during the agent phases as usual.
+        5. Every `eval_interval` iterations (0: never): the first `eval_num_tasks` test tasks, planned
+           (the agent follows the planner's mean tree) and direct (the agent alone with the finest
+           plan's step budget), with deterministic and sampled actions -> `copilot/eval/<key>` for
+           `eval_action` and `copilot/eval/<action>/<key>`, `copilot/eval/planned_collision_free`,
+           `copilot/time/eval_s`; with `eval_tree_tasks` > 0 the sub-goal trees of that many test
+           tasks (and tau_hat profiles) are saved to `<logdir>/copilot_trees/trees_iter<N>.npz`.
+
+        Returns None, as RLlib's new API stack expects: everything goes to `self.metrics`, which
+        `Algorithm.train()` reduces into the iteration's result dict.
+        """
         cfg = self.config
         if not self._warm_started:
             self._warm_start_planner()
@@ -436,7 +730,9 @@ class CoPilot(SAC):
         )
 
     # ------------------------------------------------------------------------------ checkpoints
+    @override(Algorithm)
     def get_state(self, components=None, *, not_components=None, **kwargs) -> dict[str, Any]:
+        """Algorithm's state plus CO-PILOT's driver-side state under the "copilot" key."""
         state = super().get_state(components, not_components=not_components, **kwargs)
         state[_STATE_KEY] = {
             "planner": None if self.planner is None else self.planner.state_dict(),
@@ -451,7 +747,9 @@ class CoPilot(SAC):
         }
         return state
 
+    @override(Algorithm)
     def set_state(self, state: dict[str, Any]) -> None:
+        """Algorithm's `set_state`, then CO-PILOT's driver-side state when the state has it."""
         super().set_state(state)
         own = state.get(_STATE_KEY)
         if own is None:

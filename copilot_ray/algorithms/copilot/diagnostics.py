@@ -29,8 +29,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from copilot_ray.algorithms.copilot.traversal_env import path_indices
-from copilot_ray.planning.subgoal_tree import new_layer_indices
+from copilot_ray.planning.subgoal_tree import new_layer_indices, path_indices
 
 ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 

@@ -36,61 +36,36 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from copilot_ray.algorithms.copilot.readings import (
-    AFTER_FAILURE,
-    AGENT_COLLISIONS,
-    AGENT_INPUTS,
-    STEP_LIMITS,
-    SUBTASK_REWARDS,
-)
-from copilot_ray.planning.subgoal_tree import layer_indices
+from copilot_ray.algorithms.copilot.settings import SETTINGS
+from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.planning.subgoal_tree import path_indices
 
 TRAVERSAL_ENV_ID = "copilot-traversal"
 
 
-def flat_observation(
-    observation: np.ndarray, goal: np.ndarray, achieved: np.ndarray | None = None
-) -> np.ndarray:
-    """The goal-conditioned agent's input: concat(observation, goal), batched or not; with `achieved`
-    (agent_input="state_goal_delta") also goal - achieved."""
-    parts = [observation, goal] if achieved is None else [observation, goal, goal - achieved]
-    return np.concatenate(parts, axis=-1).astype(np.float32)
-
-
 @dataclass(frozen=True)
 class TraversalRules:
-    """How sub-tasks are run and rewarded (see the module docstring); the defaults read the paper literally."""
+    """How sub-tasks are run and rewarded (see the module docstring). Defaults and rules are the
+    settings of the same names (settings.py)."""
 
-    tau_max: int = 25
-    step_limit: str = "fixed"
-    after_failure: str = "continue"
-    subtask_reward: str = "halving"
-    reward_scale: float = 1.0  # multiplies the goal env's reward R (paper: R = 1 in the maze)
-    agent_collision: str = "none"
-    agent_collision_penalty: float = 0.0
-    agent_input: str = "state_goal"
+    tau_max: int = SETTINGS["tau_max"].default
+    step_limit: str = SETTINGS["step_limit"].default
+    after_failure: str = SETTINGS["after_failure"].default
+    subtask_reward: str = SETTINGS["subtask_reward"].default
+    reward_scale: float = SETTINGS["reward_scale"].default
+    agent_collision: str = SETTINGS["agent_collision"].default
+    agent_collision_penalty: float = SETTINGS["agent_collision_penalty"].default
+    agent_input: str = SETTINGS["agent_input"].default
 
     def __post_init__(self) -> None:
-        for key, value, allowed in (
-            ("step_limit", self.step_limit, STEP_LIMITS),
-            ("after_failure", self.after_failure, AFTER_FAILURE),
-            ("subtask_reward", self.subtask_reward, SUBTASK_REWARDS),
-            ("agent_collision", self.agent_collision, AGENT_COLLISIONS),
-            ("agent_input", self.agent_input, AGENT_INPUTS),
-        ):
-            if value not in allowed:
-                raise ValueError(f"{key}={value!r} is invalid: use one of {list(allowed)}")
-        if isinstance(self.tau_max, bool) or not isinstance(self.tau_max, int) or self.tau_max < 1:
-            raise ValueError(f"tau_max={self.tau_max!r} is invalid: use an integer >= 1")
-        for key, strict in (("reward_scale", True), ("agent_collision_penalty", False)):
-            value = getattr(self, key)
-            number = isinstance(value, int | float) and not isinstance(value, bool)
-            if not (number and (value > 0 if strict else value >= 0)):
-                raise ValueError(f"{key}={value!r} is invalid: use a number {'>' if strict else '>='} 0")
+        for name in self.__dataclass_fields__:
+            value = getattr(self, name)
+            if (why := SETTINGS[name].problem(value)) is not None:
+                raise ValueError(f"{name}={value!r} is invalid: {why}")
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> TraversalRules:
-        """The rules from a traversal env_config (keys of this class; missing ones keep the paper's)."""
+        """The rules from a traversal env_config (keys of this class; missing ones keep their defaults)."""
         return cls(**{k: config[k] for k in cls.__dataclass_fields__ if k in config})
 
     def to_dict(self) -> dict[str, Any]:
@@ -116,11 +91,6 @@ class SubTask:
     index: int  # 1..2^layer along the layer's path
     goal: np.ndarray
     start: np.ndarray | None  # s0 for the first sub-task of a layer, else None: continue in place
-
-
-def path_indices(depth: int, k: int) -> np.ndarray:
-    """Indices of layer k's path in a tree; depth 0 (no planner: [s0, g]) has only layer 0."""
-    return np.array([0, 1]) if depth == 0 else layer_indices(depth, k)
 
 
 def traversal_queue(trees: np.ndarray, depth: int, task_ids: np.ndarray) -> list[SubTask]:

@@ -7,7 +7,7 @@ Pieces:
   * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
   * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
-  * `use_fast_gc_sac(config)`: switch a SACConfig to all of the above.
+  * `use_fast_learner(config)`: switch a SACConfig to all of the above.
 """
 
 from copilot_ray.algorithms.gc_sac.catalog import (
@@ -18,7 +18,7 @@ from copilot_ray.algorithms.gc_sac.catalog import (
     GCSACTorchRLModule,
     count_parameters,
 )
-from copilot_ray.algorithms.gc_sac.config import is_fast_gc_sac, use_fast_gc_sac
+from copilot_ray.algorithms.gc_sac.config import use_fast_learner, uses_fast_learner
 from copilot_ray.algorithms.gc_sac.learner import (
     GC_SAC_KEY,
     NONFINITE_SKIPPED_KEY,
@@ -45,8 +45,8 @@ __all__ = [
     "bellman_target",
     "count_parameters",
     "gc_sac_settings",
-    "is_fast_gc_sac",
+    "uses_fast_learner",
     "make_train_batch",
     "update_from_buffer",
-    "use_fast_gc_sac",
+    "use_fast_learner",
 ]

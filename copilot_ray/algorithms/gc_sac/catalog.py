@@ -31,6 +31,8 @@ from ray.rllib.core.models.base import ENCODER_OUT, Encoder
 from ray.rllib.core.models.configs import MLPEncoderConfig
 from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
 from ray.rllib.core.rl_module.rl_module import RLModule
+from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
+from ray.rllib.utils.annotations import override
 
 # Model-config settings that make RLlib's catalog build SB3-shaped networks.
 SB3_MODEL_CONFIG: dict[str, Any] = {
@@ -45,6 +47,7 @@ SB3_MODEL_CONFIG: dict[str, Any] = {
 class ConcatObsActionMLPEncoder(TorchMLPEncoder):
     """A plain MLP on concat(obs, action): the Q-function encoder of SB3's `ContinuousCritic`."""
 
+    @override(TorchMLPEncoder)
     def _forward(self, inputs: dict, **kwargs) -> dict:
         x = torch.cat([inputs[Columns.OBS], inputs[Columns.ACTIONS]], dim=-1)
         return {ENCODER_OUT: self.net(x)}
@@ -53,7 +56,9 @@ class ConcatObsActionMLPEncoder(TorchMLPEncoder):
 class ConcatObsActionMLPEncoderConfig(MLPEncoderConfig):
     """`MLPEncoderConfig` whose encoder reads concat(obs, action); `input_dims` = (obs_dim + act_dim,)."""
 
+    @override(MLPEncoderConfig)
     def build(self, framework: str = "torch") -> Encoder:
+        """Builds the torch `ConcatObsActionMLPEncoder` (torch only)."""
         if framework != "torch":
             raise ValueError(f"GCSACCatalog supports framework='torch' only, got {framework!r}")
         self._validate(framework)
@@ -67,6 +72,7 @@ class GCSACCatalog(SACCatalog):
     mean/log-std head (`head_fcnet_hiddens=[]`); see `SB3_MODEL_CONFIG` for the matching model config.
     """
 
+    @override(SACCatalog)
     def _build_qf_encoder_continuous(self, framework: str) -> Encoder:
         obs_space, act_space = self.observation_space, self.action_space
         if not (isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1):
@@ -109,18 +115,22 @@ class GCSACTorchRLModule(DefaultSACTorchRLModule):
     the target critics run under `torch.no_grad()`.
     """
 
+    @override(DefaultSACTorchRLModule)
     def __init__(self, *args, **kwargs):
         if kwargs.get("catalog_class") is None:
             kwargs["catalog_class"] = GCSACCatalog
         super().__init__(*args, **kwargs)
 
+    @override(TorchRLModule)
     def forward_train(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
+        """RLModule's training forward pass, switching to train mode only when not already in it."""
         # TorchRLModule.forward_train calls `self.train()` on every step, which walks all submodules
         # (~0.5 ms per gradient step); only switch modes when needed.
         if not self.training:
             self.train()
         return RLModule.forward_train(self, batch, **kwargs)
 
+    @override(DefaultSACTorchRLModule)
     def _forward_train_continuous(self, batch: dict[str, Any]) -> dict[str, Any]:
         out: dict[str, Any] = {}
         obs, next_obs, actions = batch[Columns.OBS], batch[Columns.NEXT_OBS], batch[Columns.ACTIONS]

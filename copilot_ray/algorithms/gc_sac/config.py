@@ -1,4 +1,4 @@
-"""`use_fast_gc_sac`: switch any `SACConfig` (or subclass) to the fast goal-conditioned SAC path."""
+"""`use_fast_learner`: switch any `SACConfig` (or subclass) to the fast goal-conditioned SAC path."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from copilot_ray.algorithms.gc_sac.catalog import GCSACCatalog, GCSACTorchRLModu
 from copilot_ray.algorithms.gc_sac.learner import GC_SAC_KEY, GCSACTorchLearner, gc_sac_settings
 
 
-def use_fast_gc_sac(
+def use_fast_learner(
     config: SACConfig,
     *,
     hidden: Sequence[int] = (256, 256),
@@ -49,9 +49,9 @@ def use_fast_gc_sac(
         critic_loss: "huber" (RLlib's SAC default) or "mse" (SB3's 0.5 * squared error).
     """
     if not isinstance(config, SACConfig):
-        raise TypeError(f"use_fast_gc_sac needs a SACConfig (or subclass), got {type(config).__name__}")
+        raise TypeError(f"use_fast_learner needs a SACConfig (or subclass), got {type(config).__name__}")
     if config.framework_str != "torch":
-        raise ValueError(f"use_fast_gc_sac supports framework='torch' only, got {config.framework_str!r}")
+        raise ValueError(f"use_fast_learner supports framework='torch' only, got {config.framework_str!r}")
     hidden = [int(h) for h in hidden]
     if not hidden or any(h <= 0 for h in hidden):
         raise ValueError(f"hidden must be a non-empty sequence of positive ints, got {hidden}")
@@ -85,6 +85,6 @@ def use_fast_gc_sac(
     return config
 
 
-def is_fast_gc_sac(config: SACConfig) -> bool:
-    """Whether `use_fast_gc_sac` was applied to `config`."""
+def uses_fast_learner(config: SACConfig) -> bool:
+    """Whether `use_fast_learner` was applied to `config`."""
     return GC_SAC_KEY in (config.learner_config_dict or {})

@@ -22,7 +22,7 @@ sync to env runners all work as for the stock learner. What differs from `SACTor
   only obs, new_obs, actions, rewards, terminateds. The critic loss is RLlib's Huber loss by default
   or SB3's 0.5 * MSE with `learner_config_dict["gc_sac"]["critic_loss"] = "mse"`.
 
-Knobs live in `config.learner_config_dict["gc_sac"]` (see `config.use_fast_gc_sac`):
+Knobs live in `config.learner_config_dict["gc_sac"]` (see `config.use_fast_learner`):
 `critic_loss` ("huber" | "mse"), `torch_threads` (int or None).
 """
 
@@ -32,6 +32,7 @@ from typing import Any
 
 import gymnasium as gym
 import torch
+from ray.rllib.algorithms.dqn.dqn_learner import DQNLearner
 from ray.rllib.algorithms.sac.sac_learner import (
     LOGPS_KEY,
     QF_LOSS_KEY,
@@ -42,13 +43,15 @@ from ray.rllib.algorithms.sac.sac_learner import (
     QF_TWIN_LOSS_KEY,
     QF_TWIN_PREDS,
     TD_ERROR_MEAN_KEY,
+    SACLearner,
 )
 from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
 from ray.rllib.core import COMPONENT_OPTIMIZER
 from ray.rllib.core.columns import Columns
-from ray.rllib.core.learner.learner import POLICY_LOSS_KEY
+from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, Learner
 from ray.rllib.core.learner.torch.torch_learner import TorchLearner
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
+from ray.rllib.utils.annotations import override
 from ray.rllib.utils.metrics import ALL_MODULES, NUM_TARGET_UPDATES
 
 from copilot_ray.torch_checks import all_finite
@@ -88,7 +91,9 @@ def bellman_target(
 class GCSACTorchLearner(SACTorchLearner):
     """SAC torch learner tuned for many small updates; see the module docstring."""
 
+    @override(SACTorchLearner)
     def build(self) -> None:
+        """Reads the `gc_sac` settings, sets torch's thread count, then `SACTorchLearner.build`."""
         settings = gc_sac_settings(self.config)
         if settings["torch_threads"]:
             torch.set_num_threads(int(settings["torch_threads"]))
@@ -97,7 +102,9 @@ class GCSACTorchLearner(SACTorchLearner):
         super().build()
 
     # ------------------------------------------------------------------ optimizers
+    @override(SACTorchLearner)
     def configure_optimizers_for_module(self, module_id, config=None) -> None:
+        """Box actions: one Adam each for "qf" (both critics), "policy" and "alpha"; else SAC's own."""
         module = self._module[module_id]
         if not isinstance(module.action_space, gym.spaces.Box):
             return super().configure_optimizers_for_module(module_id, config)
@@ -127,6 +134,7 @@ class GCSACTorchLearner(SACTorchLearner):
             )
 
     # ------------------------------------------------------------------ loss
+    @override(SACTorchLearner)
     def _compute_loss_for_module_continuous(self, *, module_id, config, batch, fwd_out):
         alpha = torch.exp(self.curr_log_alpha[module_id])
         q1 = fwd_out[QF_PREDS]
@@ -184,11 +192,13 @@ class GCSACTorchLearner(SACTorchLearner):
         return actor_loss + total_critic + alpha_loss
 
     # ------------------------------------------------------------------ update step
+    @override(SACTorchLearner)
     def compute_gradients(self, loss_per_module, **kwargs):
-        # One backward pass over the summed losses (TorchLearner's default), not one per optimizer.
+        """One backward pass over the summed losses (TorchLearner's default), not one per optimizer."""
         self._temp_losses.clear()
         return TorchLearner.compute_gradients(self, loss_per_module, **kwargs)
 
+    @override(TorchLearner)
     def _uncompiled_update(self, batch: dict, **kwargs):
         fwd_out = self.module.forward_train(batch)
         loss_per_module = self.compute_losses(fwd_out=fwd_out, batch=batch)
@@ -225,23 +235,30 @@ class GCSACTorchLearner(SACTorchLearner):
             torch._foreach_lerp_(target, main, float(self.config.get_config_for_module(module_id).tau))
             self.metrics.log_value((module_id, NUM_TARGET_UPDATES), 1, reduce="lifetime_sum")
 
+    @override(DQNLearner)
     def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
-        # Skip DQNLearner's once-per-call target update (targets move per gradient step above);
-        # keep the lr-schedule stepping and logging of TorchLearner/Learner.
+        """TorchLearner's lr-schedule stepping and logging, without DQNLearner's target update."""
+        # Skip DQNLearner's once-per-call target update (targets move per gradient step above).
         TorchLearner.after_gradient_based_update(self, timesteps=timesteps)
 
     # Module set changes invalidate cached target-parameter lists.
+    @override(SACLearner)
     def add_module(self, **kwargs):
+        """SACLearner's `add_module`, dropping the cached target-parameter lists."""
         self._gc_target_pairs.clear()
         return super().add_module(**kwargs)
 
+    @override(SACLearner)
     def remove_module(self, module_id, **kwargs):
+        """SACLearner's `remove_module`, dropping the cached target-parameter lists."""
         self._gc_target_pairs.clear()
         return super().remove_module(module_id, **kwargs)
 
     # RLlib 2.60's SACLearner keeps log(alpha) outside the RLModule and leaves it out of its state,
     # so a restored stock learner restarts from `initial_alpha`. Keep it with the optimizer state.
+    @override(Learner)
     def get_state(self, components=None, *, not_components=None, **kwargs):
+        """Learner's state plus log(alpha) per module (with the optimizer component)."""
         state = super().get_state(components, not_components=not_components, **kwargs)
         if self._check_component(COMPONENT_OPTIMIZER, components, not_components):
             state[LOG_ALPHA_STATE_KEY] = {
@@ -249,7 +266,9 @@ class GCSACTorchLearner(SACTorchLearner):
             }
         return state
 
+    @override(Learner)
     def set_state(self, state) -> None:
+        """Learner's `set_state`, also restoring log(alpha) when the state has it."""
         super().set_state(state)
         with torch.no_grad():
             for mid, value in (state.get(LOG_ALPHA_STATE_KEY) or {}).items():

@@ -84,10 +84,12 @@ class FlatTransitionBuffer:
 
     @property
     def obs_dim(self) -> int | None:
+        """Flat observation size (None until known)."""
         return self._obs_dim
 
     @property
     def action_dim(self) -> int | None:
+        """Flat action size (None until known)."""
         return self._action_dim
 
     # ---------------------------------------------------------------- adding
@@ -195,6 +197,7 @@ class FlatTransitionBuffer:
 
     # ---------------------------------------------------------------- sampling
     def sample_indices(self, batch_size: int, rng: np.random.Generator) -> np.ndarray:
+        """`batch_size` uniform row indices (with replacement) into the filled part of the buffer."""
         if self._size == 0:
             raise ValueError("cannot sample from an empty FlatTransitionBuffer")
         return rng.integers(0, self._size, size=int(batch_size))
@@ -238,6 +241,7 @@ class FlatTransitionBuffer:
         }
 
     def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restores a `get_state` snapshot (capacity, dims, rows, write pointer)."""
         self.capacity = int(state["capacity"])
         self.obs_dtype = np.dtype(state["obs_dtype"])
         self._data, self._ptr, self._size = None, 0, 0
@@ -253,6 +257,7 @@ class FlatTransitionBuffer:
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any]) -> FlatTransitionBuffer:
+        """A new buffer restored from a `get_state` snapshot."""
         buf = cls(capacity=int(state["capacity"]))
         buf.set_state(state)
         return buf

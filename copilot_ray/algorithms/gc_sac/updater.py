@@ -93,6 +93,7 @@ class GradientStepSchedule:
         self._carry = 0.0
 
     def on_env_steps(self, new_env_steps: int) -> int:
+        """Counts `new_env_steps` sampled env steps; returns the gradient steps they earn."""
         before = self._env_steps
         self._env_steps += int(new_env_steps)
         eligible = max(0, self._env_steps - max(before, self.learning_starts))
@@ -102,6 +103,7 @@ class GradientStepSchedule:
         return steps
 
     def get_state(self) -> dict[str, Any]:
+        """A picklable snapshot: ratio, learning_starts, env steps seen and the carried fraction."""
         return {
             "updates_per_env_step": self.updates_per_env_step,
             "learning_starts": self.learning_starts,
@@ -110,6 +112,7 @@ class GradientStepSchedule:
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
+        """Restores a `get_state` snapshot."""
         self.updates_per_env_step = float(state["updates_per_env_step"])
         self.learning_starts = int(state["learning_starts"])
         self._env_steps = int(state["env_steps"])

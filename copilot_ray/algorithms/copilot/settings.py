@@ -1,0 +1,619 @@
+"""Every CO-PILOT setting, declared once: its type, default, allowed values and a one-line doc.
+
+Everything else is generated from `SETTINGS`: CoPilotConfig's defaults and its validation, the keys and
+ranges a sweep spec accepts (`config`, `search`, `variants`), `python -m copilot_ray.train`'s
+command line, `benchmarks/maze_learning.py --set`, and the README's two settings tables
+(`python -m copilot_ray.algorithms.copilot.settings` prints them; a test fails when the README's copy
+is stale).
+
+A setting's `key` is its name everywhere. Dotted keys live in a nested dict of the config
+(`planner.std` is `config.planner["std"]`) or are one field of the alpha schedule
+(`alpha_schedule.start`, sweep specs only). `target` says where `CoPilotConfig.from_settings` puts the value:
+`copilot` -> `.copilot(key=...)`, `planner` / `cost_model` -> `.copilot(planner={field: ...})`,
+`alpha_schedule` -> one field of the schedule, `training` -> `.training(key=...)` (SAC's own).
+
+Where the paper is ambiguous, or its literal reading starved the agent on the long-horizon maze, the
+setting has a `why` (the measured reason for its default) and `PRESETS["paper_literal"]` holds the
+paper's (or, where it is silent, the public reference code's) reading.
+
+No Ray import here: a sweep spec is validated against this table before anything starts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from copilot_ray import keys
+from copilot_ray.planning.alpha_schedule import CLOCKS as ALPHA_CLOCKS
+from copilot_ray.planning.alpha_schedule import KINDS as ALPHA_KINDS
+from copilot_ray.planning.alpha_schedule import PRESETS as ALPHA_PRESETS
+from copilot_ray.planning.alpha_schedule import AlphaSchedule
+from copilot_ray.planning.planner import NOISE_MODES
+from copilot_ray.planning.segment_cost import COLLISION_COSTS
+from copilot_ray.settings import (
+    Setting,
+    bool_setting,
+    choice_setting,
+    float_setting,
+    int_setting,
+    is_number,
+    markdown_value,
+    numbers_setting,
+    replace_between,
+    sizes_setting,
+)
+
+MAX_TREE_DEPTH = 10  # 2^(K+1) - 1 sub-tasks per task: K = 10 is already 2047; deeper is a typo
+# Where CoPilotConfig.from_settings puts a setting: .copilot(key=...), .copilot(planner={field: ...}),
+# .copilot(cost_model={field: ...}), one field of the alpha schedule, .training(key=...).
+TARGETS = ("copilot", "planner", "cost_model", "alpha_schedule", "training")
+
+_int, _float, _bool, _choice, _sizes = int_setting, float_setting, bool_setting, choice_setting, sizes_setting
+
+
+def _schedule_ok(v: Any) -> bool:
+    if not isinstance(v, str | dict):
+        return False
+    AlphaSchedule.from_dict(v)  # raises ValueError naming the bad field
+    return True
+
+
+def _alpha_field(key: str, kind_setting: Any, *args: Any, **kw: Any) -> Setting:
+    """One field of the alpha schedule (sweep specs only): its default comes from the schedule."""
+    return kind_setting(f"alpha_schedule.{key}", "alpha_schedule", None, *args, on_cli=False, **kw)
+
+
+# Choices of the readings (the paper's first).
+STEP_LIMITS = ("fixed", "scaled")
+AFTER_FAILURE = ("continue", "restart", "abort_layer")
+SUBTASK_REWARDS = ("halving", "uniform")
+AGENT_COLLISIONS = ("none", "penalty", "terminate")
+AGENT_INPUTS = ("state_goal", "state_goal_delta")
+FAILED_SUBTASK_COSTS = ("end_state", "lower_bound")
+TRAVERSAL_TREES = ("sampled", "mean")
+EVAL_ACTIONS = ("deterministic", "sampled")
+
+# ------------------------------------------------------------------------------------- the table
+# Grouped by concern; the order is the order of the README table and of `train --help`.
+_TREE = [
+    _int(
+        "tree_depth",
+        "copilot",
+        5,
+        "K: a tree has 2^K + 1 sub-goals (0: no planner, plain goal-conditioned SAC)",
+        0,
+        MAX_TREE_DEPTH,
+        note=" (K > 10 is too deep for memory: 2^(K+1) - 1 sub-tasks per task)",
+    ),
+    _int(
+        "repetitions", "copilot", 5, "b: traversals of every task mini-batch per iteration (paper 4.1: 5)", 1
+    ),
+    _int(
+        "task_batch_size",
+        "copilot",
+        30,
+        "tasks the agent traverses per iteration (paper 4.1: a mini-batch of 30)",
+        1,
+    ),
+    _int(
+        "planner_task_batch_size",
+        "copilot",
+        30,
+        "tasks in the planner's PPO batch per phase: the iteration's tasks plus other training tasks",
+        1,
+        why="the planner's PPO batch (not a paper reading). On the agent's 2 tasks alone, collision-free test "
+        "plans fell from 0.85 to 0.36-0.45 within 10 phases; on 30 (the paper's mini-batch) they stayed at "
+        "0.80-0.91",
+    ),
+    Setting(
+        "alpha_schedule",
+        "schedule",
+        "alpha_schedule",
+        "paper_per_task",
+        "the planner's cost mix alpha x Euclidean + (1 - alpha) x time cost: a preset name or a schedule mapping",
+        _schedule_ok,
+        f"a preset name {list(ALPHA_PRESETS)} or a schedule mapping with kind in {list(ALPHA_KINDS)}"
+        " (to search over kinds use alpha_schedule.kind)",
+    ),
+]
+_ALPHA_FIELDS = [
+    _alpha_field(
+        "kind", _choice, "schedule kind: the schedule is built from its dotted fields alone", ALPHA_KINDS
+    ),
+    _alpha_field(
+        "clock", _choice, "what the schedule counts: iterations, or each task's repetitions", ALPHA_CLOCKS
+    ),
+    _alpha_field("alpha", _float, "constant alpha", 0.0, 1.0),
+    _alpha_field("start", _float, "alpha at the start (linear, exponential)", 0.0, 1.0),
+    _alpha_field("end", _float, "alpha at the end (linear, exponential)", 0.0, 1.0),
+    _alpha_field("duration", _float, "clock ticks from start to end (linear)", 0.0, lo_open=True),
+    _alpha_field("decay", _float, "factor per tick (exponential)", 0.0, 1.0, lo_open=True, hi_open=True),
+    _alpha_field(
+        "boundaries",
+        numbers_setting,
+        "clock values where a step schedule moves on",
+        what="numbers (increasing clock values)",
+    ),
+    _alpha_field("values", numbers_setting, "alpha of each step", 0.0, 1.0, "alpha values in [0, 1]"),
+]
+_TRAVERSAL = [
+    _int(
+        "tau_max",
+        "copilot",
+        25,
+        "step limit of one sub-task (paper 4.1: 25)",
+        1,
+        why="the paper's; `step_limit: scaled` made failing upper layers cost ~3x the env steps",
+    ),
+    _choice(
+        "step_limit",
+        "copilot",
+        "fixed",
+        "sub-task step limit: tau_max for every sub-task, or tau_max x 2^(K-k) for layer k",
+        STEP_LIMITS,
+        why="the paper's",
+    ),
+    _choice(
+        "after_failure",
+        "copilot",
+        "restart",
+        "after a failed sub-task the next starts where the agent stopped, at the missed sub-goal (when free), or the layer ends",
+        AFTER_FAILURE,
+        why="with `continue` a failed sub-task left the agent against a wall (30-45 % of sub-tasks ended in a "
+        "collision over the first 31k env steps) and the next sub-goal out of reach: test success 0.00-0.08 "
+        "over 57k env steps, against 0.44 at 27k with `restart`",
+    ),
+    _choice(
+        "subtask_reward",
+        "copilot",
+        "uniform",
+        "reward for reaching a layer-k sub-goal: R / 2^k (Eq. 6) or R",
+        SUBTASK_REWARDS,
+        why="a layer-5 reward of 1/32 is worth less than the entropy bonus SAC keeps by not reaching the "
+        "sub-goal: test success 0.00 at 10k and 21k env steps with `halving`, 0.16 at 18k and 0.44 at 27k "
+        "with `uniform`",
+    ),
+    _float(
+        "reward_scale",
+        "copilot",
+        1.0,
+        "R: multiplies the goal env's reward (paper: 1 in the maze)",
+        0.0,
+        lo_open=True,
+        why="the paper's",
+    ),
+    _choice(
+        "agent_collision",
+        "copilot",
+        "none",
+        "a blocked move of the agent: free, a penalty, or a penalty and the end of the sub-task",
+        AGENT_COLLISIONS,
+        why="the paper's; `penalty` and `terminate` are there to try",
+    ),
+    _float(
+        "agent_collision_penalty",
+        "copilot",
+        0.0,
+        "reward subtracted per blocked move (agent_collision penalty/terminate)",
+        0.0,
+    ),
+    _choice(
+        "agent_input",
+        "copilot",
+        "state_goal_delta",
+        "what the agent's networks see: (state, sub-goal), or that plus sub-goal - achieved goal",
+        AGENT_INPUTS,
+        why="the delta is a function of s and g; without it the finest sub-tasks stayed at 51-58 % success "
+        "and test success at 0.00-0.01 over 31k env steps; with it 0.44 at 27k",
+    ),
+    _choice(
+        "traversal_tree",
+        "copilot",
+        "mean",
+        "the tree the agent traverses: a sample of pi_p, or pi_p's mean",
+        TRAVERSAL_TREES,
+        why="with pi_p's std 0.05 the sampled layer-5 segments averaged 0.073-0.10 long while a sub-task covers "
+        "at most 0.0875; the planner's PPO still learns from its own samples",
+    ),
+    _choice(
+        "failed_subtask_cost",
+        "copilot",
+        "lower_bound",
+        "D_tau's tuple for a failed sub-task: (start, where it stopped, steps) or (start, sub-goal, a lower bound of the steps)",
+        FAILED_SUBTASK_COSTS,
+        why="tau_hat only ever saw tuples <= 0.06 long and priced a 0.012 segment at 4-7x its length but a 0.1 "
+        "one at 1x, so the finest segments drifted longer (share beyond reach 0.06 -> 0.16). Weak evidence: "
+        "the drift showed under both readings in the probes",
+    ),
+    _int("subtasks_per_sample", "copilot", 64, "sub-tasks per env runner between two learner updates", 1),
+]
+_PLANNER = [
+    _int(
+        "planner_warm_start",
+        "copilot",
+        1000,
+        "planner phases (Euclidean cost, no env steps) before the agent's first traversal",
+        0,
+        why="~100 s, no env steps; annealed over the same 1000 phases, seeds 1-3 reached 0.95 / 0.74 / 0.97 "
+        "collision-free test plans before the agent's first step, instead of plans through walls for the "
+        "first ~80 iterations (`benchmarks/planner_collision.py --collision-costs indicator --iterations 1000 "
+        "--std-final 0.015 --anneal-phases 1000 --seeds 1 2 3`; seed 0 collapsed, see Known limits)",
+    ),
+    _choice(
+        "collision_cost",
+        "copilot",
+        "indicator",
+        "Eq. 11's collision term: a penalty per colliding segment (paper) or per unit of length in collision (reference code)",
+        COLLISION_COSTS,
+    ),
+    _float(
+        "collision_penalty",
+        "copilot",
+        None,
+        "the collision term's weight; null: 10 for indicator (paper), 100 for length",
+        0.0,
+        optional=True,
+    ),
+    _sizes(
+        "planner.hidden",
+        "planner",
+        [20, 20, 20],
+        "pi_p's hidden layers, one tanh MLP per tree layer (reference code)",
+    ),
+    _float(
+        "planner.std",
+        "planner",
+        0.05,
+        "pi_p's exploration std (absolute; with noise relative: a fraction of the parent segment)",
+        0.0,
+        lo_open=True,
+    ),
+    _choice(
+        "planner.noise",
+        "planner",
+        "absolute",
+        "pi_p's std: absolute (reference code) or relative to the parent segment",
+        NOISE_MODES,
+    ),
+    _float(
+        "planner.std_final",
+        "planner",
+        0.015,
+        "the std is annealed linearly to this over std_anneal_phases planner phases; null: constant std",
+        0.0,
+        lo_open=True,
+        optional=True,
+        why="planner only, one seed each, 1600 phases: an agent driving straight at each sub-goal completed "
+        "0.92 of the annealed test plans (finest paths 1.7x the shortest) and 0.40 of the constant-std ones "
+        "(3.3x): the noise keeps PPO's mean paths away from walls by wiggling them",
+    ),
+    _int(
+        "planner.std_anneal_phases",
+        "planner",
+        1000,
+        "planner phases over which the std is annealed (warm start included)",
+        1,
+    ),
+    _float("planner.lr", "planner", 0.005, "pi_p's Adam learning rate (paper 4.1)", 0.0, lo_open=True),
+    _float(
+        "planner.clip", "planner", 0.2, "PPO's clip range (paper 4.1)", 0.0, 1.0, lo_open=True, hi_open=True
+    ),
+    _int("planner.epochs", "planner", 4, "PPO epochs per planner phase", 1),
+    _int("planner.num_samples", "planner", 16, "trees sampled per task; their mean cost is the baseline", 1),
+    _float(
+        "planner.max_grad_norm",
+        "planner",
+        0.5,
+        "gradient-norm clip of pi_p (not in the paper: without it PPO diverged on four-rooms within ~100 phases)",
+        0.0,
+        lo_open=True,
+        optional=True,
+    ),
+    _float(
+        "planner.target_kl",
+        "planner",
+        None,
+        "stop a phase's PPO epochs once the approximate KL exceeds this",
+        0.0,
+        lo_open=True,
+        optional=True,
+    ),
+    _float(
+        "planner.max_kl",
+        "planner",
+        None,
+        "undo a PPO update whose approximate KL exceeds this",
+        0.0,
+        lo_open=True,
+        optional=True,
+    ),
+]
+_COST_MODEL = [
+    _sizes("cost_model.hidden", "cost_model", [64, 64], "tau_hat's hidden layers"),
+    _float("cost_model.lr", "cost_model", 1e-3, "tau_hat's Adam learning rate", 0.0, lo_open=True),
+    _int("cost_model.capacity", "cost_model", 200_000, "D_tau's capacity (tuples)", 1),
+    _int(
+        "cost_model.init_euclidean",
+        "cost_model",
+        50_000,
+        "Euclidean tuples D_tau starts with (paper 4.1: 50k)",
+        0,
+    ),
+    _int("cost_model.fit_steps", "cost_model", 50, "tau_hat gradient steps per iteration", 1),
+    _int("cost_model.batch_size", "cost_model", 256, "tau_hat's batch size", 1),
+]
+_EVALUATION = [
+    _int(
+        "eval_interval",
+        "copilot",
+        1,
+        "iterations between evaluations on the held-out test tasks (0: never)",
+        0,
+    ),
+    _int("eval_num_tasks", "copilot", 100, "test tasks per evaluation (the paper's test set has 100)", 1),
+    _int(
+        "eval_tree_tasks", "copilot", 3, "fixed test tasks whose sub-goal trees are saved per evaluation", 0
+    ),
+    _choice(
+        "eval_action",
+        "copilot",
+        "deterministic",
+        "the actions behind the headline copilot/eval/success_* (both are always logged)",
+        EVAL_ACTIONS,
+        why="which actions the headline metrics use; both are always logged",
+    ),
+]
+_SAC = [
+    _bool(
+        "fast_learner",
+        "copilot",
+        True,
+        "our flat-buffer SAC learner (false: RLlib's stock SAC module, learner and buffer, ~10x slower)",
+    ),
+    _float(
+        "updates_per_env_step",
+        "copilot",
+        None,
+        "SAC gradient steps per env step; null: from training_intensity when set, else 1.0",
+        0.0,
+        lo_open=True,
+        optional=True,
+    ),
+    _float("actor_lr", "training", 3e-4, "SAC actor learning rate (SB3's default)", 0.0, lo_open=True),
+    _float("critic_lr", "training", 3e-4, "SAC critic learning rate", 0.0, lo_open=True),
+    _float("alpha_lr", "training", 3e-4, "SAC temperature learning rate", 0.0, lo_open=True),
+    _float("gamma", "training", 0.99, "discount", 0.0, 1.0, lo_open=True),
+    _float(
+        "initial_alpha",
+        "training",
+        0.02,
+        "SAC's initial entropy temperature",
+        0.0,
+        lo_open=True,
+        why="SAC's default temperature swamps sparse sub-task rewards (open maze: 0.00 vs 0.74 test success "
+        "at 8k env steps)",
+    ),
+    Setting(
+        "target_entropy",
+        "float",
+        "training",
+        "auto",
+        'the entropy SAC tunes its temperature towards ("auto": -|A|)',
+        lambda v: v == "auto" or is_number(v),
+        '"auto" or a number',
+        why="the paper's (SAC's default)",
+    ),
+    _float("tau", "training", 0.005, "target network update rate", 0.0, 1.0, lo_open=True),
+    _int("train_batch_size_per_learner", "training", 256, "SAC batch size", 1),
+    _float(
+        "training_intensity",
+        "training",
+        None,
+        "RLlib's update-to-data ratio: replayed per sampled timesteps (= updates_per_env_step x batch size)",
+        0.0,
+        lo_open=True,
+        optional=True,
+    ),
+    _int(
+        "num_steps_sampled_before_learning_starts",
+        "training",
+        1000,
+        "env steps before the first SAC update",
+        0,
+    ),
+]
+
+PRESET_NAMES = ("default", "paper_literal", "plain_sac")
+_PRESET = [
+    _choice(
+        "preset",
+        "copilot",
+        None,
+        "a named set of readings applied before every other setting: the measured defaults, the paper's "
+        "reading, or plain SAC (tree depth 0)",
+        PRESET_NAMES,
+        optional=True,
+    )
+]
+
+GROUPS: dict[str, list[Setting]] = {
+    "preset": _PRESET,
+    "tree and curriculum": _TREE,
+    "alpha schedule fields (sweep specs)": _ALPHA_FIELDS,
+    "sub-task traversal": _TRAVERSAL,
+    "planner": _PLANNER,
+    "cost model tau_hat": _COST_MODEL,
+    "evaluation": _EVALUATION,
+    "SAC": _SAC,
+}
+SETTINGS: dict[str, Setting] = {s.key: s for group in GROUPS.values() for s in group}
+
+
+def defaults(target: str) -> dict[str, Any]:
+    """`{field: default}` of one target's settings (`defaults("planner")`: pi_p's settings)."""
+    return {s.field: s.default for s in SETTINGS.values() if s.target == target}
+
+
+# ------------------------------------------------------------------------------------------ presets
+# The measured reading of every paper ambiguity (the settings with a `why`), and agent_collision_penalty
+# because a preset may change it.
+_DEFAULT_READINGS: dict[str, Any] = {
+    s.key: s.default for s in SETTINGS.values() if s.why and s.target in ("copilot", "training")
+}
+_DEFAULT_READINGS["agent_collision_penalty"] = SETTINGS["agent_collision_penalty"].default
+_DEFAULT_READINGS["planner"] = {k: SETTINGS[f"planner.{k}"].default for k in ("std", "noise", "std_final")}
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # The measured defaults again (undoes another preset; a sweep axis value).
+    "default": _DEFAULT_READINGS,
+    # The paper's reading of every one of them (where it is silent: the public reference code's).
+    "paper_literal": {
+        **_DEFAULT_READINGS,
+        "after_failure": "continue",
+        "subtask_reward": "halving",
+        "traversal_tree": "sampled",
+        "agent_input": "state_goal",
+        "failed_subtask_cost": "end_state",
+        "planner_warm_start": 0,
+        # The reference code's planner noise: a fixed absolute std.
+        "planner": {"std": 0.05, "noise": "absolute", "std_final": None},
+        # "For RL training with SAC, we use its default hyperparameters": SAC's initial temperature 1.
+        "initial_alpha": 1.0,
+    },
+    # Not a reading but the baseline CO-PILOT must beat: the same learner, replay and evaluation with
+    # no planner (tree depth 0), one episode per task with the step budget of a finest traversal
+    # (2^5 sub-tasks x 25 steps).
+    "plain_sac": {**_DEFAULT_READINGS, "tree_depth": 0, "tau_max": 800},
+}
+assert tuple(PRESETS) == PRESET_NAMES
+
+# ------------------------------------------------------------------------------------------ metrics
+# What a CO-PILOT run logs that a sweep may optimise or stop on; `<k>` is a tree layer (0..K).
+METRICS: tuple[str, ...] = (
+    keys.SUCCESS_PLANNED,
+    keys.SUCCESS_DIRECT,
+    keys.ALPHA,
+    keys.PLANNER_COST_LAYER + "<k>",
+    keys.PLANNER_APPROX_KL_MAX,
+    keys.PLANNER_NONFINITE_SKIPPED,
+    keys.AGENT_STEPS_LAYER + "<k>",
+    keys.AGENT_SUCCESS_LAYER + "<k>",
+    keys.DTAU_SIZE,
+    keys.COST_MODEL_LOSS,
+    keys.ENV_STEPS,
+    "env_runners/episode_return_mean",  # RLlib's
+)
+
+
+# ------------------------------------------------------------------------- from values to a config
+def alpha_schedule_from(values: Mapping[str, Any]) -> Any:
+    """The alpha schedule (preset name or dict) that flat `values` ask for; None: the default.
+
+    `alpha_schedule.kind` builds the schedule from the dotted fields alone; otherwise the dotted fields
+    override `alpha_schedule` (or its default preset).
+    """
+    dotted = {k.split(".", 1)[1]: v for k, v in values.items() if k.startswith("alpha_schedule.")}
+    whole = values.get("alpha_schedule")
+    if not dotted:
+        return whole
+    if "kind" in dotted:
+        return dotted
+    base = AlphaSchedule.from_dict(whole if whole is not None else SETTINGS["alpha_schedule"].default)
+    return {**base.to_dict(), **dotted}
+
+
+def combination_problems(values: Mapping[str, Any]) -> list[tuple[tuple[str, ...], Any, str]]:
+    """Values valid one by one that clash together: (the keys involved, their values, why)."""
+    out: list[tuple[tuple[str, ...], Any, str]] = []
+    both = ("updates_per_env_step", "training_intensity")
+    if all(values.get(k) is not None for k in both):
+        out.append((both, {k: values[k] for k in both}, "both set the update-to-data ratio; set one"))
+    if "alpha_schedule" in values and "alpha_schedule.kind" in values:
+        out.append(
+            (
+                ("alpha_schedule", "alpha_schedule.kind"),
+                values["alpha_schedule.kind"],
+                "give either alpha_schedule (preset or mapping) or alpha_schedule.kind with its fields, not both",
+            )
+        )
+    elif any(k.startswith("alpha_schedule") for k in values):
+        try:
+            AlphaSchedule.from_dict(alpha_schedule_from(values))
+        except (ValueError, TypeError) as err:
+            involved = tuple(k for k in values if k.startswith("alpha_schedule"))
+            out.append(
+                (
+                    involved,
+                    {k: values[k] for k in involved},
+                    f"these alpha_schedule keys do not form a schedule: {err}",
+                )
+            )
+    return out
+
+
+# ------------------------------------------------------------------------------------ README tables
+def _paper_value(setting: Setting) -> str:
+    paper = PRESETS["paper_literal"]
+    if setting.target == "planner":
+        return markdown_value(paper.get("planner", {}).get(setting.field, setting.default))
+    return markdown_value(paper.get(setting.key, setting.default))
+
+
+def readings_table() -> str:
+    """The README's "Readings of the paper" table: the settings with a measured reason for their default."""
+    rows = [
+        "| setting | `paper_literal` | default | why the default (four-rooms, K = 5, single-seed probes, see below) |",
+        "|---|---|---|---|",
+    ]
+    rows += [
+        f"| `{s.key}` | {_paper_value(s)} | {markdown_value(s.default)} | {s.why} |"
+        for s in SETTINGS.values()
+        if s.why
+    ]
+    return "\n".join(rows)
+
+
+def settings_table() -> str:
+    """The README's table of every setting, by concern."""
+    rows = ["| setting | default | allowed | what |", "|---|---|---|---|"]
+    for group, settings in GROUPS.items():
+        rows.append(f"| **{group}** | | | |")
+        for s in settings:
+            field_of_schedule = s.target == "alpha_schedule" and s.key != "alpha_schedule"
+            default = "(the schedule's)" if field_of_schedule else markdown_value(s.default)
+            rows.append(f"| `{s.key}` | {default} | {s.rule} | {s.doc} |")
+    return "\n".join(rows)
+
+
+_GENERATED = "(generated: python -m copilot_ray.algorithms.copilot.settings --write README.md)"
+README_TABLES = {
+    f"<!-- readings-table:begin {_GENERATED} -->": ("<!-- readings-table:end -->", readings_table),
+    f"<!-- settings-table:begin {_GENERATED} -->": ("<!-- settings-table:end -->", settings_table),
+}
+
+
+def render_readme(text: str) -> str:
+    """`text` (the README) with both generated tables replaced by the current ones."""
+    for begin, (end, table) in README_TABLES.items():
+        text = replace_between(text, begin, end, table())
+    return text
+
+
+if __name__ == "__main__":
+    import argparse
+    from pathlib import Path
+
+    parser = argparse.ArgumentParser(
+        description="Print CO-PILOT's settings tables, or write them into a README."
+    )
+    parser.add_argument(
+        "--write", metavar="README", help="replace the tables between the markers in this file"
+    )
+    args = parser.parse_args()
+    if args.write:
+        path = Path(args.write)
+        path.write_text(render_readme(path.read_text()))
+        print(f"wrote the settings tables into {path}")
+    else:
+        print(readings_table() + "\n\n" + settings_table())

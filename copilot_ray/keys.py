@@ -1,0 +1,127 @@
+"""Names that more than one module spells, defined once: metric keys, MLflow tags, Tune config keys and
+artifact names.
+
+Metric keys are the ``/``-joined paths of an RLlib result (``result["copilot"]["eval"]["success_planned"]``
+is ``copilot/eval/success_planned``), which is also the name MLflow stores the metric under. Keys ending
+in ``_layer_`` take a tree layer k = 0..K appended (``PLANNER_COST_LAYER + "3"``). ``metric_path`` turns a
+key into the tuple ``MetricsLogger.log_value`` / ``peek`` take; ``result_value`` reads a key from a nested
+or a flattened result.
+
+Standard library only: the spec checks, ``--check`` and the analysis import this without Ray or torch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+# ================================================================================================ results
+# RLlib / Tune: the x axis of every curve (MLflow's `step`), Tune's time attribute and stop criterion.
+ENV_STEPS = "env_runners/num_env_steps_sampled_lifetime"
+TRAINING_ITERATION = "training_iteration"
+TIME_TOTAL_S = "time_total_s"
+
+# CO-PILOT's own metrics (copilot_ray.algorithms.copilot), all under "copilot/".
+COPILOT_PREFIX = "copilot/"
+ALPHA = "copilot/alpha"
+DTAU_SIZE = "copilot/dtau/size"
+COST_MODEL_LOSS = "copilot/cost_model/loss"
+PLANNING_SHARE = "copilot/time/planning_share"
+
+# Evaluation on the held-out test tasks: the headline action's figures, and per action mode
+# (`eval_by_action`: copilot/eval/<action>/<name>).
+EVAL_PREFIX = "copilot/eval/"
+SUCCESS_PLANNED = "copilot/eval/success_planned"
+SUCCESS_DIRECT = "copilot/eval/success_direct"
+SUCCESS_METRICS = (SUCCESS_PLANNED, SUCCESS_DIRECT)
+REACHED_PLANNED = "copilot/eval/reached_planned"
+SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"
+PLANNED_COLLISION_FREE = "copilot/eval/planned_collision_free"
+# Set by the sweep's trial on every result: 1 when this iteration evaluated, 0 when the success
+# metrics repeat the last evaluation.
+EVAL_FRESH = "copilot/eval/fresh"
+EVAL_ACTIONS = ("deterministic", "sampled")
+
+# The planner (PPO over sub-goal trees).
+PLANNER_COST_LAYER = "copilot/planner/cost_layer_"
+PLANNER_APPROX_KL_MAX = "copilot/planner/approx_kl_max"
+PLANNER_NONFINITE_SKIPPED = "copilot/planner/nonfinite_skipped"
+
+# The agent's traversals during training.
+AGENT_STEPS_LAYER = "copilot/agent/steps_layer_"
+AGENT_SUCCESS_LAYER = "copilot/agent/success_layer_"
+AGENT_SUBTASK_SUCCESS_LAYER = "copilot/agent/subtask_success_layer_"
+
+# Diagnostics (copilot_ray.algorithms.copilot.diagnostics): why a run does (not) learn.
+DIAG_PREFIX = "copilot/diag/"
+DIAG_Q_MEAN = "copilot/diag/q_mean"
+DIAG_SUCCESS_AFTER_REACHED = "copilot/diag/success_after_reached"
+DIAG_SUCCESS_AFTER_FAILED = "copilot/diag/success_after_failed"
+DIAG_SUBGOAL_IN_OBSTACLE_LAYER = "copilot/diag/subgoal_in_obstacle_layer_"
+DIAG_SEGMENT_LENGTH_LAYER = "copilot/diag/segment_length_layer_"
+DIAG_REACHABLE_LENGTH_LAYER = "copilot/diag/reachable_length_layer_"
+DIAG_SEGMENT_UNREACHABLE_LAYER = "copilot/diag/segment_unreachable_layer_"
+
+# ================================================================================================ MLflow
+# Tags of a sweep's runs (copilot_ray.tracking writes them, analysis.load reads them).
+SWEEP_TAG = "copilot.sweep"
+ROLE_TAG = "copilot.role"
+ROLE_SWEEP = "sweep"  # ROLE_TAG of the parent run, one per sweep
+ROLE_TRIAL = "trial"  # ROLE_TAG of a child run, one per trial
+TRIAL_ID_TAG = "copilot.trial_id"
+CONFIG_KEY_TAG = "copilot.config_key"
+TUNE_PATH_TAG = "copilot.tune_path"
+PARENT_TAG = "mlflow.parentRunId"
+GIT_COMMIT_TAG = "git_commit"
+SEED_TAG = "seed"
+# The axes a run is labelled by (sweep child runs and `python -m copilot_ray.train` runs).
+ALGORITHM_TAG = "algorithm"
+ENV_TAG = "env"
+K_TAG = "K"
+B_TAG = "b"
+ALPHA_SCHEDULE_TAG = "alpha_schedule"
+PRESET_TAG = "preset"
+VARIANT_TAG = "variant"
+AXIS_TAGS = (ALGORITHM_TAG, ENV_TAG, VARIANT_TAG, PRESET_TAG, K_TAG, B_TAG, ALPHA_SCHEDULE_TAG)  # label order
+
+# Artifacts. TREES_DIR is also the folder the algorithm writes under its logdir.
+TREES_DIR = "copilot_trees"
+CHECKPOINT_ARTIFACT = "checkpoint"
+CONFIG_ARTIFACT = "config.yaml"
+ERROR_ARTIFACT = "error"
+SPEC_ARTIFACT = "spec.yaml"
+RESOLVED_SPEC_ARTIFACT = "spec.resolved.yaml"
+SUMMARY_ARTIFACT = "summary.md"
+REPORT_ARTIFACT = "report"
+
+# ================================================================================================ Tune
+# Keys of a sweep trial's flat Tune config besides the searched dotted params.
+SPEC_PATH_KEY = "_spec_path"  # the (resolved) spec the trial belongs to
+SEED_PARAM = "seed"  # also the MLflow param
+VARIANT_PARAM = "variant"
+
+
+# ================================================================================================ helpers
+def metric_path(key: str) -> tuple[str, ...]:
+    """``"copilot/eval/success_planned"`` -> ``("copilot", "eval", "success_planned")``."""
+    return tuple(key.split("/"))
+
+
+def eval_by_action(key: str, action: str) -> str:
+    """An evaluation key for one action mode: ``copilot/eval/success_planned`` ->
+    ``copilot/eval/<action>/success_planned``."""
+    if not key.startswith(EVAL_PREFIX):
+        raise ValueError(f"{key!r} is not an evaluation metric ({EVAL_PREFIX}...)")
+    return f"{EVAL_PREFIX}{action}/{key[len(EVAL_PREFIX) :]}"
+
+
+def result_value(result: Mapping[str, Any], key: str, default: Any = None) -> Any:
+    """``result['a/b/c']`` from a nested or a flattened result."""
+    if key in result:
+        return result[key]
+    node: Any = result
+    for part in key.split("/"):
+        if not isinstance(node, Mapping) or part not in node:
+            return default
+        node = node[part]
+    return node

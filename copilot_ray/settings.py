@@ -1,0 +1,217 @@
+"""A setting of an algorithm, declared once: key, type, default, rule and a one-line doc.
+
+An algorithm's module lists its settings (`copilot_ray.algorithms.copilot.settings.SETTINGS`); the
+config's validation, the sweep spec's keys and ranges, the command line and the README's settings table
+are all read off that list, so a rule cannot disagree between them.
+
+No Ray, numpy or torch here: sweep specs are validated against settings before anything starts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+# What a search domain may produce for a setting of each kind (an int range fits a float setting too).
+SETTING_KINDS = ("int", "float", "bool", "str", "list", "schedule")
+
+
+def is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One setting. `check(value)` is its rule and `rule` says it in words ("must be <rule>").
+
+    key: its name everywhere (config attribute, spec key, CLI flag); a dotted key is one field of a
+    nested dict (`planner.std` is `config.planner["std"]`). target: where the algorithm's
+    config class puts it (the algorithm's settings module documents its targets).
+    """
+
+    key: str
+    kind: str  # one of SETTING_KINDS
+    target: str
+    default: Any
+    doc: str
+    check: Callable[[Any], bool] = field(repr=False, compare=False)
+    rule: str
+    choices: tuple[Any, ...] = ()  # kind "str": the allowed values
+    why: str = ""  # why this default, when it departs from or decides a reading of the paper
+    on_cli: bool = True  # offered as a `python -m copilot_ray.train` flag
+
+    @property
+    def field(self) -> str:
+        """The name inside its target: `std` for `planner.std`, the key otherwise."""
+        return self.key.split(".", 1)[1] if "." in self.key else self.key
+
+    @property
+    def flag(self) -> str:
+        """The command-line flag: `planner.std_final` -> `--planner-std-final`."""
+        return "--" + self.key.replace(".", "-").replace("_", "-")
+
+    def problem(self, value: Any) -> str | None:
+        """None when `value` is allowed, else "must be <rule>"."""
+        try:
+            ok = bool(self.check(value))
+        except (TypeError, ValueError):
+            ok = False
+        return None if ok else f"must be {self.rule}"
+
+
+def int_setting(
+    key: str,
+    target: str,
+    default: Any,
+    doc: str,
+    lo: int,
+    hi: int | None = None,
+    *,
+    note: str = "",
+    **kw: Any,
+) -> Setting:
+    """An integer in [lo, hi] (hi None: no upper bound); `note` follows the rule in messages."""
+    rule = (f"an integer in [{lo}, {hi}]" if hi is not None else f"an integer >= {lo}") + note
+    return Setting(
+        key,
+        "int",
+        target,
+        default,
+        doc,
+        lambda v: is_int(v) and v >= lo and (hi is None or v <= hi),
+        rule,
+        **kw,
+    )
+
+
+def float_setting(
+    key: str,
+    target: str,
+    default: Any,
+    doc: str,
+    lo: float,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    optional: bool = False,
+    **kw: Any,
+) -> Setting:
+    """A finite number in a range; `optional`: null (None, "off") too."""
+
+    def check(v: Any) -> bool:
+        if v is None:
+            return optional
+        if not is_number(v):
+            return False
+        above = v > lo if lo_open else v >= lo
+        below = True if hi is None else (v < hi if hi_open else v <= hi)
+        return above and below
+
+    if hi is None:
+        rule = f"a number {'>' if lo_open else '>='} {lo:g}"
+    else:
+        rule = f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    rule += " or null (off)" if optional else ""
+    return Setting(key, "float", target, default, doc, check, rule, **kw)
+
+
+def bool_setting(key: str, target: str, default: bool, doc: str, **kw: Any) -> Setting:
+    return Setting(key, "bool", target, default, doc, lambda v: isinstance(v, bool), "true or false", **kw)
+
+
+def choice_setting(
+    key: str,
+    target: str,
+    default: Any,
+    doc: str,
+    choices: tuple[str, ...],
+    *,
+    optional: bool = False,
+    **kw: Any,
+) -> Setting:
+    """One of `choices`; `optional`: null too."""
+    rule = f"one of {list(choices)}" + (" or null" if optional else "")
+    return Setting(
+        key,
+        "str",
+        target,
+        default,
+        doc,
+        lambda v: v in choices or (optional and v is None),
+        rule,
+        choices=choices,
+        **kw,
+    )
+
+
+def sizes_setting(key: str, target: str, default: list[int], doc: str, **kw: Any) -> Setting:
+    """Hidden layer sizes: a non-empty list of positive integers."""
+    return Setting(
+        key,
+        "list",
+        target,
+        default,
+        doc,
+        lambda v: isinstance(v, list) and len(v) > 0 and all(is_int(x) and x >= 1 for x in v),
+        "a non-empty list of integers >= 1 (hidden layer sizes)",
+        **kw,
+    )
+
+
+def numbers_setting(
+    key: str,
+    target: str,
+    default: Any,
+    doc: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    what: str = "numbers",
+    **kw: Any,
+) -> Setting:
+    """A list of finite numbers, each in [lo, hi]."""
+
+    def check(v: Any) -> bool:
+        return isinstance(v, list) and all(
+            is_number(x) and (lo is None or x >= lo) and (hi is None or x <= hi) for x in v
+        )
+
+    return Setting(key, "list", target, default, doc, check, f"a list of {what}", **kw)
+
+
+def markdown_value(value: Any) -> str:
+    """A setting's value as a README table cell."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"`{str(value).lower()}`"
+    return f"`{value}`"
+
+
+def replace_between(text: str, begin: str, end: str, body: str) -> str:
+    """`text` with what lies between the marker lines `begin` and `end` replaced by `body`."""
+    head, sep, rest = text.partition(begin)
+    if not sep:
+        raise ValueError(f"no {begin!r} marker")
+    _, sep, tail = rest.partition(end)
+    if not sep:
+        raise ValueError(f"no {end!r} marker after {begin!r}")
+    return f"{head}{begin}\n{body}\n{end}{tail}"
+
+
+def problems(settings: Mapping[str, Setting], values: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
+    """(key, value, message) for every value that is not a setting or breaks its setting's rule."""
+    out = []
+    for key, value in values.items():
+        setting = settings.get(key)
+        if setting is None:
+            out.append((key, value, "unknown key"))
+        elif (msg := setting.problem(value)) is not None:
+            out.append((key, value, msg))
+    return out

@@ -1,0 +1,701 @@
+"""The sweep spec's schema (pydantic models) and its validation, section by section and across sections."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+
+from copilot_ray import keys
+from copilot_ray.algorithms.registry import (
+    ALGORITHMS,
+    AlgorithmEntry,
+    RunContext,
+    UnknownAlgorithmError,
+    algorithm_names,
+    get_algorithm,
+)
+from copilot_ray.envs import env_ids, make
+from copilot_ray.settings import Setting, is_int, is_number
+from copilot_ray.settings import problems as setting_problems
+from copilot_ray.spec.errors import Issue, Issues, SpecError, did_you_mean, short
+from copilot_ray.spec.yaml_loader import read_yaml_file
+
+# `<k>` in an algorithm's METRICS is a tree layer: 0..10, the deepest tree any setting allows.
+MAX_LAYER = 10
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, populate_by_name=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            known = [f.alias or n for n, f in cls.model_fields.items()]
+            unknown = [k for k in data if k not in known]
+            if unknown:
+                raise Issues(
+                    [
+                        Issue(
+                            str(k),
+                            data[k],
+                            f"unknown key{did_you_mean(str(k), known)} (known keys: {', '.join(known)})",
+                            show_value=False,
+                        )
+                        for k in unknown
+                    ]
+                )
+        return data
+
+
+class ParamSearch(_Model):
+    """One searched parameter: exactly one of grid / int / float / categorical."""
+
+    grid: list[Any] | None = None
+    int_: list[int] | None = Field(default=None, alias="int")
+    float_: list[float] | None = Field(default=None, alias="float")
+    categorical: list[Any] | None = None
+    log: bool = False
+    step: int | float | None = None
+    when: dict[str, dict[str, ParamSearch]] | None = None
+
+    @property
+    def domain(self) -> str:
+        for name in ("grid", "int", "float", "categorical"):
+            if self.values_of(name) is not None:
+                return name
+        raise AssertionError("validated ParamSearch has a domain")
+
+    def values_of(self, name: str) -> list[Any] | None:
+        return {"grid": self.grid, "int": self.int_, "float": self.float_, "categorical": self.categorical}[
+            name
+        ]
+
+    @property
+    def values(self) -> list[Any]:
+        return list(self.values_of(self.domain) or [])
+
+    @model_validator(mode="after")
+    def _one_domain(self) -> ParamSearch:
+        given = [n for n in ("grid", "int", "float", "categorical") if self.values_of(n) is not None]
+        if len(given) != 1:
+            raise Issue(
+                "",
+                None,
+                "give exactly one of grid, int, float, categorical"
+                + (f" (got {', '.join(given)})" if given else ""),
+                show_value=False,
+            )
+        domain = given[0]
+        values = self.values_of(domain)
+        issues: list[Issue] = []
+        if domain in ("grid", "categorical"):
+            if not values:
+                issues.append(Issue(domain, values, f"an empty {domain} has nothing to run; list >= 1 value"))
+            dupes = [v for i, v in enumerate(values) if v in values[:i]]
+            if dupes:
+                issues.append(Issue(domain, values, f"duplicate value {dupes[0]!r} would run twice"))
+            if self.log or self.step is not None:
+                issues.append(Issue(domain, values, "log and step apply to int and float ranges only"))
+        else:
+            if len(values) != 2:
+                issues.append(Issue(domain, values, f"{domain} takes [low, high]"))
+            else:
+                low, high = values
+                if low > high:
+                    issues.append(Issue(domain, values, f"low {low!r} > high {high!r}"))
+                if self.log and low <= 0:
+                    issues.append(Issue(domain, values, f"a log range needs low > 0, got low {low!r}"))
+            if self.step is not None:
+                if domain == "int" and not (is_int(self.step) and self.step >= 1):
+                    issues.append(Issue("step", self.step, "an int range's step must be an integer >= 1"))
+                if domain == "float" and not (is_number(self.step) and self.step > 0):
+                    issues.append(Issue("step", self.step, "step must be a number > 0"))
+                if self.log and self.step != 1 and domain == "int" or self.log and domain == "float":
+                    issues.append(Issue("step", self.step, "log ranges cannot have a step (Optuna)"))
+        if self.when is not None:
+            if domain != "categorical":
+                issues.append(
+                    Issue("when", None, "conditional parameters need a categorical domain", show_value=False)
+                )
+            else:
+                labels = [str(v) for v in values]
+                for choice in self.when:
+                    if choice not in labels:
+                        issues.append(
+                            Issue(
+                                f"when.{choice}",
+                                choice,
+                                f"not one of the categorical values {labels}{did_you_mean(choice, labels)}",
+                            )
+                        )
+        if issues:
+            raise Issues(issues)
+        return self
+
+    def describe(self) -> str:
+        d = self.domain
+        if d in ("grid", "categorical"):
+            return f"{d} {self.values}"
+        extra = (" log" if self.log else "") + (f" step {self.step}" if self.step is not None else "")
+        return f"{d} [{self.values[0]}, {self.values[1]}]{extra}"
+
+
+class EnvSpec(_Model):
+    id: str
+    config: dict[str, Any] = Field(default_factory=dict)
+
+
+class SearcherSpec(_Model):
+    type: Literal["grid", "optuna"] = "grid"
+    sampler: Literal["tpe", "random", "cmaes"] | None = None
+    metric: str | None = None
+    mode: Literal["max", "min"] | None = None
+    num_samples: int | None = None
+    seed: int | None = None
+
+    @model_validator(mode="after")
+    def _per_type(self) -> SearcherSpec:
+        issues = []
+        if self.type == "grid":
+            for key in ("sampler", "num_samples", "seed"):
+                if getattr(self, key) is not None:
+                    issues.append(Issue(key, getattr(self, key), "only an optuna searcher takes it"))
+        else:
+            self.sampler = self.sampler or "tpe"
+            if self.metric is None:
+                issues.append(Issue("metric", None, "an optuna searcher needs the metric it optimises"))
+            if self.mode is None:
+                issues.append(Issue("mode", None, "an optuna searcher needs mode: max or min"))
+            if self.num_samples is None or self.num_samples < 1:
+                issues.append(Issue("num_samples", self.num_samples, "must be an integer >= 1"))
+            if self.seed is None:
+                self.seed = 0
+        if (self.metric is None) != (self.mode is None) and self.type == "grid":
+            issues.append(
+                Issue("mode" if self.mode is None else "metric", None, "give metric and mode together")
+            )
+        if issues:
+            raise Issues(issues)
+        return self
+
+
+class SchedulerSpec(_Model):
+    """Early stopping under Tune; time is measured in environment steps (keys.ENV_STEPS)."""
+
+    type: Literal["asha", "median_stopping"]
+    max_t: int | None = None
+    grace_period: int | None = None
+    reduction_factor: float | None = None
+    min_samples_required: int | None = None
+
+    @model_validator(mode="after")
+    def _per_type(self) -> SchedulerSpec:
+        issues = []
+        own = {
+            "asha": ("max_t", "grace_period", "reduction_factor"),
+            "median_stopping": ("grace_period", "min_samples_required"),
+        }
+        for key in ("max_t", "grace_period", "reduction_factor", "min_samples_required"):
+            if key not in own[self.type] and getattr(self, key) is not None:
+                issues.append(Issue(key, getattr(self, key), f"does not apply to type {self.type}"))
+        if self.type == "asha":
+            if self.max_t is None or self.max_t < 1:
+                issues.append(Issue("max_t", self.max_t, "ASHA needs max_t >= 1 (environment steps)"))
+            self.grace_period = 1 if self.grace_period is None else self.grace_period
+            self.reduction_factor = 3.0 if self.reduction_factor is None else self.reduction_factor
+            if self.reduction_factor <= 1:
+                issues.append(Issue("reduction_factor", self.reduction_factor, "must be > 1"))
+        else:
+            self.grace_period = 1 if self.grace_period is None else self.grace_period
+            self.min_samples_required = 3 if self.min_samples_required is None else self.min_samples_required
+            if self.min_samples_required < 1:
+                issues.append(Issue("min_samples_required", self.min_samples_required, "must be >= 1"))
+        if self.grace_period < 1:
+            issues.append(Issue("grace_period", self.grace_period, "must be >= 1 (environment steps)"))
+        elif self.max_t is not None and self.max_t >= 1 and self.grace_period > self.max_t:
+            issues.append(Issue("grace_period", self.grace_period, f"must be <= max_t ({self.max_t})"))
+        if issues:
+            raise Issues(issues)
+        return self
+
+
+class StopSpec(_Model):
+    env_steps: int | None = None
+    iterations: int | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> StopSpec:
+        if self.env_steps is None and self.iterations is None:
+            raise Issue("", None, "give env_steps and/or iterations", show_value=False)
+        issues = [
+            Issue(k, getattr(self, k), "must be an integer >= 1")
+            for k in ("env_steps", "iterations")
+            if getattr(self, k) is not None and getattr(self, k) < 1
+        ]
+        if issues:
+            raise Issues(issues)
+        return self
+
+
+class ResourcesSpec(_Model):
+    max_concurrent_trials: int = 1
+    num_env_runners: int = 0
+    cpus_per_trial: int | None = None
+
+    @model_validator(mode="after")
+    def _sizes(self) -> ResourcesSpec:
+        issues = []
+        if self.max_concurrent_trials < 1:
+            issues.append(Issue("max_concurrent_trials", self.max_concurrent_trials, "must be >= 1"))
+        if self.num_env_runners < 0:
+            issues.append(Issue("num_env_runners", self.num_env_runners, "must be >= 0"))
+        need = 1 + max(self.num_env_runners, 0)
+        if self.cpus_per_trial is None:
+            self.cpus_per_trial = need
+        elif self.cpus_per_trial < need:
+            issues.append(
+                Issue(
+                    "cpus_per_trial",
+                    self.cpus_per_trial,
+                    f"a trial needs 1 CPU for its driver + 1 per env runner = {need}",
+                )
+            )
+        if issues:
+            raise Issues(issues)
+        return self
+
+
+class TrackingSpec(_Model):
+    uri: str | None = None
+    storage: str = "results/"
+
+
+class SweepSpec(_Model):
+    name: str
+    experiment: str | None = None
+    description: str | None = None
+    env: EnvSpec
+    algorithm: str = "copilot"
+    config: dict[str, Any] = Field(default_factory=dict)
+    variants: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    search: dict[str, ParamSearch] = Field(default_factory=dict)
+    seeds: list[int] = Field(default_factory=lambda: [0])
+    searcher: SearcherSpec = Field(default_factory=SearcherSpec)
+    scheduler: SchedulerSpec | None = None
+    stop: StopSpec
+    resources: ResourcesSpec = Field(default_factory=ResourcesSpec)
+    tracking: TrackingSpec = Field(default_factory=TrackingSpec)
+
+    _source: str = PrivateAttr(default="<spec>")
+
+    # ------------------------------------------------------------------ validation across sections
+    @model_validator(mode="after")
+    def _check(self) -> SweepSpec:
+        issues: list[Issue] = []
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", self.name):
+            issues.append(Issue("name", self.name, "use letters, digits, '_', '-', '.' (it names a folder)"))
+        self.experiment = self.experiment or self.name
+        try:
+            entry = get_algorithm(self.algorithm)
+        except UnknownAlgorithmError:
+            names = algorithm_names()
+            issues.append(
+                Issue(
+                    "algorithm",
+                    self.algorithm,
+                    f"unknown algorithm{did_you_mean(self.algorithm, names)}; known: {names}",
+                )
+            )
+            raise Issues(issues) from None
+        issues += self._check_env()
+        issues += self._check_config(entry.settings)
+        issues += self._check_variants(entry.settings)
+        issues += self._check_search(entry.settings)
+        issues += self._check_seeds()
+        issues += self._check_searcher(entry)
+        if not issues:
+            issues += self._check_combinations(entry)
+        storage = Path(self.tracking.storage).expanduser().resolve()
+        self.tracking.storage = str(storage)
+        if self.tracking.uri is None:
+            self.tracking.uri = f"sqlite:///{storage / self.name / 'mlflow.db'}"
+        if issues:
+            raise Issues(issues)
+        return self
+
+    def _check_env(self) -> list[Issue]:
+        ids = env_ids()
+        if self.env.id not in ids:
+            return [
+                Issue("env.id", self.env.id, f"unknown env id{did_you_mean(self.env.id, ids)}; known: {ids}")
+            ]
+        try:
+            make(self.env.id, **self.env.config).close()
+        except Exception as err:  # noqa: BLE001 - any failure to build is a spec error, named below
+            path = "env.config"
+            text = str(err)
+            named = [
+                k
+                for k, v in self.env.config.items()
+                if f"'{k}'" in text or f"{k}=" in text or f"{k} {v!r}" in text
+            ]
+            if named:
+                path = f"env.config.{named[0]}"
+            elif type(err).__name__ == "LayoutError" and "layout" in self.env.config:
+                path = "env.config.layout"
+            value = self.env.config.get(path[len("env.config.") :], self.env.config)
+            return [Issue(path, value, f"building env {self.env.id!r} failed: {type(err).__name__}: {text}")]
+        return []
+
+    def _check_config(self, knobs: Mapping[str, Setting]) -> list[Issue]:
+        issues = []
+        for key, value in self.config.items():
+            if key not in knobs:
+                issues.append(
+                    Issue(
+                        f"config.{key}",
+                        value,
+                        f"unknown key{did_you_mean(key, knobs)} (known keys: the SETTINGS of {ALGORITHMS[self.algorithm]})",
+                        show_value=False,
+                    )
+                )
+            elif msg := rule_problem(key, knobs[key], value):
+                issues.append(Issue(f"config.{key}", value, msg))
+        if "seed" in self.config:
+            issues.append(
+                Issue("config.seed", self.config["seed"], "seeds are set by the top-level `seeds` list")
+            )
+        if "alpha_schedule" in self.config and "alpha_schedule.kind" in self.config:
+            issues.append(
+                Issue(
+                    "config.alpha_schedule.kind",
+                    self.config["alpha_schedule.kind"],
+                    "give either alpha_schedule (preset or mapping) or alpha_schedule.kind with its fields, not both",
+                )
+            )
+        return issues
+
+    def _check_variants(self, knobs: Mapping[str, Setting]) -> list[Issue]:
+        issues = []
+        if self.variants and self.searcher.type != "grid":
+            issues.append(Issue("variants", list(self.variants), "variants need searcher type: grid"))
+        for name, overrides in self.variants.items():
+            if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
+                issues.append(Issue(f"variants.{name}", name, "use letters, digits, '_', '-', '.'"))
+            if not isinstance(overrides, dict):
+                issues.append(Issue(f"variants.{name}", overrides, "must be a mapping of config keys"))
+                continue
+            for key, value in overrides.items():
+                path = f"variants.{name}.{key}"
+                if key not in knobs:
+                    issues.append(
+                        Issue(path, value, f"unknown key{did_you_mean(key, knobs)}", show_value=False)
+                    )
+                elif msg := rule_problem(key, knobs[key], value):
+                    issues.append(Issue(path, value, msg))
+                elif key in self.search:
+                    issues.append(Issue(path, value, f"{key} is also searched; keep one"))
+        return issues
+
+    def _check_search(self, knobs: Mapping[str, Setting]) -> list[Issue]:
+        issues: list[Issue] = []
+        seen: dict[str, str] = {}
+
+        def walk(params: Mapping[str, ParamSearch], prefix: str, fixed_here: set[str]) -> None:
+            for key, ps in params.items():
+                path = f"{prefix}.{key}"
+                if key not in knobs:
+                    issues.append(
+                        Issue(path, key, f"unknown key{did_you_mean(key, knobs)}", show_value=False)
+                    )
+                    continue
+                if key in self.config:
+                    issues.append(
+                        Issue(path, key, f"{key} is also fixed in config; keep one", show_value=False)
+                    )
+                if key in fixed_here:
+                    issues.append(
+                        Issue(path, key, f"{key} is already searched at {seen[key]}", show_value=False)
+                    )
+                seen.setdefault(key, path)
+                issues.extend(_check_domain(key, ps, knobs[key], path))
+                if ps.when:
+                    for choice, branch in ps.when.items():
+                        walk(branch, f"{path}.when.{choice}", fixed_here | set(params))
+                if key == "alpha_schedule.kind" and (
+                    "alpha_schedule" in self.config or "alpha_schedule" in self.search
+                ):
+                    issues.append(
+                        Issue(
+                            path,
+                            key,
+                            "searching alpha_schedule.kind excludes alpha_schedule",
+                            show_value=False,
+                        )
+                    )
+
+        walk(self.search, "search", set())
+        return issues
+
+    def _check_seeds(self) -> list[Issue]:
+        if not self.seeds:
+            return [Issue("seeds", self.seeds, "list at least one seed")]
+        issues = [Issue(f"seeds[{i}]", s, "seeds must be >= 0") for i, s in enumerate(self.seeds) if s < 0]
+        dupes = [s for i, s in enumerate(self.seeds) if s in self.seeds[:i]]
+        if dupes:
+            issues.append(
+                Issue("seeds", self.seeds, f"duplicate seed {dupes[0]} would run the same trial twice")
+            )
+        return issues
+
+    def _check_searcher(self, entry: AlgorithmEntry) -> list[Issue]:
+        issues = []
+        s = self.searcher
+        for path, metric in (("searcher.metric", s.metric),):
+            if metric is not None and not metric_known(metric, entry.metrics):
+                names = [m.replace("<k>", "0") for m in entry.metrics]
+                issues.append(
+                    Issue(
+                        path,
+                        metric,
+                        f"{self.algorithm} does not log this metric{did_you_mean(metric, names)}; "
+                        f"it logs {list(entry.metrics)}",
+                    )
+                )
+        for key, ps in _all_params(self.search):
+            if s.type == "grid" and ps.domain != "grid":
+                issues.append(
+                    Issue(f"search.{key}", ps.domain, "a grid searcher needs every domain to be grid")
+                )
+            if s.type == "optuna" and ps.domain == "grid":
+                issues.append(
+                    Issue(
+                        f"search.{key}",
+                        "grid",
+                        "an optuna searcher samples; use categorical (or searcher type: grid)",
+                    )
+                )
+        if s.type == "optuna" and not self.search:
+            issues.append(Issue("search", {}, "an optuna searcher needs at least one searched parameter"))
+        if self.scheduler is not None and s.metric is None:
+            issues.append(
+                Issue("scheduler", self.scheduler.type, "a scheduler needs searcher.metric and searcher.mode")
+            )
+        return issues
+
+    def _check_combinations(self, entry: AlgorithmEntry) -> list[Issue]:
+        """Keys valid one by one can clash together (an alpha schedule missing a field): try them."""
+        points = self.grid_points() if self.searcher.type == "grid" else _representative_points(self.search)
+        issues: list[Issue] = []
+        reported: set[str] = set()
+        for point in points:
+            for involved, value, why in entry.combination_problems(self.merged(point)):
+                if why in reported:  # the same clash at every grid point: say it once
+                    continue
+                reported.add(why)
+                where = "search" if set(involved) & set(point) else "config"
+                issues.append(Issue(where, value, why))
+        return issues
+
+    # ------------------------------------------------------------------ the plan
+    @property
+    def source(self) -> str:
+        return self._source
+
+    @property
+    def searched_keys(self) -> list[str]:
+        return [k for k, _ in _all_params(self.search)]
+
+    @property
+    def has_conditional_params(self) -> bool:
+        return any(ps.when for _, ps in _all_params(self.search))
+
+    def grid_points(self) -> list[dict[str, Any]]:
+        keys = list(self.search)
+        values = [self.search[k].values for k in keys]
+        points = [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*values)]
+        return self._with_variants(points)
+
+    def _with_variants(self, points: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        if not self.variants:
+            return points
+        return [
+            {"variant": name, **p} for name in self.variants for p in points if "variant" not in p
+        ] or points
+
+    def merged(self, point: Mapping[str, Any]) -> dict[str, Any]:
+        """A trial's effective fixed keys: ``config``, its variant's overrides, then its own values."""
+        rest = {k: v for k, v in point.items() if k not in ("variant", "seed")}
+        return {**self.config, **self.variants.get(point.get("variant"), {}), **rest}
+
+    def num_configurations(self) -> int:
+        if self.searcher.type == "grid":
+            return max(1, len(self.variants)) * math.prod(len(ps.values) for ps in self.search.values())
+        return int(self.searcher.num_samples or 0)
+
+    def trial_plan(self) -> list[dict[str, Any]]:
+        """Every trial, in order: configurations x seeds.
+
+        grid: the cartesian product of the grid values (YAML order, last key fastest), each a flat dict
+        of dotted keys -> value plus ``seed``; the fixed ``config`` is not repeated (build_algorithm_config
+        applies it). optuna: ``num_samples`` x seeds placeholders ``{"sample": i, "seed": s}``: the values
+        are drawn by Optuna while the sweep runs (one study per seed).
+        """
+        if self.searcher.type == "grid":
+            return [{**point, "seed": seed} for point in self.grid_points() for seed in self.seeds]
+        return [
+            {"sample": i, "seed": seed} for seed in self.seeds for i in range(self.searcher.num_samples or 0)
+        ]
+
+    def budget(self) -> dict[str, Any]:
+        n = len(self.trial_plan())
+        waves = math.ceil(n / self.resources.max_concurrent_trials)
+        return {
+            "trials": n,
+            "env_steps": None if self.stop.env_steps is None else n * self.stop.env_steps,
+            "iterations": None if self.stop.iterations is None else n * self.stop.iterations,
+            "waves": waves,
+            "cpus": self.resources.max_concurrent_trials * (self.resources.cpus_per_trial or 1),
+        }
+
+
+ParamSearch.model_rebuild()
+
+
+def _all_params(params: Mapping[str, ParamSearch]) -> list[tuple[str, ParamSearch]]:
+    out = []
+    for key, ps in params.items():
+        out.append((key, ps))
+        for branch in (ps.when or {}).values():
+            out.extend(_all_params(branch))
+    return out
+
+
+def _check_domain(key: str, ps: ParamSearch, knob: Setting, path: str) -> list[Issue]:
+    """Every value a domain can produce must satisfy the key's own rule (ranges: both ends)."""
+    d = ps.domain
+    if d == "int" and knob.kind not in ("int", "float"):
+        return [Issue(f"{path}.int", ps.values, f"{key} is not a number; use grid or categorical")]
+    if d == "float" and knob.kind != "float":
+        what = "an integer: use int" if knob.kind == "int" else "not a number; use grid or categorical"
+        return [Issue(f"{path}.float", ps.values, f"{key} is {what}")]
+    issues = []
+    for i, value in enumerate(ps.values):
+        if msg := rule_problem(key, knob, value):
+            issues.append(Issue(f"{path}.{d}[{i}]", value, msg))
+    return issues
+
+
+def _representative_points(params: Mapping[str, ParamSearch]) -> list[dict[str, Any]]:
+    """A few flat points of a sampled space: every branch of every conditional, ranges at both ends."""
+
+    def expand(params: Mapping[str, ParamSearch], end: int) -> list[dict[str, Any]]:
+        per_key: list[list[dict[str, Any]]] = []
+        for key, ps in params.items():
+            if ps.domain in ("int", "float"):
+                per_key.append([{key: ps.values[end]}])
+            elif ps.when:
+                options = []
+                for v in ps.values:
+                    branch = ps.when.get(str(v), {})
+                    options.extend({key: v, **sub} for sub in expand(branch, end))
+                per_key.append(options)
+            else:
+                per_key.append([{key: ps.values[0]}])
+        return [{k: v for d in combo for k, v in d.items()} for combo in itertools.product(*per_key)][:256]
+
+    return expand(params, 0) + expand(params, 1)
+
+
+def _format_validation_error(err: ValidationError, source: str) -> list[str]:
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in e["loc"]).replace(".[", "[")
+        exc = (e.get("ctx") or {}).get("error")
+        if isinstance(exc, Issues):
+            lines += [f"{source}: {i.text(loc)}" for i in exc.issues]
+        elif isinstance(exc, Issue):
+            lines.append(f"{source}: {exc.text(loc)}")
+        elif e["type"] == "missing":
+            lines.append(f"{source}: {loc}: required key is missing")
+        else:
+            lines.append(f"{source}: {loc}: {short(e.get('input'))} is invalid: {e['msg']}")
+    return lines
+
+
+def parse_spec(data: Any, source: str = "<spec>") -> SweepSpec:
+    """Validate an already-parsed spec (a mapping); raises SpecError naming ``source``."""
+    if not isinstance(data, dict):
+        raise SpecError([f"{source}: the spec must be a mapping of keys (name, env, ...), got {short(data)}"])
+    try:
+        spec = SweepSpec.model_validate(data)
+    except ValidationError as err:
+        raise SpecError(_format_validation_error(err, source)) from None
+    spec._source = source
+    return spec
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    """Read and validate a sweep YAML file; raises SpecError (a ValueError) naming file, key path, value."""
+    return parse_spec(read_yaml_file(path), str(path))
+
+
+def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
+    """The RLlib algorithm config of one trial (a CoPilotConfig for ``algorithm: copilot``).
+
+    ``flat`` is one trial's sampled values (dotted keys, e.g. from ``trial_plan()`` or Tune's config)
+    plus optionally ``seed`` (default: the spec's first seed) and ``variant``; the spec's fixed
+    ``config`` and the variant's keys are applied first and the trial's values override them. Imports
+    RLlib.
+    """
+    entry = get_algorithm(spec.algorithm)
+    variant = flat.get(keys.VARIANT_PARAM)
+    if variant is not None and variant not in spec.variants:
+        raise SpecError(
+            [f"trial.variant: {variant!r} is invalid: the spec's variants are {list(spec.variants)}"]
+        )
+    trial = {k: v for k, v in flat.items() if k not in (keys.SEED_PARAM, keys.VARIANT_PARAM)}
+    problems = [
+        Issue(
+            f"trial.{key}",
+            value,
+            f"unknown key{did_you_mean(key, entry.settings)}" if why == "unknown key" else f"{key} {why}",
+        )
+        for key, value, why in setting_problems(entry.settings, trial)
+    ]
+    if problems:
+        raise SpecError([p.text() for p in problems])
+    run = RunContext(
+        env_id=spec.env.id,
+        env_config=dict(spec.env.config),
+        seed=flat.get(keys.SEED_PARAM, spec.seeds[0]),
+        num_env_runners=spec.resources.num_env_runners,
+        num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners,
+    )
+    return entry.build_config(spec.merged(flat), run)
+
+
+def rule_problem(key: str, setting: Setting, value: Any) -> str | None:
+    """ "<key> must be <rule>" when `value` breaks the setting's rule, else None."""
+    why = setting.problem(value)
+    return None if why is None else f"{key} {why}"
+
+
+def metric_known(metric: str, patterns: Iterable[str]) -> bool:
+    """Whether `metric` is one of an algorithm's METRICS (`<k>` matches a tree layer 0..MAX_LAYER)."""
+    for pattern in patterns:
+        if "<k>" in pattern:
+            regex = re.escape(pattern).replace(re.escape("<k>"), r"(\d+)")
+            m = re.fullmatch(regex, metric)
+            if m and int(m.group(1)) <= MAX_LAYER:
+                return True
+        elif metric == pattern:
+            return True
+    return False

@@ -1,0 +1,79 @@
+"""The trial plan in words, for ``--check``: what runs, how many trials, the budget."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from copilot_ray import keys
+
+if TYPE_CHECKING:  # annotations only: models imports this module
+    from copilot_ray.spec.models import ParamSearch, SweepSpec
+
+
+def format_plan(spec: SweepSpec) -> str:
+    """What runs (a table of grid points, or the sampled space), how many trials, the budget."""
+    lines = [
+        f"sweep {spec.name!r} ({spec.source}): {spec.algorithm} on {spec.env.id} {spec.env.config or ''}"
+    ]
+    if spec.description:
+        lines.append(f"  {spec.description.strip()}")
+    lines.append(f"  MLflow experiment {spec.experiment!r} at {spec.tracking.uri}")
+    if spec.config:
+        lines.append("  fixed: " + ", ".join(f"{k}={v!r}" for k, v in spec.config.items()))
+    for name, overrides in spec.variants.items():
+        text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "(config as it is)"
+        lines.append(f"  variant {name}: {text}")
+    seeds = ", ".join(str(s) for s in spec.seeds)
+    if spec.searcher.type == "grid":
+        points = spec.grid_points()
+        columns = (["variant"] if spec.variants else []) + list(spec.search)
+        header = ["#", *columns, "seeds"]
+        rows = [[str(i + 1), *(_cell(p[k]) for k in columns), seeds] for i, p in enumerate(points)]
+        widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
+        lines.append(f"  grid: {len(points)} configuration(s) x {len(spec.seeds)} seed(s)")
+        for row in [header, *rows]:
+            lines.append(
+                "    " + "  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip()
+            )
+    else:
+        s = spec.searcher
+        lines.append(
+            f"  optuna {s.sampler}: {s.mode} {s.metric}, {s.num_samples} sample(s) per seed, "
+            f"seeds [{seeds}] (one study per seed, sampler seed {s.seed} + index)"
+        )
+        lines.extend(_describe_space(spec.search, "    "))
+    if spec.scheduler is not None:
+        sch = spec.scheduler
+        args = {k: v for k, v in sch.model_dump().items() if k != "type" and v is not None}
+        lines.append(f"  scheduler: {sch.type} on {keys.ENV_STEPS} {args}")
+    b = spec.budget()
+    stop = " and ".join(
+        t
+        for t in (
+            f"{spec.stop.env_steps} env steps" if spec.stop.env_steps else "",
+            f"{spec.stop.iterations} iterations" if spec.stop.iterations else "",
+        )
+        if t
+    )
+    lines.append(
+        f"  {b['trials']} trial(s), each stops at {stop}; "
+        + (f"at most {b['env_steps']:,} env steps in all; " if b["env_steps"] else "")
+        + f"{spec.resources.max_concurrent_trials} at a time ({b['waves']} wave(s)), "
+        f"{spec.resources.cpus_per_trial} CPU(s) per trial, {b['cpus']} CPU(s) in use"
+    )
+    return "\n".join(lines)
+
+
+def _cell(value: Any) -> str:
+    return value if isinstance(value, str) else repr(value)
+
+
+def _describe_space(params: Mapping[str, ParamSearch], indent: str) -> list[str]:
+    out = []
+    for key, ps in params.items():
+        out.append(f"{indent}{key}: {ps.describe()}")
+        for choice, branch in (ps.when or {}).items():
+            out.append(f"{indent}  when {key} = {choice}:")
+            out.extend(_describe_space(branch, indent + "    "))
+    return out

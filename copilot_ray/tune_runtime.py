@@ -1,0 +1,293 @@
+"""The Ray side of a sweep: the Tune trainable, the Tune callbacks, the Tuner.
+
+Importing this module imports Ray (and RLlib, torch): ``copilot_ray.sweep`` imports it only once a spec is
+validated, so that a bad spec and ``--check`` never start Ray. Tune pickles the trainable, the callbacks
+and the searcher's space by reference to this module; Ray's workers import it to unpickle them.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import ray
+from ray import tune
+from ray.tune import Callback
+
+from copilot_ray.algorithms.copilot.algorithm import CoPilot
+from copilot_ray.keys import (
+    ENV_STEPS,
+    EVAL_FRESH,
+    SEED_PARAM,
+    SPEC_PATH_KEY,
+    SUCCESS_METRICS,
+    TIME_TOTAL_S,
+    TRAINING_ITERATION,
+    result_value,
+)
+from copilot_ray.spec import (
+    build_algorithm_config,
+    optuna_define_by_run,
+    to_tune_scheduler,
+    to_tune_search_space,
+    tune_stop,
+)
+from copilot_ray.tracking import TrialRuns, describe_trial, load_spec_cached, trial_flat
+
+CHECKPOINT_FREQUENCY = 1  # iterations between checkpoints (and the synced copilot_trees/)
+MAX_FAILURES = 2
+_LAST_EVAL_STATE = "copilot_trial_last_eval"
+
+
+# ================================================================================================ trainable
+class CoPilotTrial(CoPilot):
+    """CoPilot built from a flat Tune config: ``{dotted params..., "seed": s, "_spec_path": p}``.
+
+    ``__init__`` and ``default_resource_request`` turn the flat dict into the RLlib config with
+    ``build_algorithm_config(flat, spec)`` (spec loaded from ``_spec_path``), so Tune's placement
+    group fits the env runners and RLlib's checkpointing is untouched.
+
+    Every result carries ``copilot/eval/success_*`` (Tune's strict metric check and Optuna need the
+    searched metric in every result): iterations without an evaluation repeat the last evaluated
+    value (NaN before the first one) and set ``copilot/eval/fresh`` to 0 (1 when evaluated now).
+    """
+
+    def __init__(self, config=None, **kwargs):
+        if isinstance(config, dict) and SPEC_PATH_KEY in config:
+            config = _algorithm_config(config)
+        self._last_eval: dict[str, float] = {}
+        super().__init__(config=config, **kwargs)
+
+    @classmethod
+    def default_resource_request(cls, config):
+        if isinstance(config, dict) and SPEC_PATH_KEY in config:
+            config = _algorithm_config(config)
+        return super().default_resource_request(config)
+
+    def step(self):
+        result = super().step()
+        ev = result.setdefault("copilot", {}).setdefault("eval", {})
+        names = [_leaf(key) for key in SUCCESS_METRICS]
+        # RLlib reports a window-1 stat logged in an earlier iteration as NaN: not an evaluation.
+        fresh = all(_is_number(ev.get(name)) for name in names)
+        for name in names:
+            if fresh:
+                self._last_eval[name] = float(ev[name])
+            else:
+                ev[name] = self._last_eval.get(name, float("nan"))
+        ev[_leaf(EVAL_FRESH)] = 1.0 if fresh else 0.0
+        return result
+
+    def get_state(self, *args, **kwargs):
+        state = super().get_state(*args, **kwargs)
+        state[_LAST_EVAL_STATE] = dict(getattr(self, "_last_eval", {}))
+        return state
+
+    def set_state(self, state):
+        super().set_state(state)
+        self._last_eval = dict(state.get(_LAST_EVAL_STATE, {}))
+
+
+def _algorithm_config(config: Mapping[str, Any]):
+    spec = load_spec_cached(str(config[SPEC_PATH_KEY]))
+    return build_algorithm_config(trial_flat(config), spec)
+
+
+def _leaf(key: str) -> str:
+    """``copilot/eval/success_planned`` -> ``success_planned`` (its name inside ``result["copilot"]["eval"]``)."""
+    return key.rsplit("/", 1)[1]
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and not math.isnan(v)
+
+
+# ================================================================================================ callbacks
+class ProgressPrinter(Callback):
+    """One line per trial event; replaces Tune's table (which dumps the whole RLlib config)."""
+
+    _FIELDS = ("config_key", "K", "b", "alpha_schedule", "seed")
+
+    def __init__(self):
+        self._info: dict[str, dict[str, Any]] = {}
+
+    def __getstate__(self):
+        return {}
+
+    def __setstate__(self, state):
+        self._info = {}
+
+    def _head(self, trial) -> str:
+        info = self._info.get(trial.trial_id)
+        if info is None:
+            info = self._info[trial.trial_id] = self._describe(trial.config)
+        return (
+            f"[{trial.trial_id}] {info['config_key']:<18} K={info['K']} b={info['b']} "
+            f"alpha={info['alpha_schedule']} seed={info['seed']}"
+        )
+
+    @classmethod
+    def _describe(cls, config: Mapping[str, Any]) -> dict[str, Any]:
+        try:
+            d = describe_trial(config)
+            return {k: d[k] for k in cls._FIELDS}
+        except Exception as err:  # noqa: BLE001 - a progress line must not fail the sweep
+            return {**dict.fromkeys(cls._FIELDS, "?"), "config_key": f"? ({err})"}
+
+    def on_trial_start(self, iteration, trials, trial, **info):
+        _say(f"{self._head(trial)}  started")
+
+    def on_trial_result(self, iteration, trials, trial, result, **info):
+        ev = result.get("copilot", {}).get("eval", {})
+        planned, direct = (ev.get(_leaf(key)) for key in SUCCESS_METRICS)
+        steps = result_value(result, ENV_STEPS, 0)
+        mark = "" if ev.get(_leaf(EVAL_FRESH), 1.0) else " (last eval)"
+        _say(
+            f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
+            f"env_steps {int(steps):8d}  success planned {_fmt(planned)} "
+            f"direct {_fmt(direct)}{mark}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"
+        )
+
+    def on_trial_complete(self, iteration, trials, trial, **info):
+        _say(f"{self._head(trial)}  done")
+
+    def on_trial_recover(self, iteration, trials, trial, **info):
+        _say(f"{self._head(trial)}  failed, retrying from its last checkpoint ({trial.error_file})")
+
+    def on_trial_error(self, iteration, trials, trial, **info):
+        _say(f"{self._head(trial)}  ERROR, see {trial.error_file}")
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _fmt(v: Any) -> str:
+    return f"{v:.2f}" if isinstance(v, int | float) and not math.isnan(v) else "  - "
+
+
+class MlflowSweepCallback(Callback):
+    """One MLflow child run per Tune trial under the sweep's parent run: Tune's hooks, handed to
+    ``copilot_ray.tracking.TrialRuns``."""
+
+    def __init__(self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str):
+        self.runs = TrialRuns(tracking_uri, experiment_id, sweep, parent_run_id)
+
+    def on_trial_start(self, iteration, trials, trial, **info):
+        self.runs.run_id(trial)
+
+    def on_trial_result(self, iteration, trials, trial, result, **info):
+        self.runs.log_result(trial, result)
+
+    def on_trial_complete(self, iteration, trials, trial, **info):
+        self.runs.finish(trial, "FINISHED")
+
+    def on_trial_error(self, iteration, trials, trial, **info):
+        self.runs.finish(trial, "FAILED")
+
+    def on_experiment_end(self, trials, **info):
+        self.runs.kill_unfinished(trials)
+
+
+# ================================================================================================ Tuner
+def start_ray(address: str | None) -> bool:
+    """Starts Ray unless one is running (``address``: connect to that cluster); True when started here."""
+    if ray.is_initialized():
+        return False
+    if address:
+        ray.init(address=address, log_to_driver=False)
+    else:
+        ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False)
+    return True
+
+
+def stop_ray() -> None:
+    ray.shutdown()
+
+
+def restore_tuner(path: Path) -> tune.Tuner | None:
+    """The Tune experiment at ``path`` to continue (errored trials too), or None when there is none."""
+    if not (path.exists() and tune.Tuner.can_restore(str(path))):
+        return None
+    return tune.Tuner.restore(str(path), trainable=CoPilotTrial, resume_errored=True)
+
+
+def build_tuner(
+    spec, spec_path: Path, root: Path, exp_name: str, seed: int | None, index: int, callbacks: list
+) -> tune.Tuner:
+    """A fresh Tune experiment ``exp_name`` under ``root/tune``: the grid, or seed ``seed``'s Optuna study."""
+
+    if spec.searcher.type == "grid":
+        param_space = {**to_tune_search_space(spec), SPEC_PATH_KEY: str(spec_path)}
+        search_alg, num_samples = None, 1
+    else:
+        param_space = {SEED_PARAM: seed, SPEC_PATH_KEY: str(spec_path)}
+        search_alg = _searcher(spec, spec_path, root / "optuna.db", index, seed)
+        num_samples = spec.searcher.num_samples
+    return tune.Tuner(
+        CoPilotTrial,
+        param_space=param_space,
+        tune_config=tune.TuneConfig(
+            search_alg=search_alg,
+            scheduler=to_tune_scheduler(spec),
+            num_samples=num_samples,
+            max_concurrent_trials=spec.resources.max_concurrent_trials,
+            reuse_actors=False,
+        ),
+        run_config=tune.RunConfig(
+            name=exp_name,
+            storage_path=str(root / "tune"),
+            stop=tune_stop(spec),
+            checkpoint_config=tune.CheckpointConfig(
+                checkpoint_frequency=CHECKPOINT_FREQUENCY, checkpoint_at_end=True, num_to_keep=2
+            ),
+            failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
+            # copilot_trees/ is written to the trial's working dir; sync it into the trial folder.
+            sync_config=tune.SyncConfig(sync_artifacts=True),
+            callbacks=callbacks,
+            verbose=0,
+        ),
+    )
+
+
+def _searcher(spec, spec_path: Path, study_db: Path, index: int, seed: int):
+    import optuna
+    from ray.tune.search.optuna import OptunaSearch
+
+    s = spec.searcher
+    sampler_seed = (s.seed or 0) + index
+    sampler = {
+        "tpe": lambda: optuna.samplers.TPESampler(seed=sampler_seed),
+        "random": lambda: optuna.samplers.RandomSampler(seed=sampler_seed),
+        "cmaes": lambda: optuna.samplers.CmaEsSampler(seed=sampler_seed),
+    }[s.sampler or "tpe"]()
+    return OptunaSearch(
+        space=OptunaSpace(str(spec_path)),
+        metric=s.metric,
+        mode=s.mode,
+        sampler=sampler,
+        study_name=f"{spec.name}-seed{seed}",
+        storage=optuna.storages.RDBStorage(f"sqlite:///{study_db}"),
+    )
+
+
+class OptunaSpace:
+    """``OptunaSearch(space=...)`` define-by-run function; a picklable class (Tune pickles the searcher)."""
+
+    def __init__(self, spec_path: str):
+        self.spec_path = spec_path
+        self._fn = None
+
+    def __getstate__(self):
+        return {"spec_path": self.spec_path}
+
+    def __setstate__(self, state):
+        self.spec_path, self._fn = state["spec_path"], None
+
+    def __call__(self, trial):
+        if self._fn is None:
+            self._fn = optuna_define_by_run(load_spec_cached(self.spec_path))
+        return self._fn(trial)
