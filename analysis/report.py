@@ -156,6 +156,9 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
         picks = sorted({int(round(i)) for i in np.linspace(0, len(files) - 1, max(1, args.stages))})
         try:
             snaps = load_tree_snapshots(sweep.tracking_uri, trial.run_id, [files[i] for i in picks])
+            if snaps[0].depth == 0:
+                notes.append(f"{c.label} has tree depth 0 (no planner, plain SAC): no sub-goal tree to draw.")
+                continue
             n_tasks = snaps[0].trees.shape[0]
             if not 0 <= args.task < n_tasks:
                 notes.append(

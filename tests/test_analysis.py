@@ -117,8 +117,8 @@ def _child(client, exp_id, parent_id, key, k, seed):
     return client.create_run(exp_id, run_name=f"{key}_s{seed}", tags=tags).info.run_id
 
 
-def _tree_npz(path: Path, iteration: int, rng) -> None:
-    k_depth, n_tasks = 3, 2
+def _tree_npz(path: Path, iteration: int, rng, k_depth: int = 3) -> None:
+    n_tasks = 2
     trees = rng.uniform(0.05, 0.95, size=(n_tasks, 2**k_depth + 1, 2))
     steps = np.full((n_tasks, k_depth + 1, 2**k_depth), -1, dtype=np.int64)
     reached = np.zeros_like(steps, dtype=bool)
@@ -176,6 +176,15 @@ def store(tmp_path_factory):
     for it in (5, 10, 15, 20):
         _tree_npz(tree_dir / f"trees_iter{it:06d}.npz", it, rng)
     client.log_artifacts(ids["B0"], str(tree_dir), TREES_DIR)
+    # config tree_depth=0 (plain SAC): its snapshots hold [s0, g] only, no tree to draw
+    rid = ids["plain"] = _child(client, exp_id, pid, "tree_depth=0", 0, "0")
+    _metrics(client, rid, [0.0, 0.1], STEPS[:2], 3.0)
+    client.set_terminated(rid, "FINISHED")
+    flat_dir = root / "npz0" / TREES_DIR
+    flat_dir.mkdir(parents=True)
+    for it in (5, 10):
+        _tree_npz(flat_dir / f"trees_iter{it:06d}.npz", it, rng, k_depth=0)
+    client.log_artifacts(rid, str(flat_dir), TREES_DIR)
 
     # an experiment with a parent but no children, and one with children but no parent
     empty_id = client.create_experiment("empty-sweep", artifact_location=(root / "a2").as_uri())
@@ -288,6 +297,14 @@ def test_diag_curves_and_tau_hat_are_loaded(store):
     snap = load_tree_snapshots(store["uri"], b0.run_id, b0.tree_artifacts[:1])[0]
     np.testing.assert_allclose(snap.tau_hat_length, [0.0125, 0.025, 0.05, 0.1])
     np.testing.assert_allclose(snap.tau_hat, np.array([0.05, 0.06, 0.08, 0.11]) - 0.005)
+
+
+def test_tree_depth_zero_gets_a_note_not_a_failed_figure(store):
+    report = (store["out"] / "report.md").read_text()
+    assert "K=0 has tree depth 0 (no planner, plain SAC): no sub-goal tree to draw." in report
+    assert "tree figure for K=0" not in report  # not reported as a failed figure
+    assert not list(store["out"].glob("subgoal_tree_K_0*.png"))
+    assert list(store["out"].glob("subgoal_tree_K_3*.png"))
 
 
 @pytest.mark.parametrize(
