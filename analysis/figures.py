@@ -105,7 +105,7 @@ def success_curves(configs: list[ConfigSummary], axis_name: str, path: Path) -> 
         note += f"; {dropped} more configurations not drawn"
     fig.suptitle(f"Success against environment steps, by {axis_name}\n{note}", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.83 if handles else 1, 1))
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")  # long legend labels sit right of the axes
     plt.close(fig)
     return path
 
