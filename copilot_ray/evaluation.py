@@ -19,12 +19,17 @@ import numpy as np
 import torch
 
 from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.keys import (
+    REACHED_DIRECT,
+    REACHED_PLANNED,
+    SUBGOALS_REACHED_PLANNED,
+    SUCCESS_DIRECT,
+    SUCCESS_PLANNED,
+    eval_leaf,
+)
 from copilot_ray.planning.subgoal_tree import path_indices
 
 Policy = Callable[[np.ndarray], np.ndarray]
-
-
-ACTION_MODES = ("deterministic", "sampled")
 
 
 class ModulePolicy:
@@ -161,12 +166,12 @@ def evaluate_copilot(
             envs, policy, np.stack([starts, goals], axis=1), tau_max * 2**depth, with_delta
         )
         by_action[name] = {
-            "success_planned": float(planned.success.mean()),
-            "success_direct": float(direct.success.mean()),
-            "reached_planned": float(planned.reached_final.mean()),
-            "reached_direct": float(direct.reached_final.mean()),
+            eval_leaf(SUCCESS_PLANNED): float(planned.success.mean()),
+            eval_leaf(SUCCESS_DIRECT): float(direct.success.mean()),
+            eval_leaf(REACHED_PLANNED): float(planned.reached_final.mean()),
+            eval_leaf(REACHED_DIRECT): float(direct.reached_final.mean()),
             # share of the finest path's sub-goals reached: how far along the plan the agent gets
-            "subgoals_reached_planned": float(planned.subtask_reached.mean()),
+            eval_leaf(SUBGOALS_REACHED_PLANNED): float(planned.subtask_reached.mean()),
         }
     policy = policies[tree_policy or next(iter(policies))]
     geometry = envs[0].unwrapped

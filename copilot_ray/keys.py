@@ -26,6 +26,7 @@ COPILOT_PREFIX = "copilot/"
 ALPHA = "copilot/alpha"
 DTAU_SIZE = "copilot/dtau/size"
 COST_MODEL_LOSS = "copilot/cost_model/loss"
+TIME_PREFIX = "copilot/time/"  # wall seconds per phase of an iteration
 PLANNING_SHARE = "copilot/time/planning_share"
 
 # Evaluation on the held-out test tasks: the headline action's figures, and per action mode
@@ -35,6 +36,7 @@ SUCCESS_PLANNED = "copilot/eval/success_planned"
 SUCCESS_DIRECT = "copilot/eval/success_direct"
 SUCCESS_METRICS = (SUCCESS_PLANNED, SUCCESS_DIRECT)
 REACHED_PLANNED = "copilot/eval/reached_planned"
+REACHED_DIRECT = "copilot/eval/reached_direct"
 SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"
 PLANNED_COLLISION_FREE = "copilot/eval/planned_collision_free"
 # Set by the sweep's trial on every result: 1 when this iteration evaluated, 0 when the success
@@ -43,7 +45,10 @@ EVAL_FRESH = "copilot/eval/fresh"
 EVAL_ACTIONS = ("deterministic", "sampled")
 
 # The planner (PPO over sub-goal trees).
+PLANNER_PREFIX = "copilot/planner/"
 PLANNER_COST_LAYER = "copilot/planner/cost_layer_"
+PLANNER_ROLLED_BACK = "copilot/planner/rolled_back"
+PLANNER_STD = "copilot/planner/std"
 PLANNER_APPROX_KL_MAX = "copilot/planner/approx_kl_max"
 PLANNER_NONFINITE_SKIPPED = "copilot/planner/nonfinite_skipped"
 
@@ -61,6 +66,10 @@ DIAG_SUBGOAL_IN_OBSTACLE_LAYER = "copilot/diag/subgoal_in_obstacle_layer_"
 DIAG_SEGMENT_LENGTH_LAYER = "copilot/diag/segment_length_layer_"
 DIAG_REACHABLE_LENGTH_LAYER = "copilot/diag/reachable_length_layer_"
 DIAG_SEGMENT_UNREACHABLE_LAYER = "copilot/diag/segment_unreachable_layer_"
+DIAG_FIRST_SUBTASK_TRIVIAL = "copilot/diag/first_subtask_trivial"
+DIAG_SUBTASK_COLLIDED = "copilot/diag/subtask_collided"
+DIAG_DTAU_TUPLE_LENGTH_MEAN = "copilot/diag/dtau_tuple_length_mean"
+DIAG_DTAU_TUPLE_LENGTH_MAX = "copilot/diag/dtau_tuple_length_max"
 
 # ================================================================================================ MLflow
 # Tags of a sweep's runs (copilot_ray.tracking writes them, analysis.load reads them).
@@ -105,6 +114,13 @@ VARIANT_PARAM = "variant"
 def metric_path(key: str) -> tuple[str, ...]:
     """``"copilot/eval/success_planned"`` -> ``("copilot", "eval", "success_planned")``."""
     return tuple(key.split("/"))
+
+
+def eval_leaf(key: str) -> str:
+    """An evaluation key's name under ``copilot/eval/``: ``copilot/eval/success_planned`` -> ``success_planned``."""
+    if not key.startswith(EVAL_PREFIX):
+        raise ValueError(f"{key!r} is not an evaluation metric ({EVAL_PREFIX}...)")
+    return key[len(EVAL_PREFIX) :]
 
 
 def eval_by_action(key: str, action: str) -> str:

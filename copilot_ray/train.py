@@ -114,17 +114,16 @@ def build_config(args: argparse.Namespace):
 
 
 def progress_line(result: dict[str, Any], started: float) -> str:
-    cop = result.get("copilot", {})
-    ev = cop.get("eval", {})
     steps = keys.result_value(result, keys.ENV_STEPS) or 0
 
-    def fmt(v):
+    def fmt(key: str) -> str:
+        v = keys.result_value(result, key)
         return f"{v:.2f}" if isinstance(v, float) else "  - "
 
     return (
-        f"iter {result['training_iteration']:4d}  env_steps {int(steps):9d}  "
-        f"success planned {fmt(ev.get('success_planned'))} direct {fmt(ev.get('success_direct'))}  "
-        f"alpha {fmt(cop.get('alpha'))}  wall {time.time() - started:7.1f}s"
+        f"iter {result[keys.TRAINING_ITERATION]:4d}  env_steps {int(steps):9d}  "
+        f"success planned {fmt(keys.SUCCESS_PLANNED)} direct {fmt(keys.SUCCESS_DIRECT)}  "
+        f"alpha {fmt(keys.ALPHA)}  wall {time.time() - started:7.1f}s"
     )
 
 
@@ -178,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                 run.log_metrics(metrics_from_result(result), step=steps)
             if steps >= args.stop_env_steps:
                 break
-            if args.stop_iters is not None and result["training_iteration"] >= args.stop_iters:
+            if args.stop_iters is not None and result[keys.TRAINING_ITERATION] >= args.stop_iters:
                 break
     except KeyboardInterrupt:
         status = "KILLED"

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from copilot_ray import keys
 from copilot_ray.algorithms.copilot.diagnostics import (
     plan_diagnostics,
     tau_hat_profile,
@@ -28,15 +29,15 @@ def test_plan_diagnostics_on_a_hand_made_tree():
         distance=euclid,
         reachable_length=lambda k: 0.45 if k == 1 else 0.15,
     )
-    assert diag["subgoal_in_obstacle_layer_1"] == 1.0  # node 2
-    assert diag["subgoal_in_obstacle_layer_2"] == 0.0  # nodes 1 and 3
+    assert diag[keys.DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "1"] == 1.0  # node 2
+    assert diag[keys.DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "2"] == 0.0  # nodes 1 and 3
     seg1 = [euclid([0.1, 0.1], wall), euclid(wall, [0.1, 0.7])]
-    assert diag["segment_length_layer_1"] == pytest.approx(np.mean(seg1), rel=1e-5)
-    assert diag["segment_unreachable_layer_1"] == pytest.approx(0.5)  # 0.566 > 0.45, 0.447 < 0.45
+    assert diag[keys.DIAG_SEGMENT_LENGTH_LAYER + "1"] == pytest.approx(np.mean(seg1), rel=1e-5)
+    assert diag[keys.DIAG_SEGMENT_UNREACHABLE_LAYER + "1"] == pytest.approx(0.5)  # 0.566 > 0.45, 0.447 < 0.45
     seg2 = [0.1, euclid([0.1, 0.2], wall), euclid(wall, [0.1, 0.3]), 0.4]
-    assert diag["segment_length_layer_2"] == pytest.approx(np.mean(seg2), rel=1e-5)
-    assert diag["segment_unreachable_layer_2"] == pytest.approx(0.75)  # all but the first
-    assert diag["reachable_length_layer_2"] == 0.15
+    assert diag[keys.DIAG_SEGMENT_LENGTH_LAYER + "2"] == pytest.approx(np.mean(seg2), rel=1e-5)
+    assert diag[keys.DIAG_SEGMENT_UNREACHABLE_LAYER + "2"] == pytest.approx(0.75)  # all but the first
+    assert diag[keys.DIAG_REACHABLE_LENGTH_LAYER + "2"] == 0.15
 
 
 def records(rows):
@@ -69,15 +70,15 @@ def test_traversal_diagnostics_splits_success_by_the_previous_subtask():
     ]
     shuffled = records(rows)
     diag = traversal_diagnostics(shuffled, distance=euclid, success_radius=0.05)
-    assert diag["success_after_reached"] == pytest.approx(1 / 2)  # R->F, R->R
-    assert diag["success_after_failed"] == pytest.approx(1 / 2)  # F->F, F->R
-    assert diag["dtau_tuple_length_max"] == pytest.approx(0.3)
-    assert diag["dtau_tuple_length_mean"] == pytest.approx(0.6 / 7)
-    assert diag["subtask_collided"] == pytest.approx(1 / 7)
+    assert diag[keys.DIAG_SUCCESS_AFTER_REACHED] == pytest.approx(1 / 2)  # R->F, R->R
+    assert diag[keys.DIAG_SUCCESS_AFTER_FAILED] == pytest.approx(1 / 2)  # F->F, F->R
+    assert diag[keys.DIAG_DTAU_TUPLE_LENGTH_MAX] == pytest.approx(0.3)
+    assert diag[keys.DIAG_DTAU_TUPLE_LENGTH_MEAN] == pytest.approx(0.6 / 7)
+    assert diag[keys.DIAG_SUBTASK_COLLIDED] == pytest.approx(1 / 7)
     goals = np.array([[0.01, 0.0]] * 7)  # every first sub-goal within 0.05 of its start
     goals[4] = [0.5, 0.5]  # ... but task 0's layer-0 one
     diag = traversal_diagnostics({**shuffled, "goal": goals}, distance=euclid, success_radius=0.05)
-    assert diag["first_subtask_trivial"] == pytest.approx(2 / 3)
+    assert diag[keys.DIAG_FIRST_SUBTASK_TRIVIAL] == pytest.approx(2 / 3)
 
 
 def test_tau_hat_profile_measures_the_segments_it_was_given():

@@ -51,6 +51,7 @@ from ray.rllib.utils.metrics import (
 )
 from ray.tune.registry import register_env
 
+from copilot_ray import keys
 from copilot_ray.algorithms.copilot.agent_updates import make_agent_updater
 from copilot_ray.algorithms.copilot.diagnostics import (
     plan_diagnostics,
@@ -79,6 +80,7 @@ from copilot_ray.planning import (
 )
 
 _STATE_KEY = "copilot"
+DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
 # Tasks per planner phase of the warm start: the paper's task mini-batch for the maze.
 WARM_START_TASKS = 30
 # Segment lengths at which tau_hat is profiled at every evaluation (the report's diagnostics page).
@@ -438,7 +440,7 @@ class CoPilot(SAC):
         timing = defaultdict(float)
         for _ in range(cfg.repetitions):
             alpha = self.alpha_clock.value
-            stats["alpha"].append(alpha)
+            stats[keys.ALPHA].append(alpha)
 
             t0 = time.perf_counter()
             trees = self._plan(starts, goals, alpha, stats)[:n_tasks]
@@ -447,11 +449,11 @@ class CoPilot(SAC):
             subtasks = self._traverse(trees, idx[:n_tasks])
             t2 = time.perf_counter()
             for key, value in self._traversal_diagnostics(subtasks).items():
-                stats[f"diag/{key}"].append(value)
+                stats[key].append(value)
 
             if self.planner is not None:
                 self._add_to_dtau(subtasks)
-                stats["cost_model/loss"].append(
+                stats[keys.COST_MODEL_LOSS].append(
                     self.cost_model.fit(cfg.cost_model["fit_steps"], cfg.cost_model["batch_size"], self._rng)
                 )
             t3 = time.perf_counter()
@@ -463,20 +465,20 @@ class CoPilot(SAC):
             timing["cost_model_s"] += t3 - t2
 
         for key, values in stats.items():
-            self.metrics.log_value(("copilot", *key.split("/")), float(np.mean(values)), window=1)
-        self.metrics.log_value(("copilot", "dtau", "size"), len(self.cost_model.dataset), window=1)
+            self.metrics.log_value(keys.metric_path(key), float(np.mean(values)), window=1)
+        self.metrics.log_value(keys.metric_path(keys.DTAU_SIZE), len(self.cost_model.dataset), window=1)
         try:
             q_mean = float(self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, "qf_mean")))
         except KeyError:  # no learner update yet
             q_mean = None
         if q_mean is not None:
-            self.metrics.log_value(("copilot", "diag", "q_mean"), q_mean, window=1)
+            self.metrics.log_value(keys.metric_path(keys.DIAG_Q_MEAN), q_mean, window=1)
         total = sum(timing.values())
         for key, value in timing.items():
-            self.metrics.log_value(("copilot", "time", key), value, window=1)
+            self.metrics.log_value(keys.metric_path(keys.TIME_PREFIX + key), value, window=1)
         # The planner and cost-model phases should stay a small share of the iteration.
         self.metrics.log_value(
-            ("copilot", "time", "planning_share"),
+            keys.metric_path(keys.PLANNING_SHARE),
             (timing["planner_s"] + timing["cost_model_s"]) / max(total, 1e-9),
             window=1,
         )
@@ -484,7 +486,9 @@ class CoPilot(SAC):
         if cfg.eval_interval and (self.iteration + 1) % cfg.eval_interval == 0:
             t = time.perf_counter()
             self._evaluate()
-            self.metrics.log_value(("copilot", "time", "eval_s"), time.perf_counter() - t, window=1)
+            self.metrics.log_value(
+                keys.metric_path(keys.TIME_PREFIX + "eval_s"), time.perf_counter() - t, window=1
+            )
 
     # ---------------------------------------------------------------------------- planner phase
     def _segment_cost(self, alpha: float) -> SegmentCost:
@@ -529,9 +533,11 @@ class CoPilot(SAC):
             idx = self._rng.choice(len(self.train_starts), size=n, replace=False)
             built = self._planner_phase(self.train_starts[idx], self.train_goals[idx], cost, mean_tree=True)
         self._warm_started = True
-        self.metrics.log_value(("copilot", "planner", "warm_start_s"), time.perf_counter() - t0, window=1)
         self.metrics.log_value(
-            ("copilot", "planner", "warm_start_cost"),
+            keys.metric_path(keys.PLANNER_PREFIX + "warm_start_s"), time.perf_counter() - t0, window=1
+        )
+        self.metrics.log_value(
+            keys.metric_path(keys.PLANNER_PREFIX + "warm_start_cost"),
             built.stats["cost_layer_" + str(self.config.tree_depth)],
             window=1,
         )
@@ -546,7 +552,7 @@ class CoPilot(SAC):
         built = self._planner_phase(
             starts, goals, self._segment_cost(alpha), mean_tree=cfg.traversal_tree == "mean"
         )
-        stats["planner/std"].append(float(self.planner.std.mean()))
+        stats[keys.PLANNER_STD].append(float(self.planner.std.mean()))
         env = self.goal_env.unwrapped
         diag = plan_diagnostics(
             built.trees[: cfg.task_batch_size],
@@ -556,15 +562,15 @@ class CoPilot(SAC):
             reachable_length=self._reachable_length,
         )
         for key, value in diag.items():
-            stats[f"diag/{key}"].append(value)
+            stats[key].append(value)
         for k in range(cfg.tree_depth + 1):
-            stats[f"planner/cost_layer_{k}"].append(built.stats[f"cost_layer_{k}"])
+            stats[keys.PLANNER_COST_LAYER + str(k)].append(built.stats[f"cost_layer_{k}"])
         # How far PPO moved the planner per layer update (a diverging planner shows here first).
-        stats["planner/approx_kl_max"].append(
+        stats[keys.PLANNER_APPROX_KL_MAX].append(
             max(built.stats[f"approx_kl_layer_{k}"] for k in range(1, cfg.tree_depth + 1))
         )
-        stats["planner/nonfinite_skipped"].append(built.stats.get("nonfinite_skipped", 0.0))
-        stats["planner/rolled_back"].append(built.stats.get("rolled_back", 0.0))
+        stats[keys.PLANNER_NONFINITE_SKIPPED].append(built.stats.get("nonfinite_skipped", 0.0))
+        stats[keys.PLANNER_ROLLED_BACK].append(built.stats.get("rolled_back", 0.0))
         return built.trees
 
     def _add_to_dtau(self, subtasks: dict[str, np.ndarray]) -> None:
@@ -672,8 +678,8 @@ class CoPilot(SAC):
         module = self.get_module(DEFAULT_MODULE_ID)
         seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
         policies = {
-            "deterministic": ModulePolicy(module),
-            "sampled": ModulePolicy(module, sampled=True, seed=seed),
+            DETERMINISTIC: ModulePolicy(module),
+            SAMPLED: ModulePolicy(module, sampled=True, seed=seed),
         }
         # The headline action goes first: it also drives the sub-goal tree figure's rollouts.
         policies = {cfg.eval_action: policies[cfg.eval_action], **policies}
@@ -691,12 +697,14 @@ class CoPilot(SAC):
             with_delta=self.rules.agent_input == "state_goal_delta",
         )
         for key, value in result.headline(cfg.eval_action).items():
-            self.metrics.log_value(("copilot", "eval", key), value, window=1)
+            self.metrics.log_value(keys.metric_path(keys.EVAL_PREFIX + key), value, window=1)
         for action, values in result.by_action.items():
             for key, value in values.items():
-                self.metrics.log_value(("copilot", "eval", action, key), value, window=1)
+                self.metrics.log_value(
+                    keys.metric_path(keys.eval_by_action(keys.EVAL_PREFIX + key, action)), value, window=1
+                )
         self.metrics.log_value(
-            ("copilot", "eval", "planned_collision_free"), result.plan_collision_free, window=1
+            keys.metric_path(keys.PLANNED_COLLISION_FREE), result.plan_collision_free, window=1
         )
         if result.trees is not None:
             lifetime = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
@@ -714,7 +722,7 @@ class CoPilot(SAC):
             env.goal_space.low,
             env.goal_space.high,
         )
-        directory = Path(self.logdir) / "copilot_trees"
+        directory = Path(self.logdir) / keys.TREES_DIR
         directory.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(
             directory / f"trees_iter{self.iteration + 1:06d}.npz",
@@ -792,12 +800,12 @@ def _traversal_stats(subtasks: dict[str, np.ndarray], depth: int) -> dict[str, f
         in_layer = layers == k
         if not in_layer.any():
             continue
-        out[f"agent/steps_layer_{k}"] = float(subtasks["steps"][in_layer].mean())
+        out[keys.AGENT_STEPS_LAYER + str(k)] = float(subtasks["steps"][in_layer].mean())
         # A layer's traversal succeeds when its last sub-task (the final goal g) is reached.
         last = in_layer & (subtasks["index"] == 2**k)
         if last.any():
-            out[f"agent/success_layer_{k}"] = float(reached[last].mean())
-        out[f"agent/subtask_success_layer_{k}"] = float(reached[in_layer].mean())
+            out[keys.AGENT_SUCCESS_LAYER + str(k)] = float(reached[last].mean())
+        out[keys.AGENT_SUBTASK_SUCCESS_LAYER + str(k)] = float(reached[in_layer].mean())
     return out
 
 

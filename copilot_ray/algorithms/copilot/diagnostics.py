@@ -20,7 +20,8 @@ Traversals (the finished sub-tasks of one agent phase):
     subtask_collided                share of sub-tasks that ended against an obstacle
     dtau_tuple_length_mean/_max     length of the measured D_tau tuples (start -> where it ended)
 
-All functions are pure numpy on arrays, so they are tested on hand-made trees.
+The returned keys are the full metric names (`copilot_ray.keys.DIAG_*`). All functions are pure numpy on
+arrays, so they are tested on hand-made trees.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from copilot_ray import keys
 from copilot_ray.planning.subgoal_tree import new_layer_indices, path_indices
 
 ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -51,13 +53,13 @@ def plan_diagnostics(
     d = trees.shape[-1]
     for k in range(1, depth + 1):
         new = trees[:, new_layer_indices(depth, k)].reshape(-1, d)
-        out[f"subgoal_in_obstacle_layer_{k}"] = float(np.mean(point_collides(new)))
+        out[keys.DIAG_SUBGOAL_IN_OBSTACLE_LAYER + str(k)] = float(np.mean(point_collides(new)))
         path = trees[:, path_indices(depth, k)]
         lengths = distance(path[:, :-1].reshape(-1, d), path[:, 1:].reshape(-1, d))
         reach = float(reachable_length(k))
-        out[f"segment_length_layer_{k}"] = float(np.mean(lengths))
-        out[f"reachable_length_layer_{k}"] = reach
-        out[f"segment_unreachable_layer_{k}"] = float(np.mean(lengths > reach))
+        out[keys.DIAG_SEGMENT_LENGTH_LAYER + str(k)] = float(np.mean(lengths))
+        out[keys.DIAG_REACHABLE_LENGTH_LAYER + str(k)] = reach
+        out[keys.DIAG_SEGMENT_UNREACHABLE_LAYER + str(k)] = float(np.mean(lengths > reach))
     return out
 
 
@@ -75,19 +77,19 @@ def traversal_diagnostics(
     prev_reached, this_reached = reached[:-1][same_run], reached[1:][same_run]
     out: dict[str, float] = {}
     if (prev_reached).any():
-        out["success_after_reached"] = float(this_reached[prev_reached].mean())
+        out[keys.DIAG_SUCCESS_AFTER_REACHED] = float(this_reached[prev_reached].mean())
     if (~prev_reached).any():
-        out["success_after_failed"] = float(this_reached[~prev_reached].mean())
+        out[keys.DIAG_SUCCESS_AFTER_FAILED] = float(this_reached[~prev_reached].mean())
     if "goal" in records:
         first = records["index"] == 1
         if first.any():
             near = distance(records["start"][first], records["goal"][first]) <= success_radius
-            out["first_subtask_trivial"] = float(np.mean(near))
+            out[keys.DIAG_FIRST_SUBTASK_TRIVIAL] = float(np.mean(near))
     if "collided" in records:
-        out["subtask_collided"] = float(np.mean(records["collided"]))
+        out[keys.DIAG_SUBTASK_COLLIDED] = float(np.mean(records["collided"]))
     lengths = distance(records["start"], records["end"])
-    out["dtau_tuple_length_mean"] = float(np.mean(lengths))
-    out["dtau_tuple_length_max"] = float(np.max(lengths))
+    out[keys.DIAG_DTAU_TUPLE_LENGTH_MEAN] = float(np.mean(lengths))
+    out[keys.DIAG_DTAU_TUPLE_LENGTH_MAX] = float(np.max(lengths))
     return out
 
 

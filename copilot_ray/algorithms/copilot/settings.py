@@ -72,7 +72,7 @@ AGENT_COLLISIONS = ("none", "penalty", "terminate")
 AGENT_INPUTS = ("state_goal", "state_goal_delta")
 FAILED_SUBTASK_COSTS = ("end_state", "lower_bound")
 TRAVERSAL_TREES = ("sampled", "mean")
-EVAL_ACTIONS = ("deterministic", "sampled")
+EVAL_ACTIONS = keys.EVAL_ACTIONS
 
 # ------------------------------------------------------------------------------------- the table
 # Grouped by concern; the order is the order of the README table and of `train --help`.
