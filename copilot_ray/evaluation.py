@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation
 from copilot_ray.keys import (
     REACHED_DIRECT,
@@ -147,7 +148,6 @@ def evaluate_copilot(
     tau_max * 2^K. The trees of the first `tree_tasks` tasks are traversed layer by layer with
     `policies[tree_policy]` (default: the first policy) for the sub-goal tree figure.
     """
-    from copilot_ray.envs import make
 
     step_limit_of = step_limit_of or (lambda k: tau_max)
     n = len(starts)

@@ -7,11 +7,16 @@ Every curve is plotted against environment steps, so metrics are logged with
 
 from __future__ import annotations
 
+import enum
 import os
 import subprocess
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+import yaml
 
 from copilot_ray.algorithms.registry import get_algorithm
 from copilot_ray.keys import (
@@ -122,7 +127,6 @@ class MlflowRun:
             self.client.log_batch(self.run_id, params=items[i : i + 100])
 
     def log_metrics(self, metrics: Mapping[str, float], step: int) -> None:
-        import time
 
         from mlflow.entities import Metric
 
@@ -362,15 +366,12 @@ def _plain(value: Any) -> Any:
         return [_plain(v) for v in value]
     if value is None or type(value) in (bool, int, float, str):
         return value
-    import enum
 
     if isinstance(value, enum.Enum):
         return _plain(value.value)
     if isinstance(value, bool | int | float | str):  # subclasses of the scalars
         return _base_scalar(value)
     try:
-        import numpy as np
-
         if isinstance(value, np.generic):
             return value.item()
     except ImportError:  # pragma: no cover
@@ -386,7 +387,6 @@ def _base_scalar(value: Any) -> Any:
 
 
 def trial_config_yaml(info: Mapping[str, Any]) -> str:
-    import yaml
 
     spec = info["spec"]
     try:
@@ -526,7 +526,6 @@ class TrialRuns:
         self._last_step[run_id] = step
 
     def _log_metrics(self, run_id: str, metrics: Mapping[str, float], step: int) -> None:
-        import time
 
         from mlflow.entities import Metric
 

@@ -37,6 +37,7 @@ import gymnasium as gym
 import numpy as np
 
 from copilot_ray.algorithms.copilot.settings import SETTINGS
+from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation
 from copilot_ray.planning.subgoal_tree import path_indices
 
@@ -111,7 +112,6 @@ class TraversalEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, config: Mapping[str, Any]):
-        from copilot_ray.envs import make
 
         self.goal_env = make(config["goal_env"], **dict(config.get("goal_env_config") or {}))
         self.inner = self.goal_env.unwrapped
