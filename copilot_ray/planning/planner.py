@@ -159,61 +159,43 @@ class SubgoalPlanner:
         last_init_scale: float = 0.01,
         seed: int | None = 0,
     ) -> None:
-        if int(goal_dim) < 1:
-            raise ValueError(f"goal_dim must be >= 1, got goal_dim={goal_dim!r}")
+        _check_planner_args(goal_dim, low, high, noise, clip_eps, epochs, target_kl, max_kl)
         self.goal_dim = int(goal_dim)
         self.depth = check_depth(depth)
-        if (low is None) != (high is None):
-            raise ValueError("give both low and high goal bounds, or neither")
-        if low is not None:
-            low = np.broadcast_to(np.asarray(low, dtype=np.float32), (self.goal_dim,)).copy()
-            high = np.broadcast_to(np.asarray(high, dtype=np.float32), (self.goal_dim,)).copy()
-            if not np.all(high > low):
-                raise ValueError(f"goal bounds need high > low, got low={low}, high={high}")
-        self.low, self.high = low, high
-        if noise not in NOISE_MODES:
-            raise ValueError(f"noise must be one of {NOISE_MODES}, got noise={noise!r}")
+        self.low, self.high = _bounds(low, high, self.goal_dim)
         self.noise = noise
         self.set_std(std)
-        if not 0 < clip_eps < 1:
-            raise ValueError(f"clip_eps must lie in (0, 1), got clip_eps={clip_eps!r}")
-        if int(epochs) < 1:
-            raise ValueError(f"epochs must be >= 1, got epochs={epochs!r}")
         self.hidden = tuple(int(h) for h in hidden)
         self.shared_across_layers = bool(shared_across_layers)
         self.lr = float(lr)
         self.clip_eps = float(clip_eps)
         self.epochs = int(epochs)
         self.max_grad_norm = None if max_grad_norm is None else float(max_grad_norm)
-        if target_kl is not None and not float(target_kl) > 0:
-            raise ValueError(f"target_kl must be > 0 or None, got target_kl={target_kl!r}")
         self.target_kl = None if target_kl is None else float(target_kl)
-        if max_kl is not None and not float(max_kl) > 0:
-            raise ValueError(f"max_kl must be > 0 or None, got max_kl={max_kl!r}")
         self.max_kl = None if max_kl is None else float(max_kl)
         self.normalize_advantages = bool(normalize_advantages)
         self.augment_reversed = bool(augment_reversed)
         self.last_init_scale = float(last_init_scale)
+        self.nets = self._build_nets(seed)
+        self.optimizer = torch.optim.Adam(self.nets.parameters(), lr=self.lr)
+        # Sub-goals are squashed into the goal box: center + half * tanh(.) (the unit box without bounds).
+        center = (self.low + self.high) / 2.0 if self.low is not None else np.zeros(self.goal_dim, np.float32)
+        half = (self.high - self.low) / 2.0 if self.low is not None else np.ones(self.goal_dim, np.float32)
+        self._center = torch.as_tensor(center, dtype=torch.float32)
+        self._half = torch.as_tensor(half, dtype=torch.float32)
 
+    def _build_nets(self, seed: int | None) -> nn.ModuleList:
+        """One MLP per layer (or one shared), initialised from `seed` without touching torch's global RNG."""
         if seed is not None:
             gen_state = torch.random.get_rng_state()
             torch.manual_seed(seed)
         n_nets = 1 if self.shared_across_layers else self.depth
-        self.nets = nn.ModuleList(
+        nets = nn.ModuleList(
             _mlp(2 * self.goal_dim, self.goal_dim, self.hidden, self.last_init_scale) for _ in range(n_nets)
         )
         if seed is not None:
             torch.random.set_rng_state(gen_state)
-        self.optimizer = torch.optim.Adam(self.nets.parameters(), lr=self.lr)
-
-        if self.low is not None:
-            center = (self.low + self.high) / 2.0
-            half = (self.high - self.low) / 2.0
-        else:
-            center = np.zeros(self.goal_dim, np.float32)
-            half = np.ones(self.goal_dim, np.float32)
-        self._center = torch.as_tensor(center, dtype=torch.float32)
-        self._half = torch.as_tensor(half, dtype=torch.float32)
+        return nets
 
     def set_std(self, std: float | Sequence[float]) -> None:
         """Sets the exploration std (scalar or [d]; its meaning depends on ``noise``)."""
@@ -446,3 +428,31 @@ class SubgoalPlanner:
             "nonfinite_skipped": float(skipped),
             "rolled_back": rolled_back,
         }
+
+
+def _check_planner_args(goal_dim, low, high, noise, clip_eps, epochs, target_kl, max_kl) -> None:
+    """SubgoalPlanner's argument checks: a ValueError naming the argument and its value."""
+    if int(goal_dim) < 1:
+        raise ValueError(f"goal_dim must be >= 1, got goal_dim={goal_dim!r}")
+    if (low is None) != (high is None):
+        raise ValueError("give both low and high goal bounds, or neither")
+    if noise not in NOISE_MODES:
+        raise ValueError(f"noise must be one of {NOISE_MODES}, got noise={noise!r}")
+    if not 0 < clip_eps < 1:
+        raise ValueError(f"clip_eps must lie in (0, 1), got clip_eps={clip_eps!r}")
+    if int(epochs) < 1:
+        raise ValueError(f"epochs must be >= 1, got epochs={epochs!r}")
+    for name, value in (("target_kl", target_kl), ("max_kl", max_kl)):
+        if value is not None and not float(value) > 0:
+            raise ValueError(f"{name} must be > 0 or None, got {name}={value!r}")
+
+
+def _bounds(low, high, goal_dim: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The goal box as float32 arrays of `goal_dim` (None, None: unbounded)."""
+    if low is None:
+        return None, None
+    low = np.broadcast_to(np.asarray(low, dtype=np.float32), (goal_dim,)).copy()
+    high = np.broadcast_to(np.asarray(high, dtype=np.float32), (goal_dim,)).copy()
+    if not np.all(high > low):
+        raise ValueError(f"goal bounds need high > low, got low={low}, high={high}")
+    return low, high
