@@ -363,7 +363,7 @@ def run_experiments(
 def _tuner(run: SweepRun, runtime, index, exp_name, seed, exp_id, parent_id, extra_callbacks):
     """The experiment restored from its Tune state (resume), or built fresh with the sweep's callbacks."""
     if run.resume:
-        tuner = runtime.restore_tuner(run.tune_root / exp_name)
+        tuner = runtime.restore_tuner(run.spec, run.tune_root / exp_name)
         if tuner is not None:
             return tuner
     callbacks = [

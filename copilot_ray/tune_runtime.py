@@ -18,14 +18,18 @@ from ray import tune
 from ray.tune import Callback
 
 from copilot_ray.algorithms.copilot.algorithm import CoPilot
+from copilot_ray.algorithms.registry import get_algorithm
 from copilot_ray.keys import (
     ENV_STEPS,
     EVAL_FRESH,
+    EVAL_PREFIX,
     SEED_PARAM,
     SPEC_PATH_KEY,
     SUCCESS_METRICS,
     TIME_TOTAL_S,
     TRAINING_ITERATION,
+    eval_leaf,
+    metric_path,
     result_value,
 )
 from copilot_ray.spec import (
@@ -43,8 +47,10 @@ _LAST_EVAL_STATE = "copilot_trial_last_eval"
 
 
 # ================================================================================================ trainable
-class CoPilotTrial(CoPilot):
-    """CoPilot built from a flat Tune config: ``{dotted params..., "seed": s, "_spec_path": p}``.
+class SpecTrial:
+    """Mixin that makes an RLlib Algorithm a sweep trial: built from a flat Tune config
+    ``{dotted params..., "seed": s, "_spec_path": p}``. A registered algorithm's trial class is
+    ``class MyTrial(SpecTrial, MyAlgorithm)`` (the registry's third entry).
 
     ``__init__`` and ``default_resource_request`` turn the flat dict into the RLlib config with
     ``build_algorithm_config(flat, spec)`` (spec loaded from ``_spec_path``), so Tune's placement
@@ -69,8 +75,10 @@ class CoPilotTrial(CoPilot):
 
     def step(self):
         result = super().step()
-        ev = result.setdefault("copilot", {}).setdefault("eval", {})
-        names = [_leaf(key) for key in SUCCESS_METRICS]
+        ev = result
+        for part in metric_path(EVAL_PREFIX.rstrip("/")):
+            ev = ev.setdefault(part, {})
+        names = [eval_leaf(key) for key in SUCCESS_METRICS]
         # RLlib reports a window-1 stat logged in an earlier iteration as NaN: not an evaluation.
         fresh = all(_is_number(ev.get(name)) for name in names)
         for name in names:
@@ -78,7 +86,7 @@ class CoPilotTrial(CoPilot):
                 self._last_eval[name] = float(ev[name])
             else:
                 ev[name] = self._last_eval.get(name, float("nan"))
-        ev[_leaf(EVAL_FRESH)] = 1.0 if fresh else 0.0
+        ev[eval_leaf(EVAL_FRESH)] = 1.0 if fresh else 0.0
         return result
 
     def get_state(self, *args, **kwargs):
@@ -91,14 +99,18 @@ class CoPilotTrial(CoPilot):
         self._last_eval = dict(state.get(_LAST_EVAL_STATE, {}))
 
 
+class CoPilotTrial(SpecTrial, CoPilot):
+    """CoPilot as a sweep trial (see SpecTrial)."""
+
+
+def trainable(spec) -> type:
+    """The trial class of the spec's algorithm (the registry's third entry)."""
+    return get_algorithm(spec.algorithm).trial_class()
+
+
 def _algorithm_config(config: Mapping[str, Any]):
     spec = load_spec_cached(str(config[SPEC_PATH_KEY]))
     return build_algorithm_config(trial_flat(config), spec)
-
-
-def _leaf(key: str) -> str:
-    """``copilot/eval/success_planned`` -> ``success_planned`` (its name inside ``result["copilot"]["eval"]``)."""
-    return key.rsplit("/", 1)[1]
 
 
 def _is_number(v: Any) -> bool:
@@ -141,10 +153,9 @@ class ProgressPrinter(Callback):
         _say(f"{self._head(trial)}  started")
 
     def on_trial_result(self, iteration, trials, trial, result, **info):
-        ev = result.get("copilot", {}).get("eval", {})
-        planned, direct = (ev.get(_leaf(key)) for key in SUCCESS_METRICS)
+        planned, direct = (result_value(result, key) for key in SUCCESS_METRICS)
         steps = result_value(result, ENV_STEPS, 0)
-        mark = "" if ev.get(_leaf(EVAL_FRESH), 1.0) else " (last eval)"
+        mark = "" if result_value(result, EVAL_FRESH, 1.0) else " (last eval)"
         _say(
             f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
             f"env_steps {int(steps):8d}  success planned {_fmt(planned)} "
@@ -208,11 +219,11 @@ def stop_ray() -> None:
     ray.shutdown()
 
 
-def restore_tuner(path: Path) -> tune.Tuner | None:
+def restore_tuner(spec, path: Path) -> tune.Tuner | None:
     """The Tune experiment at ``path`` to continue (errored trials too), or None when there is none."""
     if not (path.exists() and tune.Tuner.can_restore(str(path))):
         return None
-    return tune.Tuner.restore(str(path), trainable=CoPilotTrial, resume_errored=True)
+    return tune.Tuner.restore(str(path), trainable=trainable(spec), resume_errored=True)
 
 
 def build_tuner(
@@ -228,7 +239,7 @@ def build_tuner(
         search_alg = _searcher(spec, spec_path, root / "optuna.db", index, seed)
         num_samples = spec.searcher.num_samples
     return tune.Tuner(
-        CoPilotTrial,
+        trainable(spec),
         param_space=param_space,
         tune_config=tune.TuneConfig(
             search_alg=search_alg,

@@ -7,13 +7,16 @@ import pytest
 from copilot_ray.algorithms import registry
 from copilot_ray.envs import registry as env_registry
 from copilot_ray.spec import SpecError, build_algorithm_config, format_plan, parse_spec
+from copilot_ray.tune_runtime import SpecTrial
+
+
+TOY = ("tests.toy_algorithm", "tests.toy_algorithm:ToyPPOConfig", "tests.toy_algorithm:ToyPPOTrial")
 
 
 @pytest.fixture
 def toy(monkeypatch):
-    monkeypatch.setitem(
-        registry.ALGORITHMS, "toy-ppo", ("tests.toy_algorithm", "tests.toy_algorithm:ToyPPOConfig")
-    )
+    # The one registry line a new algorithm adds (here undone after the test).
+    monkeypatch.setitem(registry.ALGORITHMS, "toy-ppo", TOY)
     monkeypatch.setitem(
         env_registry.ENV_FACTORIES, "toy-cartpole", "gymnasium.envs.classic_control:CartPoleEnv"
     )
@@ -40,6 +43,8 @@ def test_a_registered_toy_algorithm_runs_through_spec_plan_and_config(toy):
     config = build_algorithm_config(spec.trial_plan()[1], spec)
     assert type(config).__name__ == "ToyPPOConfig"
     assert config.lr == 1e-3 and config.num_epochs == 3 and config.env == "toy-cartpole"
+    trial = registry.get_algorithm("toy-ppo").trial_class()
+    assert trial.__name__ == "ToyPPOTrial" and issubclass(trial, SpecTrial)
 
 
 def test_the_toy_algorithms_own_rules_and_metrics_apply(toy):

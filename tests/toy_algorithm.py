@@ -1,7 +1,8 @@
 """A toy algorithm for tests: what a new algorithm (a baseline) adds, in one module.
 
 Registered with one line, `register_algorithm("toy-ppo", "tests.toy_algorithm",
-"tests.toy_algorithm:ToyPPOConfig")`: this module is both its settings module and its config module.
+"tests.toy_algorithm:ToyPPOConfig", "tests.toy_algorithm:ToyPPOTrial")`: this module is its settings
+module, its config module and its sweep trial's.
 (A real one keeps RLlib out of its settings module, so that specs are checked without Ray.)
 """
 
@@ -10,9 +11,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.ppo import PPO, PPOConfig
 
 from copilot_ray.settings import float_setting, int_setting
+from copilot_ray.tune_runtime import SpecTrial
 
 SETTINGS = {
     s.key: s
@@ -30,3 +32,7 @@ class ToyPPOConfig(PPOConfig):
         training = {key: values.get(key, s.default) for key, s in SETTINGS.items()}
         config = cls().environment(run.env_id, env_config=dict(run.env_config)).debugging(seed=run.seed)
         return config.training(**training)
+
+
+class ToyPPOTrial(SpecTrial, PPO):
+    """What a sweep runs for `algorithm: toy-ppo`."""

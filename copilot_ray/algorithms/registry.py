@@ -1,7 +1,8 @@
 """Algorithm names -> where they are declared. A new algorithm is one module plus one line in
 ALGORITHMS (or one `register_algorithm` call).
 
-A line names two things, "settings_module" and "config_module:ConfigClass" (one module may be both).
+A line names three things: "settings_module", "module:ConfigClass" and "module:TrialClass" (one module
+may hold all three).
 The settings module must import without Ray (sweep specs are validated against it before anything
 starts) and provide:
 
@@ -11,7 +12,8 @@ starts) and provide:
     combination_problems(values)          optional: [(keys, value, why)] for values that clash together
 
 The config class (an RLlib AlgorithmConfig, imported only when a run is built) provides
-`from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build.
+`from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build. The trial
+class is what a sweep runs: `class MyTrial(tune_runtime.SpecTrial, MyAlgorithm)`.
 """
 
 from __future__ import annotations
@@ -24,10 +26,11 @@ from typing import Any
 
 from copilot_ray.settings import Setting
 
-ALGORITHMS: dict[str, tuple[str, str]] = {
+ALGORITHMS: dict[str, tuple[str, str, str]] = {
     "copilot": (
         "copilot_ray.algorithms.copilot.settings",
         "copilot_ray.algorithms.copilot.algorithm:CoPilotConfig",
+        "copilot_ray.tune_runtime:CoPilotTrial",
     ),
 }
 
@@ -56,20 +59,32 @@ class AlgorithmEntry:
     metrics: tuple[str, ...]
     combination_problems: Callable[[Mapping[str, Any]], list[tuple[tuple[str, ...], Any, str]]]
     config_class: str  # "module:Class", imported by build_config only
+    trial_class_path: str  # "module:Class", imported by trial_class only (a sweep's trainable)
 
     def build_config(self, values: Mapping[str, Any], run: RunContext) -> Any:
         """The algorithm's config for flat setting `values` and one run (imports the config class)."""
-        module, name = self.config_class.split(":")
-        return getattr(importlib.import_module(module), name).from_settings(values, run)
+        return _load(self.config_class).from_settings(values, run)
+
+    def trial_class(self) -> type:
+        """The Tune trainable a sweep runs (imports Ray)."""
+        return _load(self.trial_class_path)
+
+
+def _load(path: str) -> Any:
+    module, name = path.split(":")
+    return getattr(importlib.import_module(module), name)
 
 
 def algorithm_names() -> list[str]:
     return sorted(ALGORITHMS)
 
 
-def register_algorithm(name: str, settings_module: str, config_class: str) -> None:
-    """Make `algorithm: <name>` valid in specs; both are imported on first use."""
-    ALGORITHMS[name] = (settings_module, config_class)
+def register_algorithm(name: str, settings_module: str, config_class: str, trial_class: str) -> None:
+    """Make `algorithm: <name>` valid in specs; all three are imported on first use.
+
+    In this process only: Ray's trial workers import the registry afresh, so an algorithm that sweeps
+    run needs its line in ALGORITHMS itself."""
+    ALGORITHMS[name] = (settings_module, config_class, trial_class)
 
 
 def get_algorithm(name: str) -> AlgorithmEntry:
@@ -78,7 +93,7 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         close = difflib.get_close_matches(name, ALGORITHMS, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise UnknownAlgorithmError(f"unknown algorithm {name!r}{hint}; known: {algorithm_names()}")
-    settings_module, config_class = ALGORITHMS[name]
+    settings_module, config_class, trial_class = ALGORITHMS[name]
     module = importlib.import_module(settings_module)
     return AlgorithmEntry(
         name=name,
@@ -86,4 +101,5 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         metrics=tuple(module.METRICS),
         combination_problems=getattr(module, "combination_problems", lambda values: []),
         config_class=config_class,
+        trial_class_path=trial_class,
     )
