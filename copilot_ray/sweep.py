@@ -413,7 +413,7 @@ def _say(line: str) -> None:
 # ================================================================================================ CLI
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m copilot_ray.sweep", description=__doc__.split("\n\n")[0])
-    p.add_argument("spec", help="sweep spec YAML (see copilot_ray/spec.py and sweeps/)")
+    p.add_argument("spec", help="sweep spec YAML (format: copilot_ray/spec/__init__.py; examples: sweeps/)")
     p.add_argument("--check", action="store_true", help="validate and print the plan; start nothing")
     p.add_argument("--resume", action="store_true", help="continue an interrupted or failed sweep")
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")

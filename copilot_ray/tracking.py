@@ -155,7 +155,7 @@ class MlflowRun:
 #   child run (one per trial)    tags  mlflow.parentRunId, copilot.role=trial, copilot.sweep,
 #                                      copilot.trial_id, copilot.config_key, algorithm, env, K, b,
 #                                      alpha_schedule, preset, variant, seed, git_commit
-#                                params  every knob of the algorithm at its effective value, seed, env.*
+#                                params  every setting of the algorithm at its effective value, seed, env.*
 #                                metrics  metrics_from_result + time_total_s + training_iteration,
 #                                         step = env steps (keys.ENV_STEPS)
 #                                artifacts  config.yaml, checkpoint/ (final), copilot_trees/*.npz
@@ -336,7 +336,7 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "preset": getattr(algo_config, "preset", None) or "default",
         "variant": flat.get(VARIANT_PARAM, ""),
         "seed": seed,
-        "knobs": effective_settings(algo_config, settings),
+        "settings": effective_settings(algo_config, settings),
     }
 
 
@@ -400,7 +400,7 @@ def trial_config_yaml(info: Mapping[str, Any]) -> str:
         "seed": info["seed"],
         "config_key": info["config_key"],
         "env": {"id": spec.env.id, "config": dict(spec.env.config)},
-        "knobs": info["knobs"],
+        "settings": info["settings"],
         "algorithm": spec.algorithm,
         "algorithm_config": algo,
     }
@@ -490,7 +490,7 @@ class TrialRuns:
         name = f"{info['config_key']}-seed{info['seed']}"
         run = self.client.create_run(self.experiment_id, run_name=name, tags=self._tags(trial, info))
         run_id = run.info.run_id
-        params = {**info["knobs"], SEED_PARAM: info["seed"], **env_params(info["spec"])}
+        params = {**info["settings"], SEED_PARAM: info["seed"], **env_params(info["spec"])}
         _log_params(self.client, run_id, params_for_mlflow(params))
         self.client.log_text(run_id, trial_config_yaml(info), CONFIG_ARTIFACT)
         return run_id

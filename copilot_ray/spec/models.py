@@ -354,19 +354,19 @@ class SweepSpec(_Model):
             return [Issue(path, value, f"building env {self.env.id!r} failed: {type(err).__name__}: {text}")]
         return []
 
-    def _check_config(self, knobs: Mapping[str, Setting]) -> list[Issue]:
+    def _check_config(self, settings: Mapping[str, Setting]) -> list[Issue]:
         issues = []
         for key, value in self.config.items():
-            if key not in knobs:
+            if key not in settings:
                 issues.append(
                     Issue(
                         f"config.{key}",
                         value,
-                        f"unknown key{did_you_mean(key, knobs)} (known keys: the SETTINGS of {ALGORITHMS[self.algorithm]})",
+                        f"unknown key{did_you_mean(key, settings)} (known keys: the SETTINGS of {ALGORITHMS[self.algorithm][0]})",
                         show_value=False,
                     )
                 )
-            elif msg := rule_problem(key, knobs[key], value):
+            elif msg := rule_problem(key, settings[key], value):
                 issues.append(Issue(f"config.{key}", value, msg))
         if "seed" in self.config:
             issues.append(
@@ -382,7 +382,7 @@ class SweepSpec(_Model):
             )
         return issues
 
-    def _check_variants(self, knobs: Mapping[str, Setting]) -> list[Issue]:
+    def _check_variants(self, settings: Mapping[str, Setting]) -> list[Issue]:
         issues = []
         if self.variants and self.searcher.type != "grid":
             issues.append(Issue("variants", list(self.variants), "variants need searcher type: grid"))
@@ -394,26 +394,26 @@ class SweepSpec(_Model):
                 continue
             for key, value in overrides.items():
                 path = f"variants.{name}.{key}"
-                if key not in knobs:
+                if key not in settings:
                     issues.append(
-                        Issue(path, value, f"unknown key{did_you_mean(key, knobs)}", show_value=False)
+                        Issue(path, value, f"unknown key{did_you_mean(key, settings)}", show_value=False)
                     )
-                elif msg := rule_problem(key, knobs[key], value):
+                elif msg := rule_problem(key, settings[key], value):
                     issues.append(Issue(path, value, msg))
                 elif key in self.search:
                     issues.append(Issue(path, value, f"{key} is also searched; keep one"))
         return issues
 
-    def _check_search(self, knobs: Mapping[str, Setting]) -> list[Issue]:
+    def _check_search(self, settings: Mapping[str, Setting]) -> list[Issue]:
         issues: list[Issue] = []
         seen: dict[str, str] = {}
 
         def walk(params: Mapping[str, ParamSearch], prefix: str, fixed_here: set[str]) -> None:
             for key, ps in params.items():
                 path = f"{prefix}.{key}"
-                if key not in knobs:
+                if key not in settings:
                     issues.append(
-                        Issue(path, key, f"unknown key{did_you_mean(key, knobs)}", show_value=False)
+                        Issue(path, key, f"unknown key{did_you_mean(key, settings)}", show_value=False)
                     )
                     continue
                 if key in self.config:
@@ -425,7 +425,7 @@ class SweepSpec(_Model):
                         Issue(path, key, f"{key} is already searched at {seen[key]}", show_value=False)
                     )
                 seen.setdefault(key, path)
-                issues.extend(_check_domain(key, ps, knobs[key], path))
+                issues.extend(_check_domain(key, ps, settings[key], path))
                 if ps.when:
                     for choice, branch in ps.when.items():
                         walk(branch, f"{path}.when.{choice}", fixed_here | set(params))
@@ -578,17 +578,17 @@ def _all_params(params: Mapping[str, ParamSearch]) -> list[tuple[str, ParamSearc
     return out
 
 
-def _check_domain(key: str, ps: ParamSearch, knob: Setting, path: str) -> list[Issue]:
+def _check_domain(key: str, ps: ParamSearch, setting: Setting, path: str) -> list[Issue]:
     """Every value a domain can produce must satisfy the key's own rule (ranges: both ends)."""
     d = ps.domain
-    if d == "int" and knob.kind not in ("int", "float"):
+    if d == "int" and setting.kind not in ("int", "float"):
         return [Issue(f"{path}.int", ps.values, f"{key} is not a number; use grid or categorical")]
-    if d == "float" and knob.kind != "float":
-        what = "an integer: use int" if knob.kind == "int" else "not a number; use grid or categorical"
+    if d == "float" and setting.kind != "float":
+        what = "an integer: use int" if setting.kind == "int" else "not a number; use grid or categorical"
         return [Issue(f"{path}.float", ps.values, f"{key} is {what}")]
     issues = []
     for i, value in enumerate(ps.values):
-        if msg := rule_problem(key, knob, value):
+        if msg := rule_problem(key, setting, value):
             issues.append(Issue(f"{path}.{d}[{i}]", value, msg))
     return issues
 
