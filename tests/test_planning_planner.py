@@ -52,6 +52,17 @@ def test_samples_are_seeded_and_clipped():
     assert (t1 >= 0).all() and (t1 <= 1).all() and (t1[:, 1:-1] == 0).any()
 
 
+def _layer_mean(planner, trees, k):
+    """pi_p's mean of layer k's new sub-goals given their parents in `trees`, by hand."""
+    li, ri = parent_indices(planner.depth, k)
+    with torch.no_grad():
+        return planner.mean(
+            torch.as_tensor(trees[:, li], dtype=torch.float32),
+            torch.as_tensor(trees[:, ri], dtype=torch.float32),
+            k,
+        ).numpy()
+
+
 def test_log_prob_equals_hand_computed_gaussian():
     std = np.array([0.05, 0.1])
     planner = SubgoalPlanner(2, 2, low=0.0, high=1.0, std=std, seed=0)
@@ -60,13 +71,7 @@ def test_log_prob_equals_hand_computed_gaussian():
     expected = np.zeros(3)
     per_layer = {}
     for k in (1, 2):
-        li, ri = parent_indices(2, k)
-        with torch.no_grad():
-            mu = planner.mean(
-                torch.as_tensor(trees[:, li], dtype=torch.float32),
-                torch.as_tensor(trees[:, ri], dtype=torch.float32),
-                k,
-            ).numpy()
+        mu = _layer_mean(planner, trees, k)
         x = trees[:, new_layer_indices(2, k)]
         dens = -0.5 * ((x - mu) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi)
         per_layer[k] = dens.sum(axis=(1, 2))
@@ -95,12 +100,7 @@ def test_relative_noise_scales_with_the_parent_segment_and_log_prob_matches_by_h
     expected = np.zeros(2)
     for k in (1, 2):
         li, ri = parent_indices(2, k)
-        with torch.no_grad():
-            mu = planner.mean(
-                torch.as_tensor(trees[:, li], dtype=torch.float32),
-                torch.as_tensor(trees[:, ri], dtype=torch.float32),
-                k,
-            ).numpy()
+        mu = _layer_mean(planner, trees, k)
         std = np.maximum(0.1 * np.linalg.norm(trees[:, ri] - trees[:, li], axis=-1, keepdims=True), 1e-3)
         x = trees[:, new_layer_indices(2, k)]
         dens = -0.5 * ((x - mu) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi)
