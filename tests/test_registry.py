@@ -9,7 +9,6 @@ from copilot_ray.envs import registry as env_registry
 from copilot_ray.spec import SpecError, build_algorithm_config, format_plan, parse_spec
 from copilot_ray.tune_runtime import SpecTrial
 
-
 TOY = ("tests.toy_algorithm", "tests.toy_algorithm:ToyPPOConfig", "tests.toy_algorithm:ToyPPOTrial")
 
 

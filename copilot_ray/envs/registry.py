@@ -14,6 +14,7 @@ import gymnasium as gym
 
 ENV_FACTORIES: dict[str, str] = {
     "maze-point": "copilot_ray.envs.maze.env:make_maze_point",
+    "maze-rigid": "copilot_ray.envs.maze.env:make_maze_rigid",
 }
 
 

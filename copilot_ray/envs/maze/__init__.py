@@ -1,7 +1,7 @@
 """The 1 x 1 maze family: layouts, exact collision geometry, agents, task sets, rendering, the env."""
 
-from .agents import AGENTS, AgentGeometry, PointMass
-from .env import DEFAULT_LAYOUT, DEFAULT_SPEED, DEFAULTS, GoalMazeEnv, shortest_path_lengths
+from .agents import AgentGeometry, PointMass
+from .env import AGENTS, DEFAULT_LAYOUT, DEFAULT_SPEED, DEFAULTS, GoalMazeEnv, shortest_path_lengths
 from .geometry import Obstacles, VisibilityGraph, merge_cells
 from .layouts import Layout, LayoutError, builtin_layout_names, load_layout, parse_layout, random_maze
 from .render import render_maze

@@ -1,7 +1,7 @@
 """Agent geometries: what moves through the maze, in its configuration space.
 
-The maze env only talks to an `AgentGeometry`, so a rigid body (x, y, angle; a stick checked by
-interpolation) or a 3-link snake (base + joint angles) plugs in without touching the maze code. The goal
+The maze env only talks to an `AgentGeometry`, so a rigid body (`rigid_body.py`: x, y, angle) or a
+3-link snake (base + joint angles) plugs in with one line in `env.AGENTS`. The goal
 is a full configuration, so planning happens in configuration space.
 """
 
@@ -113,7 +113,3 @@ class PointMass(AgentGeometry):
         self, obstacles: Obstacles, starts: np.ndarray, goals: np.ndarray
     ) -> np.ndarray:
         return obstacles.visibility_graph.lengths(starts, goals)
-
-
-# Agent kinds by env_config["agent"]; the rigid body and the snake add one line each.
-AGENTS = {"point": PointMass}

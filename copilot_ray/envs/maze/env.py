@@ -11,11 +11,15 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .agents import AGENTS, AgentGeometry
+from .agents import AgentGeometry, PointMass
 from .geometry import Obstacles
 from .layouts import Layout, load_layout
 from .render import render_maze
+from .rigid_body import RigidBody
 from .tasks import SPLITS, sample_task_pairs, split_rng
+
+# Agent kinds (the maze env's `agent` argument); a new agent is an AgentGeometry and one line here.
+AGENTS: dict[str, type[AgentGeometry]] = {"point": PointMass, "rigid": RigidBody}
 
 # four-rooms: 67 % of straight test start->goal lines collide, yet no task needs more than two doorways.
 DEFAULT_LAYOUT = "four-rooms"
@@ -286,3 +290,7 @@ def shortest_path_lengths(env: gym.Env, starts: np.ndarray, goals: np.ndarray) -
 
 def make_maze_point(**env_config: Any) -> GoalMazeEnv:
     return GoalMazeEnv(env_config, agent="point")
+
+
+def make_maze_rigid(**env_config: Any) -> GoalMazeEnv:
+    return GoalMazeEnv(env_config, agent="rigid")
