@@ -15,6 +15,7 @@ import gymnasium as gym
 ENV_FACTORIES: dict[str, str] = {
     "maze-point": "copilot_ray.envs.maze.env:make_maze_point",
     "maze-rigid": "copilot_ray.envs.maze.env:make_maze_rigid",
+    "maze-snake": "copilot_ray.envs.maze.env:make_maze_snake",
 }
 
 

@@ -16,10 +16,11 @@ from .geometry import Obstacles
 from .layouts import Layout, load_layout
 from .render import render_maze
 from .rigid_body import RigidBody
+from .snake import Snake
 from .tasks import SPLITS, sample_task_pairs, split_rng
 
 # Agent kinds (the maze env's `agent` argument); a new agent is an AgentGeometry and one line here.
-AGENTS: dict[str, type[AgentGeometry]] = {"point": PointMass, "rigid": RigidBody}
+AGENTS: dict[str, type[AgentGeometry]] = {"point": PointMass, "rigid": RigidBody, "snake": Snake}
 
 # four-rooms: 67 % of straight test start->goal lines collide, yet no task needs more than two doorways.
 DEFAULT_LAYOUT = "four-rooms"
@@ -294,3 +295,7 @@ def make_maze_point(**env_config: Any) -> GoalMazeEnv:
 
 def make_maze_rigid(**env_config: Any) -> GoalMazeEnv:
     return GoalMazeEnv(env_config, agent="rigid")
+
+
+def make_maze_snake(**env_config: Any) -> GoalMazeEnv:
+    return GoalMazeEnv(env_config, agent="snake")

@@ -141,30 +141,10 @@ class RigidBody(AgentGeometry):
         """bool [N], by conservative advancement (module docstring): never reports a colliding motion free."""
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
-        if a.shape != b.shape:
-            raise ValueError(f"motion endpoints differ in shape: {a.shape} vs {b.shape}")
         d = b - a
         # Fastest any body point moves per unit of the motion's parameter t.
         speed = np.hypot(d[:, 0], d[:, 1]) + 0.5 * self.length * np.abs(wrap_angle(d[:, 2]))
-        t = np.zeros(len(a))
-        collide = np.zeros(len(a), dtype=bool)
-        active = np.ones(len(a), dtype=bool)
-        for _ in range(MAX_ADVANCES):
-            idx = np.flatnonzero(active)
-            if not len(idx):
-                break
-            gap = self.clearance(obstacles, self._along(a[idx], b[idx], t[idx]))
-            hit = gap <= CONTACT
-            collide[idx[hit]] = True
-            step = np.where(speed[idx] > 0, gap / np.maximum(speed[idx], 1e-300), np.inf)
-            t[idx] = t[idx] + step
-            done = hit | (t[idx] >= 1.0)
-            if (~hit & done).any():  # the last stretch reached b: check b itself (closed obstacles)
-                end = idx[~hit & done]
-                collide[end] = self.clearance(obstacles, b[end]) <= CONTACT
-            active[idx[done]] = False
-        collide[active] = True  # undecided after MAX_ADVANCES: grazing a wall, count it as touching
-        return collide
+        return advance_motions(lambda c: self.clearance(obstacles, c), self._along, a, b, speed)
 
     def motion_collision_lengths(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """float [N]: the motion's length times the share of 32 evenly spaced configurations along it that
@@ -180,3 +160,33 @@ class RigidBody(AgentGeometry):
     def draw(self, canvas: Canvas, config: np.ndarray, color: tuple[int, int, int]) -> None:
         p, q = stick_endpoints(config, self.length)
         canvas.segment(p[0], q[0], width_px=max(2.0, canvas.size / 100), color=color)
+
+
+def advance_motions(clearance, along, a: np.ndarray, b: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """bool [N]: do the motions a -> b collide? Conservative advancement, shared by the maze's bodies.
+
+    clearance(configs) is the body's exact distance to obstacles and border; along(a, b, t) the
+    configurations a fraction t of the way; speed [N] bounds how far any body point moves per unit of t.
+    At clearance d the motion moves on by d / speed (no point can reach an obstacle in between); it
+    collides when the clearance falls to `CONTACT` and is free when it reaches b.
+    """
+    if a.shape != b.shape:
+        raise ValueError(f"motion endpoints differ in shape: {a.shape} vs {b.shape}")
+    t = np.zeros(len(a))
+    collide = np.zeros(len(a), dtype=bool)
+    active = np.ones(len(a), dtype=bool)
+    for _ in range(MAX_ADVANCES):
+        idx = np.flatnonzero(active)
+        if not len(idx):
+            break
+        gap = clearance(along(a[idx], b[idx], t[idx]))
+        hit = gap <= CONTACT
+        collide[idx[hit]] = True
+        t[idx] = t[idx] + np.where(speed[idx] > 0, gap / np.maximum(speed[idx], 1e-300), np.inf)
+        done = hit | (t[idx] >= 1.0)
+        if (~hit & done).any():  # the last stretch reached b: check b itself (closed obstacles)
+            end = idx[~hit & done]
+            collide[end] = clearance(b[end]) <= CONTACT
+        active[idx[done]] = False
+    collide[active] = True  # undecided after MAX_ADVANCES: grazing a wall, count it as touching
+    return collide

@@ -1,4 +1,4 @@
-"""maze-rigid: a stick (x, y, theta) whose motion checks never report a colliding motion free."""
+"""maze-rigid and maze-snake: bodies whose motion checks never report a colliding motion free."""
 
 from __future__ import annotations
 
@@ -8,42 +8,60 @@ import pytest
 from copilot_ray.envs import make
 from copilot_ray.envs.maze import Obstacles, builtin_layout_names, load_layout
 from copilot_ray.envs.maze.rigid_body import LENGTH, RigidBody, segment_clearance, stick_endpoints
+from copilot_ray.envs.maze.snake import JOINT_LIMIT, LINK, Snake, joints
+
+BODIES = {"rigid": RigidBody, "snake": Snake}
 
 
-def reference_motion_collides(body: RigidBody, obstacles: Obstacles, a, b, samples: int = 2000) -> np.ndarray:
-    """A much finer reference: the stick at `samples` evenly spaced configurations along each motion,
-    each tested exactly (segment against boxes and border)."""
+def static_collides(body, obstacles: Obstacles, configs: np.ndarray) -> np.ndarray:
+    """The body at each configuration against boxes and border, by the exact segment test alone."""
+    if isinstance(body, RigidBody):
+        return obstacles.segments_collide(*stick_endpoints(configs, body.length))
+    pts = joints(configs)
+    links = obstacles.segments_collide(pts[:, :-1].reshape(-1, 2), pts[:, 1:].reshape(-1, 2))
+    return links.reshape(len(pts), pts.shape[1] - 1).any(axis=1)
+
+
+def reference_motion_collides(body, obstacles: Obstacles, a, b, samples: int = 2000) -> np.ndarray:
+    """A much finer reference: the body at `samples` evenly spaced configurations along each motion,
+    each tested exactly (its segments against boxes and border)."""
     out = np.zeros(len(a), dtype=bool)
     for t in np.linspace(0.0, 1.0, samples):
-        configs = body._along(a, b, np.full(len(a), t))
-        out |= obstacles.segments_collide(*stick_endpoints(configs, body.length))
+        out |= static_collides(body, obstacles, body._along(a, b, np.full(len(a), t)))
     return out
 
 
-def random_motions(rng, n: int, scale: float) -> tuple[np.ndarray, np.ndarray]:
-    a = np.column_stack([rng.uniform(0.02, 0.98, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
-    step = np.column_stack([rng.normal(0, scale, (n, 2)), rng.normal(0, 40 * scale, n)])
-    return a, a + step
+def random_motions(rng, n: int, scale: float, dim: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Motions from random configurations (joint angles within the snake's limits), `scale` long."""
+    angles = rng.uniform(-JOINT_LIMIT, JOINT_LIMIT, (n, dim - 2))
+    a = np.column_stack([rng.uniform(0.02, 0.98, (n, 2)), angles])
+    step = np.column_stack([rng.normal(0, scale, (n, 2)), rng.normal(0, 40 * scale, (n, dim - 2))])
+    b = a + step
+    b[:, 3:] = np.clip(b[:, 3:], -JOINT_LIMIT, JOINT_LIMIT)
+    return a, b
 
 
+@pytest.mark.parametrize("agent", sorted(BODIES))
 @pytest.mark.parametrize("layout", builtin_layout_names())
-def test_no_colliding_motion_is_reported_free_on_any_builtin_layout(layout):
+def test_no_colliding_motion_is_reported_free_on_any_builtin_layout(layout, agent):
     obstacles = Obstacles.from_layout(load_layout(layout))
-    body = RigidBody(speed=0.0025)
+    body = BODIES[agent](speed=0.0025)
     rng = np.random.default_rng(0)
-    for scale in (0.003, 0.02, 0.1):  # one step, a few steps, a planner's segment
-        a, b = random_motions(rng, 400, scale)
+    for scale in (0.003, 0.02, 0.06):  # one step, a few steps, a planner's segment
+        a, b = random_motions(rng, 200, scale, body.config_dim)
         ours = body.motions_collide(obstacles, a, b)
         reference = reference_motion_collides(body, obstacles, a, b)
         missed = reference & ~ours
-        assert not missed.any(), f"{missed.sum()} colliding motions reported free ({layout}, scale {scale})"
+        assert not missed.any(), (
+            f"{missed.sum()} colliding motions reported free ({agent}, {layout}, {scale})"
+        )
         # Conservative, not paranoid: where we say "collides" and the reference does not, a 50x finer
         # reference must mostly agree with us (it did find the 2000-sample reference missing a graze).
         free = ~reference
         doubt = np.flatnonzero(ours & free)
         confirmed = reference_motion_collides(body, obstacles, a[doubt], b[doubt], samples=100_000)
         false_alarms = len(doubt) - int(confirmed.sum())
-        assert free.sum() > 20 and false_alarms <= 0.02 * free.sum(), (layout, scale, false_alarms)
+        assert free.sum() > 10 and false_alarms <= 0.02 * free.sum(), (agent, layout, scale, false_alarms)
 
 
 def test_a_wall_thinner_than_any_sampling_step_is_not_jumped():
@@ -116,13 +134,14 @@ def test_start_inside_a_wall_is_refused_naming_it():
         env.reset(options={"start": [0.5, 0.5, 0.0], "goal": [0.2, 0.2, 0.0]})
 
 
-def test_a_spec_on_maze_rigid_builds_a_copilot_config_in_the_3d_goal_space():
+@pytest.mark.parametrize("env_id", ["maze-rigid", "maze-snake"])
+def test_a_spec_on_a_body_maze_builds_a_copilot_config(env_id):
     from copilot_ray.spec import build_algorithm_config, parse_spec
 
     spec = parse_spec(
         {
-            "name": "rigid",
-            "env": {"id": "maze-rigid", "config": {"layout": "four-rooms"}},
+            "name": "body",
+            "env": {"id": env_id, "config": {"layout": "four-rooms"}},
             "config": {"tree_depth": 2},
             "stop": {"env_steps": 100},
         }
@@ -132,3 +151,31 @@ def test_a_spec_on_maze_rigid_builds_a_copilot_config_in_the_3d_goal_space():
     assert config.goal_env == "maze-rigid" and config.env_config["goal_env_config"] == {
         "layout": "four-rooms"
     }
+
+
+def test_snake_joints_chain_the_links_and_the_distance_weights_each_joint_by_its_reach():
+    pts = joints(np.array([0.5, 0.5, 0.0, np.pi / 2, -np.pi / 2]))[0]
+    np.testing.assert_allclose(pts, [[0.5, 0.5], [0.52, 0.5], [0.52, 0.52], [0.54, 0.52]], atol=1e-12)
+    body = Snake(speed=0.0025)
+    a = np.array([0.5, 0.5, np.pi - 0.1, 0.0, 0.0])
+    b = np.array([0.5, 0.5, -np.pi + 0.1, 0.3, 0.0])
+    assert body.distance(a, b) == pytest.approx(np.hypot(3 * LINK * 0.2, 2 * LINK * 0.3))
+    nxt = body.step(np.array([0.5, 0.5, 0.0, 0.0, 0.0]), np.ones(5))
+    moved = np.linalg.norm(joints(nxt)[0] - joints(np.array([0.5, 0.5, 0.0, 0.0, 0.0]))[0], axis=1)
+    assert moved.max() <= 4 * body.speed + 1e-12  # base + three joints, each at most `speed`
+    assert body.distance(np.array([0.5, 0.5, 0.0, 0.0, 0.0]), nxt) == pytest.approx(
+        body.nominal_step_distance
+    )
+    limited = body.step(np.array([0.5, 0.5, 0.0, JOINT_LIMIT, 0.0]), np.ones(5))
+    assert limited[3] == JOINT_LIMIT  # joints stop at their limits
+
+
+def test_maze_snake_env_runs_renders_and_keeps_tasks_free():
+    env = make("maze-snake", layout="four-rooms", render_mode="rgb_array").unwrapped
+    assert env.goal_dim == 5 and env.action_space.shape == (5,)
+    starts, goals = env.tasks("test")
+    assert (env.agent_geometry.clearance(env.obstacles, starts) >= env.success_radius).all()
+    env.reset()
+    _, _, _, _, info = env.step(np.ones(5, np.float32))
+    assert set(info) >= {"collision", "success", "distance"}
+    assert env.render().shape == (256, 256, 3)
