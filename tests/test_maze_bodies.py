@@ -148,7 +148,7 @@ def test_a_spec_on_a_body_maze_builds_a_copilot_config(env_id):
     )
     config = build_algorithm_config({"seed": 0}, spec)
     config.validate()
-    assert config.goal_env == "maze-rigid" and config.env_config["goal_env_config"] == {
+    assert config.goal_env == env_id and config.env_config["goal_env_config"] == {
         "layout": "four-rooms"
     }
 
