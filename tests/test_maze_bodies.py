@@ -148,9 +148,7 @@ def test_a_spec_on_a_body_maze_builds_a_copilot_config(env_id):
     )
     config = build_algorithm_config({"seed": 0}, spec)
     config.validate()
-    assert config.goal_env == env_id and config.env_config["goal_env_config"] == {
-        "layout": "four-rooms"
-    }
+    assert config.goal_env == env_id and config.env_config["goal_env_config"] == {"layout": "four-rooms"}
 
 
 def test_snake_joints_chain_the_links_and_the_distance_weights_each_joint_by_its_reach():

@@ -23,6 +23,13 @@ class AgentGeometry(ABC):
     name: str
     config_dim: int
     action_dim: int
+    # Wrapped angles among the configuration's dims, and each dim's weight in `distance`
+    # (distance = sqrt(sum_i (w_i * d_i)^2), angles wrapped): what a planner over the same space needs.
+    angle_dims: tuple[int, ...] = ()
+
+    @property
+    def distance_weights(self) -> tuple[float, ...]:
+        return (1.0,) * self.config_dim
 
     @property
     @abstractmethod

@@ -94,6 +94,7 @@ class RigidBody(AgentGeometry):
     name = "rigid"
     config_dim = 3
     action_dim = 3
+    angle_dims = (2,)
 
     def __init__(self, speed: float, length: float = LENGTH):
         if not (np.isfinite(speed) and speed > 0):
@@ -111,6 +112,10 @@ class RigidBody(AgentGeometry):
     @property
     def nominal_step_distance(self) -> float:
         return float(np.sqrt(2.0) * self.speed)
+
+    @property
+    def distance_weights(self) -> tuple[float, ...]:
+        return (1.0, 1.0, 0.5 * self.length)
 
     def step(self, config: np.ndarray, action: np.ndarray) -> np.ndarray:
         a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)

@@ -50,6 +50,7 @@ class Snake(AgentGeometry):
     name = "snake"
     config_dim = 5
     action_dim = 5
+    angle_dims = (2,)
 
     def __init__(self, speed: float):
         if not (np.isfinite(speed) and speed > 0):
@@ -67,6 +68,10 @@ class Snake(AgentGeometry):
     @property
     def nominal_step_distance(self) -> float:
         return 2.0 * self.speed
+
+    @property
+    def distance_weights(self) -> tuple[float, ...]:
+        return (1.0, 1.0, *map(float, REACH))
 
     def step(self, config: np.ndarray, action: np.ndarray) -> np.ndarray:
         a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
