@@ -24,11 +24,10 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from rrt_star import rrt_on_test_tasks  # noqa: E402 - benchmarks/rrt_star.py, next to this script
 
 from copilot_ray.algorithms.copilot.settings import PRESETS, defaults  # noqa: E402
-from copilot_ray.envs import make  # noqa: E402
 from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees  # noqa: E402
-from copilot_ray.planning.rrt_star import rrt_star_for_env  # noqa: E402
 from copilot_ray.planning.subgoal_tree import layer_indices  # noqa: E402
 
 
@@ -68,11 +67,10 @@ def main() -> None:
     torch.set_num_threads(1)
     planner_settings = {**defaults("planner"), **PRESETS["paper_literal"]["planner"]}
     for agent in args.agents:
-        env = make(f"maze-{agent}", layout=args.layout)
+        env, starts, goals, ref = rrt_on_test_tasks(
+            agent, args.layout, args.tasks, args.rrt_time_limit, args.seed
+        )
         maze = env.unwrapped
-        starts, goals = (x.astype(np.float64)[: args.tasks] for x in maze.tasks("test"))
-        rrt = rrt_star_for_env(env, time_limit_s=args.rrt_time_limit, seed=args.seed)
-        ref = [rrt.plan(s, g, maze.success_radius) for s, g in zip(starts, goals, strict=True)]
         rrt_solved = np.array([r.solved for r in ref])
         rrt_length = np.array([r.length for r in ref])
         rrt_checks = sum(r.collision_checks for r in ref)

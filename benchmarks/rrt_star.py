@@ -25,6 +25,16 @@ from copilot_ray.envs.maze import shortest_path_lengths  # noqa: E402
 from copilot_ray.planning.rrt_star import rrt_star_for_env  # noqa: E402
 
 
+def rrt_on_test_tasks(agent: str, layout: str, tasks: int, time_limit: float, seed: int):
+    """(env, starts, goals, results): RRT* on the first `tasks` test tasks of `maze-<agent>`."""
+    env = make(f"maze-{agent}", layout=layout)
+    maze = env.unwrapped
+    starts, goals = (x.astype(np.float64)[:tasks] for x in maze.tasks("test"))
+    rrt = rrt_star_for_env(env, time_limit_s=time_limit, seed=seed)
+    results = [rrt.plan(s, g, maze.success_radius) for s, g in zip(starts, goals, strict=True)]
+    return env, starts, goals, results
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -38,11 +48,9 @@ def main() -> None:
     print(f"RRT* on {args.layout}, {args.tasks} test tasks, {args.time_limit:g} s per task")
     print("agent  solved  mean length  length / shortest  collision checks  s/task")
     for agent in args.agents:
-        env = make(f"maze-{agent}", layout=args.layout)
-        maze = env.unwrapped
-        starts, goals = (x.astype(np.float64)[: args.tasks] for x in maze.tasks("test"))
-        rrt = rrt_star_for_env(env, time_limit_s=args.time_limit, seed=args.seed)
-        results = [rrt.plan(s, g, maze.success_radius) for s, g in zip(starts, goals, strict=True)]
+        env, starts, goals, results = rrt_on_test_tasks(
+            agent, args.layout, args.tasks, args.time_limit, args.seed
+        )
         solved = np.array([r.solved for r in results])
         length = np.array([r.length for r in results])
         ratio = "-"
