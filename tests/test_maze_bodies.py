@@ -7,7 +7,8 @@ import pytest
 
 from copilot_ray.envs import make
 from copilot_ray.envs.maze import Obstacles, builtin_layout_names, load_layout
-from copilot_ray.envs.maze.rigid_body import LENGTH, RigidBody, segment_clearance, stick_endpoints
+from copilot_ray.envs.maze.bodies import segment_clearance
+from copilot_ray.envs.maze.rigid_body import LENGTH, RigidBody, stick_endpoints
 from copilot_ray.envs.maze.snake import JOINT_LIMIT, LINK, Snake, joints
 
 BODIES = {"rigid": RigidBody, "snake": Snake}
@@ -27,7 +28,7 @@ def reference_motion_collides(body, obstacles: Obstacles, a, b, samples: int = 2
     each tested exactly (its segments against boxes and border)."""
     out = np.zeros(len(a), dtype=bool)
     for t in np.linspace(0.0, 1.0, samples):
-        out |= static_collides(body, obstacles, body._along(a, b, np.full(len(a), t)))
+        out |= static_collides(body, obstacles, body.interpolate(a, b, np.full(len(a), t)))
     return out
 
 

@@ -31,6 +31,13 @@ class AgentGeometry(ABC):
     def distance_weights(self) -> tuple[float, ...]:
         return (1.0,) * self.config_dim
 
+    @staticmethod
+    def _checked_speed(speed: float) -> float:
+        """`speed` as a float; a ValueError naming it unless it is a positive finite number."""
+        if not (np.isfinite(speed) and speed > 0):
+            raise ValueError(f"speed must be a positive number, got {speed!r}")
+        return float(speed)
+
     @property
     @abstractmethod
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -84,9 +91,7 @@ class PointMass(AgentGeometry):
     action_dim = 2
 
     def __init__(self, speed: float):
-        if not (np.isfinite(speed) and speed > 0):
-            raise ValueError(f"speed must be a positive number, got {speed!r}")
-        self.speed = float(speed)
+        self.speed = self._checked_speed(speed)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

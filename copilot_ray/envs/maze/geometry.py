@@ -142,8 +142,13 @@ class Obstacles:
         border = np.minimum(p, 1.0 - p).min(axis=1).clip(min=0.0)
         if len(self.lo) == 0:
             return border
+        return np.minimum(border, self.box_distances(p).min(axis=1))
+
+    def box_distances(self, points: np.ndarray) -> np.ndarray:
+        """float [N, boxes]: Euclidean distance from each point to each obstacle box (0 inside)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         gap = np.maximum(np.maximum(self.lo[None] - p[:, None], p[:, None] - self.hi[None]), 0.0)
-        return np.minimum(border, np.sqrt((gap**2).sum(axis=2)).min(axis=1))
+        return np.sqrt((gap**2).sum(axis=2))
 
     @cached_property
     def visibility_graph(self) -> VisibilityGraph:

@@ -12,9 +12,9 @@ What the paper leaves open (its Appendix B is not available) and what is chosen 
   moves no body point more than `speed`.
 * Distance: sqrt(dx^2 + dy^2 + sum_j (REACH[j] * dtheta_j)^2), theta1 wrapped: a joint's turn counts as
   far as the chain's tip moves because of it. A full-speed step is 2 x speed.
-* Motion collision never misses: the same conservative advancement as the rigid body
-  (`rigid_body.advance_motions`) on the chain's exact clearance (the smallest of its links'), with
-  every body point moving at most |dp| + sum_j REACH[j] |dtheta_j| per unit of the motion.
+* Motion collision never misses: conservative advancement (`bodies.py`) on the chain's exact clearance
+  (the smallest of its links'), with every body point moving at most |dp| + sum_j REACH[j] |dtheta_j|
+  over a motion.
 """
 
 from __future__ import annotations
@@ -23,8 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .agents import AgentGeometry
-from .rigid_body import CONTACT, advance_motions, segment_clearance, wrap_angle
+from .bodies import ExtendedBody, segment_clearance, wrap_angle
 
 if TYPE_CHECKING:
     from .geometry import Obstacles
@@ -44,7 +43,7 @@ def joints(configs: np.ndarray) -> np.ndarray:
     return np.concatenate([c[:, None, :2], c[:, None, :2] + np.cumsum(steps, axis=1)], axis=1)
 
 
-class Snake(AgentGeometry):
+class Snake(ExtendedBody):
     """The chain described in the module docstring; configuration (x, y, theta1, theta2, theta3)."""
 
     name = "snake"
@@ -53,9 +52,7 @@ class Snake(AgentGeometry):
     angle_dims = (2,)
 
     def __init__(self, speed: float):
-        if not (np.isfinite(speed) and speed > 0):
-            raise ValueError(f"speed must be a positive number, got {speed!r}")
-        self.speed = float(speed)
+        self.speed = self._checked_speed(speed)
         self.turn_rates = self.speed / REACH  # radians per step at a[2 + j] = 1
 
     @property
@@ -82,18 +79,6 @@ class Snake(AgentGeometry):
         c[3:] = np.clip(c[3:], -JOINT_LIMIT, JOINT_LIMIT)
         return c
 
-    def _turns(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        d = np.asarray(b, dtype=np.float64)[..., 2:] - np.asarray(a, dtype=np.float64)[..., 2:]
-        d[..., 0] = wrap_angle(d[..., 0])
-        return d
-
-    def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        a = np.asarray(a, dtype=np.float64)
-        b = np.asarray(b, dtype=np.float64)
-        d = b[..., :2] - a[..., :2]
-        turn = REACH * self._turns(a, b)
-        return np.sqrt((d**2).sum(-1) + (turn**2).sum(-1))
-
     def clearance(self, obstacles: Obstacles, configs: np.ndarray) -> np.ndarray:
         pts = joints(configs)
         n = len(pts)
@@ -103,34 +88,6 @@ class Snake(AgentGeometry):
         c = np.asarray(configs, dtype=np.float64).reshape(-1, 5)
         out[(np.abs(c[:, 3:]) > JOINT_LIMIT + 1e-12).any(axis=1)] = 0.0
         return out
-
-    def _along(self, a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
-        c = a.copy()
-        c[:, :2] = a[:, :2] + t[:, None] * (b[:, :2] - a[:, :2])
-        c[:, 2:] = a[:, 2:] + t[:, None] * self._turns(a, b)
-        c[:, 2] = wrap_angle(c[:, 2])
-        return c
-
-    def motions_collide(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """bool [N], by conservative advancement: never reports a colliding motion free."""
-        a = np.asarray(a, dtype=np.float64).reshape(-1, 5)
-        b = np.asarray(b, dtype=np.float64).reshape(-1, 5)
-        speed = np.hypot(*(b[:, :2] - a[:, :2]).T) + (REACH * np.abs(self._turns(a, b))).sum(axis=1)
-        return advance_motions(lambda c: self.clearance(obstacles, c), self._along, a, b, speed)
-
-    def motion_collision_lengths(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """float [N]: the motion's length times the share of 32 evenly spaced configurations along it that
-        collide (an estimate, for the planner's `collision_cost: length`)."""
-        a = np.asarray(a, dtype=np.float64).reshape(-1, 5)
-        b = np.asarray(b, dtype=np.float64).reshape(-1, 5)
-        hits = np.stack(
-            [
-                self.clearance(obstacles, self._along(a, b, np.full(len(a), t))) <= CONTACT
-                for t in np.linspace(0.0, 1.0, 32)
-            ],
-            axis=1,
-        )
-        return self.distance(a, b) * hits.mean(axis=1)
 
     def draw(self, canvas: Canvas, config: np.ndarray, color: tuple[int, int, int]) -> None:
         pts = joints(config)[0]
