@@ -28,6 +28,7 @@ from copilot_ray.keys import (
     SUCCESS_PLANNED,
     eval_leaf,
 )
+from copilot_ray.planning.path_metrics import PathScores, score_paths
 from copilot_ray.planning.subgoal_tree import path_indices
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -118,6 +119,7 @@ class CopilotEvaluation:
     # reached_planned, reached_direct (shares of the test tasks), subgoals_reached_planned
     by_action: dict[str, dict[str, float]]
     plan_collision_free: float
+    plan_scores: PathScores  # the finest paths (mean trees) scored as motion plans
     trees: np.ndarray | None  # [n_tree, 2^K + 1, d] deterministic trees of the first test tasks
     tree_subtask_steps: np.ndarray | None  # [n_tree, K + 1, 2^K], -1 where layer k has no sub-task
     tree_subtask_reached: np.ndarray | None
@@ -178,6 +180,7 @@ def evaluate_copilot(
     a = trees[:, :-1].reshape(-1, trees.shape[-1])
     b = trees[:, 1:].reshape(-1, trees.shape[-1])
     plan_free = ~geometry.segments_collide(a, b).reshape(n, -1).any(axis=1)
+    plan_scores = score_paths(geometry, trees, goals)
 
     tree_steps = tree_reached = kept = None
     if tree_tasks:
@@ -194,6 +197,7 @@ def evaluate_copilot(
     return CopilotEvaluation(
         by_action=by_action,
         plan_collision_free=float(plan_free.mean()),
+        plan_scores=plan_scores,
         trees=kept,
         tree_subtask_steps=tree_steps,
         tree_subtask_reached=tree_reached,

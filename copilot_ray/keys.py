@@ -71,6 +71,26 @@ DIAG_SUBTASK_COLLIDED = "copilot/diag/subtask_collided"
 DIAG_DTAU_TUPLE_LENGTH_MEAN = "copilot/diag/dtau_tuple_length_mean"
 DIAG_DTAU_TUPLE_LENGTH_MAX = "copilot/diag/dtau_tuple_length_max"
 
+# Planners scored as motion planners (copilot_ray.planning.path_metrics; the paper's Fig. 4b/4c): every
+# method that produces paths (RRT*, SGT-PG, CO-PILOT's finest layer) logs these on the same test tasks.
+PATHS_PREFIX = "paths/"
+PATH_SUCCESS = "paths/success"  # share of test tasks with a collision-free path to the goal radius
+PATH_LENGTH = "paths/length"  # mean length (env distance) of the successful paths
+PATH_COLLISION_CHECKS = "paths/collision_checks"  # checks spent so far (training + planning)
+PATH_SUCCESS_VS_RRT = "paths/success_vs_rrt"  # success / RRT*'s on the same tasks
+PATH_LENGTH_VS_RRT = "paths/length_vs_rrt"  # mean of length / RRT*'s, tasks both solved
+PATH_CHECKS_VS_RRT = "paths/collision_checks_vs_rrt"  # checks / RRT*'s total on the same tasks
+PATH_TASKS = "paths/tasks"  # test tasks scored
+PLANNER_UPDATES = "paths/planner_updates"  # planner phases so far (planner-only algorithms)
+PATH_METRICS = (
+    PATH_SUCCESS,
+    PATH_LENGTH,
+    PATH_COLLISION_CHECKS,
+    PATH_SUCCESS_VS_RRT,
+    PATH_LENGTH_VS_RRT,
+    PATH_CHECKS_VS_RRT,
+)
+
 # ================================================================================================ MLflow
 # Tags of a sweep's runs (copilot_ray.tracking writes them, analysis.load reads them).
 SWEEP_TAG = "copilot.sweep"
@@ -108,6 +128,7 @@ REPORT_ARTIFACT = "report"
 SPEC_PATH_KEY = "_spec_path"  # the (resolved) spec the trial belongs to
 SEED_PARAM = "seed"  # also the MLflow param
 VARIANT_PARAM = "variant"
+ENV_PARAM = "env.id"  # a trial's env when the spec lists several (`env: {id: [..]}`): a grid axis
 
 
 # ================================================================================================ helpers

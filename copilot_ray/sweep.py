@@ -2,8 +2,9 @@
 
     python -m copilot_ray.sweep SPEC.yaml [--check] [--resume] [--address ADDR] [--tracking-uri URI]
 
-* The spec is validated first (``copilot_ray.spec.load_spec``): a bad spec prints one line per problem
-  (file, key path, value, why) on stderr and exits 2 before Ray is imported. ``--check`` prints the plan
+* The spec is validated first (``copilot_ray.spec.load_specs``): a bad spec prints one line per problem
+  (file, key path, value, why) on stderr and exits 2 before Ray is imported. A file of several specs
+  (YAML documents, e.g. one per algorithm) is validated whole, then its parts run one after another. ``--check`` prints the plan
   (configurations x seeds, trials, budget) and exits 0, also without Ray.
 * Running: a local Ray with ``os.cpu_count()`` CPUs, or the cluster at ``--address``. Everything lands in
   ``<tracking.storage>/<name>/``: ``spec.yaml`` (the spec as resolved: absolute paths; trials and
@@ -12,8 +13,9 @@
   studies). The grid searcher runs one Tune experiment ``<name>`` over configurations x seeds; the optuna
   searcher runs one experiment per seed, ``<name>-seed<s>`` (study ``<name>-seed<s>``, sampler seed
   ``searcher.seed + index``), one after the other.
-* The trainable is ``CoPilotTrial`` (``copilot_ray.tune_runtime``, with the Tune callbacks: the one
-  module here that imports Ray), a subclass of ``CoPilot`` built from a FLAT Tune config (the
+* The trainable is the algorithm's trial class (registry; for CO-PILOT ``CoPilotTrial`` in
+  ``copilot_ray.tune_runtime``, with the Tune callbacks: the one module here that imports Ray), a
+  subclass of ``CoPilot`` built from a FLAT Tune config (the
   trial's dotted params + ``seed`` + ``_spec_path``) with ``build_algorithm_config``; RLlib's own
   ``save_checkpoint`` / ``load_checkpoint`` carry the whole state, so a trial that fails (up to 2 times)
   or is resumed continues from its last checkpoint.
@@ -47,6 +49,8 @@ from copilot_ray.keys import (
     ENV_STEPS,
     ENV_TAG,
     EVAL_FRESH,
+    PATH_LENGTH_VS_RRT,
+    PATH_SUCCESS,
     RESOLVED_SPEC_ARTIFACT,
     SEED_PARAM,
     SPEC_ARTIFACT,
@@ -56,7 +60,7 @@ from copilot_ray.keys import (
     TUNE_PATH_TAG,
     result_value,
 )
-from copilot_ray.spec import SpecError, SpecLoader, format_plan, load_spec, parse_spec
+from copilot_ray.spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.tracking import config_key, trial_flat
 
 EXIT_INTERRUPTED = 130
@@ -105,8 +109,7 @@ class TrialRow:
     config_key: str
     seed: Any
     status: str  # finished | error | unfinished
-    success_planned: float
-    success_direct: float
+    figures: dict[str, float]  # the last evaluated value of each of SUMMARY_METRICS (NaN: not logged)
     env_steps: int
     wall_s: float
 
@@ -121,6 +124,15 @@ class SweepOutcome:
     parent_run_id: str = ""
     tune_paths: list[str] = field(default_factory=list)
     wall_s: float = 0.0
+
+
+# The summary's columns, where any trial logged them: CO-PILOT's headline, the planners' (Fig. 4b/4c).
+SUMMARY_METRICS = {
+    SUCCESS_PLANNED: "success_planned",
+    SUCCESS_DIRECT: "success_direct",
+    PATH_SUCCESS: "path success",
+    PATH_LENGTH_VS_RRT: "length / RRT*",
+}
 
 
 def _last_valid(df, column: str) -> float:
@@ -151,8 +163,7 @@ def rows_from_grid(grid) -> list[TrialRow]:
                 config_key=config_key(flat),
                 seed=flat.get(SEED_PARAM),
                 status=status,
-                success_planned=_last_valid(df, SUCCESS_PLANNED),
-                success_direct=_last_valid(df, SUCCESS_DIRECT),
+                figures={key: _last_valid(df, key) for key in SUMMARY_METRICS},
                 env_steps=int(result_value(m, ENV_STEPS, 0) or 0),
                 wall_s=float(m.get(TIME_TOTAL_S, 0.0) or 0.0),
             )
@@ -176,15 +187,12 @@ def summary_table(rows: Sequence[TrialRow]) -> str:
     groups: dict[str, list[TrialRow]] = {}
     for row in rows:
         groups.setdefault(row.config_key, []).append(row)
-    header = [
-        "configuration",
-        "seeds",
-        "success_planned",
-        "success_direct",
-        "env steps",
-        "wall s/trial",
-        "status",
+    shown = [key for key in SUMMARY_METRICS if any(not math.isnan(r.figures[key]) for r in rows)] or [
+        SUCCESS_PLANNED,
+        SUCCESS_DIRECT,
     ]
+    header = ["configuration", "seeds", *(SUMMARY_METRICS[key] for key in shown)]
+    header += ["env steps", "wall s/trial", "status"]
     lines = [header]
     for key, group in groups.items():
         statuses = sorted({r.status for r in group})
@@ -192,8 +200,7 @@ def summary_table(rows: Sequence[TrialRow]) -> str:
             [
                 key,
                 ",".join(str(r.seed) for r in group),
-                _mean_std([r.success_planned for r in group]),
-                _mean_std([r.success_direct for r in group]),
+                *(_mean_std([r.figures[key] for r in group]) for key in shown),
                 f"{sum(r.env_steps for r in group) / len(group):,.0f}",
                 f"{sum(r.wall_s for r in group) / len(group):.0f}",
                 "/".join(statuses),
@@ -302,7 +309,11 @@ def open_tracking(run: SweepRun) -> tuple[str, str]:
         spec.experiment,
         spec.name,
         resume=run.resume,
-        tags={TUNE_PATH_TAG: str(run.tune_root), ALGORITHM_TAG: spec.algorithm, ENV_TAG: spec.env.id},
+        tags={
+            TUNE_PATH_TAG: str(run.tune_root),
+            ALGORITHM_TAG: spec.algorithm,
+            ENV_TAG: ",".join(spec.env.ids),
+        },
         params=_sweep_params(spec),
         artifact_location=tracking.local_artifact_location(run.uri, run.root / "mlartifacts"),
     )
@@ -322,7 +333,7 @@ def _sweep_params(spec) -> dict[str, Any]:
     """The sweep's shape, as the parent run's params."""
     return {
         "algorithm": spec.algorithm,
-        **tracking.env_params(spec),
+        **tracking.env_params(spec, ",".join(spec.env.ids)),
         "searcher": spec.searcher.type,
         "seeds": list(spec.seeds),
         "trials": len(spec.trial_plan()),
@@ -424,20 +435,56 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        spec = load_spec(args.spec)
+        specs = load_specs(args.spec)
     except SpecError as err:
         for line in err.problems:
             print(line, file=sys.stderr)
         return 2
     if args.check:
-        print(format_plan(spec))
+        print("\n\n".join(format_plan(spec) for spec in specs))
         return 0
+    if len(specs) == 1:
+        return _run_one(specs[0], args, resume=args.resume)
+    return _run_parts(specs, args)
+
+
+def _run_one(spec, args, *, resume: bool) -> int:
     try:
-        outcome = run_sweep(spec, resume=args.resume, address=args.address, tracking_uri=args.tracking_uri)
+        outcome = run_sweep(spec, resume=resume, address=args.address, tracking_uri=args.tracking_uri)
     except SweepError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     return outcome.exit_code
+
+
+def _run_parts(specs: Sequence[Any], args) -> int:
+    """A file of several specs: each runs as its own sweep, in order, on one Ray. Without --resume no
+    part may have results yet (checked before anything starts); with it, the parts that started resume and
+    the others start. An interrupted or failed part ends the run (--resume continues from it)."""
+    started = [
+        spec.name
+        for spec in specs
+        if any((sweep_root(spec) / "tune" / name).exists() for name, _ in experiment_names(spec))
+    ]
+    if started and not args.resume:
+        print(
+            f"error: part {started[0]!r} of {args.spec} has results already: add --resume "
+            "to continue the file's sweeps, or remove it to start over",
+            file=sys.stderr,
+        )
+        return 2
+    runtime = _import_runtime()
+    own_ray = runtime.start_ray(args.address)
+    try:
+        for i, spec in enumerate(specs, start=1):
+            _say(f"=== part {i} of {len(specs)}: {spec.name} ({spec.algorithm})")
+            code = _run_one(spec, args, resume=spec.name in started)
+            if code != 0:
+                return code
+        return 0
+    finally:
+        if own_ray:
+            runtime.stop_ray()
 
 
 if __name__ == "__main__":

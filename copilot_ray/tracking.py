@@ -26,6 +26,7 @@ from copilot_ray.keys import (
     CHECKPOINT_ARTIFACT,
     CONFIG_ARTIFACT,
     CONFIG_KEY_TAG,
+    ENV_PARAM,
     ENV_STEPS,
     ENV_TAG,
     ERROR_ARTIFACT,
@@ -73,7 +74,7 @@ def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str,
 def metrics_from_result(result: Mapping[str, Any]) -> dict[str, float]:
     """The numeric metrics worth tracking from an RLlib result dict (flattened with '/')."""
     flat = flatten(result)
-    keep = ("copilot/", "env_runners/", "learners/default_policy/", "timers/")
+    keep = ("copilot/", "paths/", "env_runners/", "learners/default_policy/", "timers/")
     out = {}
     for key, value in flat.items():
         if not key.startswith(keep):
@@ -327,7 +328,7 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "algo_config": algo_config,
         "config_key": config_key(flat),
         "algorithm": spec.algorithm,
-        "env": spec.env.id,
+        "env": flat.get(ENV_PARAM, spec.env.ids[0]),
         "K": getattr(algo_config, "tree_depth", None),
         "b": getattr(algo_config, "repetitions", None),
         "alpha_schedule": alpha_schedule_label(
@@ -399,7 +400,7 @@ def trial_config_yaml(info: Mapping[str, Any]) -> str:
         "trial": info["flat"],
         "seed": info["seed"],
         "config_key": info["config_key"],
-        "env": {"id": spec.env.id, "config": dict(spec.env.config)},
+        "env": {"id": info["env"], "config": dict(spec.env.config)},
         "settings": info["settings"],
         "algorithm": spec.algorithm,
         "algorithm_config": algo,
@@ -407,9 +408,9 @@ def trial_config_yaml(info: Mapping[str, Any]) -> str:
     return yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=120)
 
 
-def env_params(spec: Any) -> dict[str, Any]:
-    """The environment as MLflow params: ``env.id`` and ``env.config.<key>``."""
-    return {"env.id": spec.env.id, **{f"env.config.{k}": v for k, v in spec.env.config.items()}}
+def env_params(spec: Any, env_id: str) -> dict[str, Any]:
+    """The environment as MLflow params: ``env.id`` (the trial's) and ``env.config.<key>``."""
+    return {ENV_PARAM: env_id, **{f"env.config.{k}": v for k, v in spec.env.config.items()}}
 
 
 # ------------------------------------------------------------------------------- a sweep's child runs
@@ -490,7 +491,7 @@ class TrialRuns:
         name = f"{info['config_key']}-seed{info['seed']}"
         run = self.client.create_run(self.experiment_id, run_name=name, tags=self._tags(trial, info))
         run_id = run.info.run_id
-        params = {**info["settings"], SEED_PARAM: info["seed"], **env_params(info["spec"])}
+        params = {**info["settings"], SEED_PARAM: info["seed"], **env_params(info["spec"], info["env"])}
         _log_params(self.client, run_id, params_for_mlflow(params))
         self.client.log_text(run_id, trial_config_yaml(info), CONFIG_ARTIFACT)
         return run_id

@@ -23,6 +23,8 @@ from copilot_ray.keys import (
     ENV_STEPS,
     EVAL_FRESH,
     EVAL_PREFIX,
+    PATH_LENGTH_VS_RRT,
+    PATH_SUCCESS,
     SEED_PARAM,
     SPEC_PATH_KEY,
     SUCCESS_METRICS,
@@ -121,7 +123,7 @@ def _is_number(v: Any) -> bool:
 class ProgressPrinter(Callback):
     """One line per trial event; replaces Tune's table (which dumps the whole RLlib config)."""
 
-    _FIELDS = ("config_key", "K", "b", "alpha_schedule", "seed")
+    _FIELDS = ("config_key", "algorithm", "env", "K", "b", "alpha_schedule", "seed")
 
     def __init__(self):
         self._info: dict[str, dict[str, Any]] = {}
@@ -136,6 +138,12 @@ class ProgressPrinter(Callback):
         info = self._info.get(trial.trial_id)
         if info is None:
             info = self._info[trial.trial_id] = self._describe(trial.config)
+        if info["b"] is None:  # not CO-PILOT: name the algorithm and the env instead
+            depth = "" if info["K"] is None else f" K={info['K']}"
+            return (
+                f"[{trial.trial_id}] {info['config_key']:<18} {info['algorithm']} on {info['env']}{depth} "
+                f"seed={info['seed']}"
+            )
         return (
             f"[{trial.trial_id}] {info['config_key']:<18} K={info['K']} b={info['b']} "
             f"alpha={info['alpha_schedule']} seed={info['seed']}"
@@ -156,10 +164,16 @@ class ProgressPrinter(Callback):
         planned, direct = (result_value(result, key) for key in SUCCESS_METRICS)
         steps = result_value(result, ENV_STEPS, 0)
         mark = "" if result_value(result, EVAL_FRESH, 1.0) else " (last eval)"
+        if planned is None and direct is None:  # a planner-only baseline: its paths' figures
+            figures = (
+                f"paths success {_fmt(result_value(result, PATH_SUCCESS))} "
+                f"length/RRT* {_fmt(result_value(result, PATH_LENGTH_VS_RRT))}"
+            )
+        else:
+            figures = f"success planned {_fmt(planned)} direct {_fmt(direct)}{mark}"
         _say(
             f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
-            f"env_steps {int(steps):8d}  success planned {_fmt(planned)} "
-            f"direct {_fmt(direct)}{mark}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"
+            f"env_steps {int(steps):8d}  {figures}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"
         )
 
     def on_trial_complete(self, iteration, trials, trial, **info):

@@ -12,7 +12,7 @@ pytestmark = pytest.mark.ray
 
 
 def tiny_config(
-    fast_learner: bool = True, num_env_runners: int = 1, collision_cost="indicator"
+    fast_learner: bool = True, num_env_runners: int = 1, collision_cost="indicator", rrt_reference_s=0.0
 ) -> CoPilotConfig:
     return (
         CoPilotConfig()
@@ -34,6 +34,7 @@ def tiny_config(
             cost_model={"init_euclidean": 500, "fit_steps": 5},
             planner_warm_start=3,
             planner_task_batch_size=5,
+            eval_rrt_reference_s=rrt_reference_s,
         )
     )
 
@@ -61,8 +62,11 @@ EXPECTED_METRICS = [
     ("copilot", "diag", "dtau_tuple_length_mean"),
     ("copilot", "diag", "q_mean"),
     ("copilot", "planner", "std"),
+    ("paths", "success"),
+    ("paths", "collision_checks"),
     ("env_runners", "num_env_steps_sampled_lifetime"),
 ]
+VS_RRT = [("paths", "success_vs_rrt"), ("paths", "collision_checks_vs_rrt")]
 
 
 def lookup(result, key):
@@ -72,10 +76,15 @@ def lookup(result, key):
 
 
 @pytest.mark.parametrize("fast_learner", [True, False], ids=["fast", "stock"])
-def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_path, fast_learner):
-    # The stock run also covers the graded (length-in-collision) planner cost end to end.
+def test_two_iterations_log_metrics_and_checkpoint_round_trips(
+    ray_session, tmp_path, monkeypatch, fast_learner
+):
+    # The stock run also covers the graded (length-in-collision) planner cost end to end, the fast one
+    # the paths' figures against an RRT* reference (computed into a fresh cache).
     collision_cost = "indicator" if fast_learner else "length"
-    algo = tiny_config(fast_learner, collision_cost=collision_cost).build_algo()
+    rrt_s = 0.05 if fast_learner else 0.0
+    monkeypatch.setenv("COPILOT_RAY_CACHE", str(tmp_path / "cache"))
+    algo = tiny_config(fast_learner, collision_cost=collision_cost, rrt_reference_s=rrt_s).build_algo()
     try:
         results = [algo.train() for _ in range(2)]
         assert algo.planner.max_grad_norm == 0.5  # CO-PILOT's default planner gradient clip
@@ -89,6 +98,14 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
         )
         for key in EXPECTED_METRICS:
             assert np.isfinite(lookup(results[-1], key)), key
+        # Fig. 4c's checks: every segment the planner's cost asked about (at least one phase's
+        # 5 tasks x 4 sampled trees x 7 segments).
+        checks = [lookup(r, ("paths", "collision_checks")) for r in results]
+        assert 5 * 4 * 7 <= checks[0] < checks[1] == algo._planner_checks.count
+        assert ("success_vs_rrt" in results[-1]["paths"]) == fast_learner
+        if fast_learner:
+            assert len(list((tmp_path / "cache" / "rrt_reference").glob("maze-point-4tasks-*.npz"))) == 1
+            assert lookup(results[-1], VS_RRT[1]) > 0
         steps = [lookup(r, EXPECTED_METRICS[-1]) for r in results]
         # 3 tasks x 2 repetitions x (4 + 2 + 1) sub-tasks of at most 8 steps each, per iteration.
         assert 0 < steps[0] < steps[1] <= 2 * 3 * 2 * 7 * 8
@@ -119,6 +136,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(ray_session, tmp_
             assert restored.iteration == algo.iteration == 2
             assert restored.gradient_steps.get_state() == algo.gradient_steps.get_state()
             assert restored._planner_phases == algo._planner_phases and restored._warm_started
+            assert restored._planner_checks.count == algo._planner_checks.count
             assert restored.planner.std.tolist() == algo.planner.std.tolist()
             # The task sampler continues where it stopped: both draw the same next mini-batch.
             assert (restored._rng.integers(1 << 30, size=4) == algo._rng.integers(1 << 30, size=4)).all()

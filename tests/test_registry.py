@@ -64,6 +64,7 @@ def test_unknown_algorithm_names_the_registered_ones():
     ):
         registry.get_algorithm("copilt")
     with pytest.raises(
-        SpecError, match=r"algorithm: 'nope' is invalid: unknown algorithm; known: \['copilot'\]"
+        SpecError,
+        match=r"algorithm: 'nope' is invalid: unknown algorithm; known: \['copilot', 'rrt_star', 'sgt_pg'\]",
     ):
         parse_spec(toy_spec(algorithm="nope"))

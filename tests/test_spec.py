@@ -21,6 +21,7 @@ from copilot_ray.spec import (
     build_algorithm_config,
     format_plan,
     load_spec,
+    load_specs,
     optuna_define_by_run,
     parse_spec,
     to_tune_search_space,
@@ -67,10 +68,15 @@ def rejected(data: dict) -> str:
 # ------------------------------------------------------------------------------------------ shipped specs
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.name for p in SWEEPS])
 def test_every_shipped_spec_loads(path):
-    spec = load_spec(path)
-    assert spec.name == path.stem
-    assert spec.trial_plan()
-    assert "trial(s)" in format_plan(spec)
+    specs = load_specs(path)
+    # one spec named after its file, or parts named <file>_<part>
+    assert [s.name for s in specs] == [path.stem] or all(s.name.startswith(path.stem + "_") for s in specs)
+    for spec in specs:
+        assert spec.trial_plan()
+        assert "trial(s)" in format_plan(spec)
+        if spec.searcher.type == "grid":
+            for point in spec.trial_plan():
+                build_algorithm_config(point, spec)  # every trial of every part builds its config
 
 
 def test_shipped_specs_exist():

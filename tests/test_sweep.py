@@ -88,12 +88,13 @@ def test_cli_bad_spec_exits_2_naming_the_key_without_ray(tmp_path):
 
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
 def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
-    from copilot_ray.spec import load_spec
+    from copilot_ray.spec import load_specs
     from copilot_ray.sweep import main
 
     assert main([str(path), "--check"]) == 0
     out = capsys.readouterr().out
-    assert f"{len(load_spec(path).trial_plan())} trial(s)" in out
+    for spec in load_specs(path):  # every part's plan
+        assert f"sweep {spec.name!r}" in out and f"{len(spec.trial_plan())} trial(s)" in out
 
 
 def test_existing_results_need_resume(tmp_path):

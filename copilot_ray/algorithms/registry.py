@@ -13,7 +13,9 @@ starts) and provide:
 
 The config class (an RLlib AlgorithmConfig, imported only when a run is built) provides
 `from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build. The trial
-class is what a sweep runs: `class MyTrial(tune_runtime.SpecTrial, MyAlgorithm)`.
+class is what a sweep runs: `class MyTrial(tune_runtime.SpecTrial, MyAlgorithm)` for an RLlib Algorithm,
+or a Tune Trainable (`copilot_ray.algorithms.planning_trial.PlanningTrial` for the planner-only baselines,
+whose config class is a plain dataclass).
 """
 
 from __future__ import annotations
@@ -31,6 +33,17 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.copilot.settings",
         "copilot_ray.algorithms.copilot.algorithm:CoPilotConfig",
         "copilot_ray.tune_runtime:CoPilotTrial",
+    ),
+    # Planner-only baselines (the paper's Fig. 4b/4c): plain Tune trainables, no RLlib.
+    "rrt_star": (
+        "copilot_ray.algorithms.rrt_star.settings",
+        "copilot_ray.algorithms.rrt_star.config:RRTStarConfig",
+        "copilot_ray.algorithms.rrt_star.trial:RRTStarTrial",
+    ),
+    "sgt_pg": (
+        "copilot_ray.algorithms.sgt_pg.settings",
+        "copilot_ray.algorithms.sgt_pg.config:SGTPGConfig",
+        "copilot_ray.algorithms.sgt_pg.trial:SGTPGTrial",
     ),
 }
 

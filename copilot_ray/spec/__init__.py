@@ -21,6 +21,12 @@
     resources: {max_concurrent_trials: 2, num_env_runners: 0}   # cpus_per_trial >= 1 + num_env_runners
     tracking: {storage: results/}       # uri default: sqlite:///<abs storage>/<name>/mlflow.db
 
+``env.id`` may be a list: every configuration runs on each env (trial param ``env.id``, grid only). A file
+may hold several specs as YAML documents separated by ``---`` (``load_specs``), each complete and with its
+own ``name``: the sweep runner validates them all, then runs them one after another. That is how one file
+compares algorithms (a Tune experiment runs one algorithm); give them one ``experiment`` so that MLflow
+and the analysis see them side by side.
+
 Search domains: ``{grid: [...]}``, ``{int: [low, high], log: false, step: 1}`` (both ends inclusive),
 ``{float: [low, high], log: false}`` (``step`` allowed when not log), ``{categorical: [...]}``. A
 categorical domain may carry ``when: {choice: {param: domain, ...}}``: those parameters exist only in
@@ -73,6 +79,7 @@ from copilot_ray.spec.models import (
     SweepSpec,
     build_algorithm_config,
     load_spec,
+    load_specs,
     metric_known,
     parse_spec,
 )
@@ -93,6 +100,7 @@ __all__ = [
     "build_algorithm_config",
     "format_plan",
     "load_spec",
+    "load_specs",
     "load_yaml_value",
     "metric_known",
     "optuna_define_by_run",

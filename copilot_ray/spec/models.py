@@ -24,7 +24,7 @@ from copilot_ray.envs import env_ids, make
 from copilot_ray.settings import Setting, is_int, is_number
 from copilot_ray.settings import problems as setting_problems
 from copilot_ray.spec.errors import Issue, Issues, SpecError, did_you_mean, short
-from copilot_ray.spec.yaml_loader import read_yaml_file
+from copilot_ray.spec.yaml_loader import read_yaml_documents, read_yaml_file
 
 # `<k>` in an algorithm's METRICS is a tree layer: 0..10, the deepest tree any setting allows.
 MAX_LAYER = 10
@@ -148,8 +148,12 @@ class ParamSearch(_Model):
 
 
 class EnvSpec(_Model):
-    id: str
+    id: str | list[str]  # several: a grid axis (trial param `env.id`), every configuration on each
     config: dict[str, Any] = Field(default_factory=dict)
+
+    @property
+    def ids(self) -> list[str]:
+        return [self.id] if isinstance(self.id, str) else list(self.id)
 
 
 class SearcherSpec(_Model):
@@ -326,18 +330,31 @@ class SweepSpec(_Model):
         self.tracking.storage = str(storage)
         if self.tracking.uri is None:
             self.tracking.uri = f"sqlite:///{storage / self.name / 'mlflow.db'}"
+        elif self.tracking.uri.startswith("sqlite:///") and not self.tracking.uri.startswith("sqlite:////"):
+            # A relative SQLite file, like a relative storage, is where the sweep was started.
+            db = Path(self.tracking.uri[len("sqlite:///") :]).expanduser().resolve()
+            self.tracking.uri = f"sqlite:///{db}"
         if issues:
             raise Issues(issues)
         return self
 
     def _check_env(self) -> list[Issue]:
+        if not self.env.ids or len(set(self.env.ids)) != len(self.env.ids):
+            return [Issue("env.id", self.env.id, "give one env id, or a list of distinct ones")]
+        if len(self.env.ids) > 1 and self.searcher.type != "grid":
+            return [Issue("env.id", self.env.id, "several envs need searcher type: grid")]
+        issues = []
+        for i, env_id in enumerate(self.env.ids):
+            path = "env.id" if isinstance(self.env.id, str) else f"env.id[{i}]"
+            issues += self._check_one_env(env_id, path)
+        return issues
+
+    def _check_one_env(self, env_id: str, id_path: str) -> list[Issue]:
         ids = env_ids()
-        if self.env.id not in ids:
-            return [
-                Issue("env.id", self.env.id, f"unknown env id{did_you_mean(self.env.id, ids)}; known: {ids}")
-            ]
+        if env_id not in ids:
+            return [Issue(id_path, env_id, f"unknown env id{did_you_mean(env_id, ids)}; known: {ids}")]
         try:
-            make(self.env.id, **self.env.config).close()
+            make(env_id, **self.env.config).close()
         except Exception as err:  # noqa: BLE001 - any failure to build is a spec error, named below
             path = "env.config"
             text = str(err)
@@ -351,7 +368,7 @@ class SweepSpec(_Model):
             elif type(err).__name__ == "LayoutError" and "layout" in self.env.config:
                 path = "env.config.layout"
             value = self.env.config.get(path[len("env.config.") :], self.env.config)
-            return [Issue(path, value, f"building env {self.env.id!r} failed: {type(err).__name__}: {text}")]
+            return [Issue(path, value, f"building env {env_id!r} failed: {type(err).__name__}: {text}")]
         return []
 
     def _check_config(self, settings: Mapping[str, Setting]) -> list[Issue]:
@@ -524,6 +541,8 @@ class SweepSpec(_Model):
         return self._with_variants(points)
 
     def _with_variants(self, points: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        if len(self.env.ids) > 1:
+            points = [{keys.ENV_PARAM: env_id, **p} for env_id in self.env.ids for p in points]
         if not self.variants:
             return points
         return [
@@ -532,12 +551,16 @@ class SweepSpec(_Model):
 
     def merged(self, point: Mapping[str, Any]) -> dict[str, Any]:
         """A trial's effective fixed keys: ``config``, its variant's overrides, then its own values."""
-        rest = {k: v for k, v in point.items() if k not in ("variant", "seed")}
+        rest = {k: v for k, v in point.items() if k not in ("variant", "seed", keys.ENV_PARAM)}
         return {**self.config, **self.variants.get(point.get("variant"), {}), **rest}
 
     def num_configurations(self) -> int:
         if self.searcher.type == "grid":
-            return max(1, len(self.variants)) * math.prod(len(ps.values) for ps in self.search.values())
+            return (
+                max(1, len(self.variants))
+                * len(self.env.ids)
+                * math.prod(len(ps.values) for ps in self.search.values())
+            )
         return int(self.searcher.num_samples or 0)
 
     def trial_plan(self) -> list[dict[str, Any]]:
@@ -642,6 +665,27 @@ def parse_spec(data: Any, source: str = "<spec>") -> SweepSpec:
     return spec
 
 
+def load_specs(path: str | Path) -> list[SweepSpec]:
+    """Every spec of a file: one, or several YAML documents (``---`` between them), each a complete spec
+    with its own ``name`` (e.g. one algorithm each: a Tune experiment runs one trainable). All are
+    validated before this returns; problems name the part they are in."""
+    documents = read_yaml_documents(path)
+    if len(documents) == 1:
+        return [parse_spec(documents[0], str(path))]
+    specs, problems = [], []
+    for i, doc in enumerate(documents, start=1):
+        try:
+            specs.append(parse_spec(doc, str(path)))
+        except SpecError as err:
+            problems += [f"part {i} of {len(documents)}: {line}" for line in err.problems]
+    names = [s.name for s in specs]
+    for name in sorted({n for n in names if names.count(n) > 1}):
+        problems.append(f"{path}: name: {name!r} is invalid: every part of a spec file needs its own name")
+    if problems:
+        raise SpecError(problems)
+    return specs
+
+
 def load_spec(path: str | Path) -> SweepSpec:
     """Read and validate a sweep YAML file; raises SpecError (a ValueError) naming file, key path, value."""
     return parse_spec(read_yaml_file(path), str(path))
@@ -661,7 +705,12 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
         raise SpecError(
             [f"trial.variant: {variant!r} is invalid: the spec's variants are {list(spec.variants)}"]
         )
-    trial = {k: v for k, v in flat.items() if k not in (keys.SEED_PARAM, keys.VARIANT_PARAM)}
+    env_id = flat.get(keys.ENV_PARAM, spec.env.ids[0])
+    if env_id not in spec.env.ids:
+        raise SpecError(
+            [f"trial.{keys.ENV_PARAM}: {env_id!r} is invalid: the spec's envs are {spec.env.ids}"]
+        )
+    trial = {k: v for k, v in flat.items() if k not in (keys.SEED_PARAM, keys.VARIANT_PARAM, keys.ENV_PARAM)}
     problems = [
         Issue(
             f"trial.{key}",
@@ -673,7 +722,7 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
     if problems:
         raise SpecError([p.text() for p in problems])
     run = RunContext(
-        env_id=spec.env.id,
+        env_id=env_id,
         env_config=dict(spec.env.config),
         seed=flat.get(keys.SEED_PARAM, spec.seeds[0]),
         num_env_runners=spec.resources.num_env_runners,

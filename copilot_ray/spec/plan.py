@@ -14,7 +14,8 @@ if TYPE_CHECKING:  # annotations only: models imports this module
 def format_plan(spec: SweepSpec) -> str:
     """What runs (a table of grid points, or the sampled space), how many trials, the budget."""
     lines = [
-        f"sweep {spec.name!r} ({spec.source}): {spec.algorithm} on {spec.env.id} {spec.env.config or ''}"
+        f"sweep {spec.name!r} ({spec.source}): {spec.algorithm} on {', '.join(spec.env.ids)} "
+        f"{spec.env.config or ''}"
     ]
     if spec.description:
         lines.append(f"  {spec.description.strip()}")
@@ -27,7 +28,11 @@ def format_plan(spec: SweepSpec) -> str:
     seeds = ", ".join(str(s) for s in spec.seeds)
     if spec.searcher.type == "grid":
         points = spec.grid_points()
-        columns = (["variant"] if spec.variants else []) + list(spec.search)
+        columns = (
+            (["variant"] if spec.variants else [])
+            + ([keys.ENV_PARAM] if len(spec.env.ids) > 1 else [])
+            + list(spec.search)
+        )
         header = ["#", *columns, "seeds"]
         rows = [[str(i + 1), *(_cell(p[k]) for k in columns), seeds] for i, p in enumerate(points)]
         widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]

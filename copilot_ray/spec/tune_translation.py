@@ -59,6 +59,8 @@ def to_tune_search_space(spec: SweepSpec) -> dict[str, Any]:
             space[key] = tune.uniform(v[0], v[1])
     if spec.variants:
         space[keys.VARIANT_PARAM] = tune.grid_search(list(spec.variants))
+    if len(spec.env.ids) > 1:
+        space[keys.ENV_PARAM] = tune.grid_search(spec.env.ids)
     if spec.searcher.type == "grid":
         space[keys.SEED_PARAM] = tune.grid_search(list(spec.seeds))
     return space

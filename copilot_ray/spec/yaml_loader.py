@@ -49,13 +49,23 @@ def load_yaml_value(text: str) -> Any:
 
 def read_yaml_file(path: str | Path) -> Any:
     """The parsed contents of a spec file; raises SpecError naming the file (and line, for syntax)."""
+    documents = read_yaml_documents(path)
+    if len(documents) != 1:
+        raise SpecError([f"{path}: expected one YAML document, found {len(documents)}"])
+    return documents[0]
+
+
+def read_yaml_documents(path: str | Path) -> list[Any]:
+    """Every YAML document of a file (``---`` separates them; empty ones are skipped); raises SpecError
+    naming the file (and line, for syntax)."""
     source = str(path)
     try:
         text = Path(path).read_text()
     except OSError as err:
         raise SpecError([f"{source}: cannot read the spec: {err.strerror or err}"]) from None
     try:
-        return yaml.load(text, Loader=SpecLoader)  # noqa: S506 - a SafeLoader subclass
+        docs = yaml.load_all(text, Loader=SpecLoader)  # noqa: S506 - a SafeLoader subclass
+        return [doc for doc in docs if doc is not None] or [None]
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark is not None else source

@@ -78,6 +78,7 @@ from copilot_ray.planning import (
     TimeCostModel,
     construct_trees,
 )
+from copilot_ray.planning.path_metrics import CountedChecks, RRTReference, path_metrics, rrt_reference
 
 _STATE_KEY = "copilot"
 DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
@@ -356,6 +357,9 @@ class CoPilot(SAC):
         self.test_starts, self.test_goals = env.tasks("test")
         self.rules = cfg.traversal_rules()
         self._planner_phases = 0  # for the planner's std annealing; checkpointed
+        # Every segment the planner's cost asks about: the "collision checks" of Fig. 4c; checkpointed.
+        self._planner_checks = CountedChecks(env.segments_collide)
+        self._rrt_reference: RRTReference | None = None  # computed at the first evaluation that needs it
         self._warm_started = cfg.planner_warm_start == 0 or self.planner is None
         directions = self._rng.standard_normal(self.test_starts.shape)
         self._tau_probe = (self.test_starts, directions / np.linalg.norm(directions, axis=1, keepdims=True))
@@ -496,7 +500,7 @@ class CoPilot(SAC):
         return SegmentCost(
             alpha=alpha,
             time_cost=self.cost_model.predict,
-            segments_collide=env.segments_collide,
+            segments_collide=self._planner_checks,
             distance=env.goal_distance,
             collision_penalty=self.config.collision_penalty_value(),
             collision_cost=self.config.collision_cost,
@@ -706,6 +710,14 @@ class CoPilot(SAC):
         self.metrics.log_value(
             keys.metric_path(keys.PLANNED_COLLISION_FREE), result.plan_collision_free, window=1
         )
+        if cfg.eval_rrt_reference_s > 0 and self._rrt_reference is None:
+            seed = 0 if cfg.seed is None else int(cfg.seed)
+            self._rrt_reference = rrt_reference(
+                cfg.goal_env, cfg.goal_env_config, n, cfg.eval_rrt_reference_s, seed
+            )
+        figures = path_metrics(result.plan_scores, self._planner_checks.count, self._rrt_reference)
+        for key, value in figures.items():
+            self.metrics.log_value(keys.metric_path(key), value, window=1)
         if result.trees is not None:
             lifetime = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
             self._save_tree_artifact(result, lifetime)
@@ -751,6 +763,7 @@ class CoPilot(SAC):
             "agent_updater": self.agent_updater.get_state(),
             "gradient_steps": self.gradient_steps.get_state(),
             "planner_phases": self._planner_phases,
+            "planner_checks": self._planner_checks.count,
             "warm_started": self._warm_started,
         }
         return state
@@ -771,6 +784,7 @@ class CoPilot(SAC):
         self.agent_updater.set_state(own["agent_updater"])
         self.gradient_steps.set_state(own["gradient_steps"])
         self._planner_phases = int(own.get("planner_phases", 0))
+        self._planner_checks.count = int(own.get("planner_checks", 0))
         self._warm_started = bool(own.get("warm_started", True))
 
 

@@ -355,6 +355,13 @@ _EVALUATION = [
     _int(
         "eval_tree_tasks", "copilot", 3, "fixed test tasks whose sub-goal trees are saved per evaluation", 0
     ),
+    _float(
+        "eval_rrt_reference_s",
+        "copilot",
+        0.0,
+        "RRT*'s time per task for the paths/*_vs_rrt metrics (computed once per env, cached; 0: none)",
+        0.0,
+    ),
     _choice(
         "eval_action",
         "copilot",
@@ -503,6 +510,7 @@ METRICS: tuple[str, ...] = (
     keys.COST_MODEL_LOSS,
     keys.ENV_STEPS,
     "env_runners/episode_return_mean",  # RLlib's
+    *keys.PATH_METRICS,  # its finest paths scored as a motion planner's (copilot_ray.planning.path_metrics)
 )
 
 

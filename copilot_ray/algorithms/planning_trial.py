@@ -1,0 +1,87 @@
+"""The sweep trial of a planner-only algorithm (RRT*, SGT-PG): a plain Ray Tune Trainable, no RLlib.
+
+These algorithms take no environment steps: they query the env's collision checks. Each result reports
+the checks spent so far as ``env_runners/num_env_steps_sampled_lifetime`` (the x axis of every curve,
+MLflow's step and the sweep's ``stop.env_steps``), so that they are drawn against "interaction steps" as
+in the paper's Fig. 4, where a planner's interactions are its collision checks. ``paths/collision_checks``
+carries the same number under its own name.
+
+A subclass implements ``start(cfg, env)``, ``iterate() -> (metrics, collision_checks, done)``,
+``state() -> dict`` and ``restore(state)``; this class turns the trial's flat Tune config into the
+algorithm's config (``copilot_ray.spec.build_algorithm_config``), builds the env, nests the metrics the
+way an RLlib result nests them, and checkpoints ``state()`` with pickle.
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ray import tune
+
+from copilot_ray import keys
+from copilot_ray.envs import make
+from copilot_ray.spec import build_algorithm_config
+from copilot_ray.tracking import load_spec_cached, trial_flat
+
+_STATE_FILE = "planner_trial_state.pkl"
+
+
+def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """``{"a/b": 1}`` -> ``{"a": {"b": 1}}`` (how RLlib results nest metric keys)."""
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        node = out
+        *parents, leaf = keys.metric_path(key)
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    return out
+
+
+def config_from_trial(config: Mapping[str, Any]) -> Any:
+    """The algorithm config of a sweep trial's flat Tune config (spec path + searched values + seed)."""
+    spec = load_spec_cached(str(config[keys.SPEC_PATH_KEY]))
+    return build_algorithm_config(trial_flat(config), spec)
+
+
+class PlanningTrial(tune.Trainable):
+    """Base of RRTStarTrial and SGTPGTrial (see the module docstring)."""
+
+    def setup(self, config: dict) -> None:
+        self.cfg = config_from_trial(config) if keys.SPEC_PATH_KEY in config else config["algorithm_config"]
+        self.env = make(self.cfg.env_id, **dict(self.cfg.env_config))
+        self.start(self.cfg, self.env)
+
+    def step(self) -> dict:
+        metrics, checks, done = self.iterate()
+        result = nested({**metrics, keys.PATH_COLLISION_CHECKS: float(checks), keys.ENV_STEPS: int(checks)})
+        if done:
+            result["done"] = True
+        return result
+
+    def save_checkpoint(self, checkpoint_dir: str) -> None:
+        with open(Path(checkpoint_dir) / _STATE_FILE, "wb") as f:
+            pickle.dump(self.state(), f)
+
+    def load_checkpoint(self, checkpoint: str | dict) -> None:
+        with open(Path(checkpoint) / _STATE_FILE, "rb") as f:
+            self.restore(pickle.load(f))  # noqa: S301 - our own checkpoint
+
+    def cleanup(self) -> None:
+        self.env.close()
+
+    # ------------------------------------------------------------------ what a subclass provides
+    def start(self, cfg: Any, env: Any) -> None:
+        raise NotImplementedError
+
+    def iterate(self) -> tuple[dict[str, float], int, bool]:
+        raise NotImplementedError
+
+    def state(self) -> dict:
+        raise NotImplementedError
+
+    def restore(self, state: dict) -> None:
+        raise NotImplementedError
