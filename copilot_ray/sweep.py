@@ -84,7 +84,7 @@ def experiment_names(spec) -> list[tuple[str, int | None]]:
 
 def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None) -> Path:
     """The spec as it runs: absolute storage, the tracking URI and layout files resolved, re-validated."""
-    data = yaml.load(Path(spec.source).read_text(), Loader=SpecLoader)  # noqa: S506 - SafeLoader subclass
+    data = spec.document  # this spec's own part of its file, as written
     data.setdefault("tracking", {})
     data["tracking"] = {**(data["tracking"] or {}), "storage": spec.tracking.storage}
     data["tracking"]["uri"] = tracking_uri or spec.tracking.uri

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 import re
@@ -298,6 +299,7 @@ class SweepSpec(_Model):
     tracking: TrackingSpec = Field(default_factory=TrackingSpec)
 
     _source: str = PrivateAttr(default="<spec>")
+    _document: Any = PrivateAttr(default=None)  # the mapping it was parsed from, as written
 
     # ------------------------------------------------------------------ validation across sections
     @model_validator(mode="after")
@@ -527,6 +529,11 @@ class SweepSpec(_Model):
         return self._source
 
     @property
+    def document(self) -> dict[str, Any]:
+        """A copy of the mapping this spec was parsed from (its own part of a several-spec file)."""
+        return copy.deepcopy(self._document) if self._document is not None else self.model_dump()
+
+    @property
     def searched_keys(self) -> list[str]:
         return [k for k, _ in _all_params(self.search)]
 
@@ -662,6 +669,7 @@ def parse_spec(data: Any, source: str = "<spec>") -> SweepSpec:
     except ValidationError as err:
         raise SpecError(_format_validation_error(err, source)) from None
     spec._source = source
+    spec._document = copy.deepcopy(data)
     return spec
 
 
