@@ -1,8 +1,15 @@
+import atexit
 import os
+import shutil
+import tempfile
 
 import pytest
 
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+# The RRT* reference cache (copilot_ray.planning.path_metrics) of this test session, set before Ray starts
+# so that trial workers see it too; never the user's ~/.cache.
+os.environ["COPILOT_RAY_CACHE"] = tempfile.mkdtemp(prefix="copilot_ray_test_cache_")
+atexit.register(shutil.rmtree, os.environ["COPILOT_RAY_CACHE"], True)
 
 
 @pytest.fixture(scope="session")

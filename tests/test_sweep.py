@@ -232,3 +232,67 @@ def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
     study = optuna.load_study(study_name=summary.study_name, storage=storage)
     finished = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
     assert len(finished) == 2, [t.state for t in study.trials]
+
+
+def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
+    ray_session, tmp_path, monkeypatch, capsys
+):
+    """RRT* then SGT-PG on two agents (env.id as a list), one MLflow experiment; the second part divides
+    by the reference the first one stored."""
+    from copilot_ray.keys import ALGORITHM_TAG, ENV_TAG, PATH_LENGTH_VS_RRT, PATH_SUCCESS
+    from copilot_ray.spec import load_specs
+    from copilot_ray.sweep import main
+
+    common = {
+        "experiment": "planners",
+        "env": {"id": ["maze-point", "maze-rigid"], "config": {"layout": "u-maze"}},
+        "seeds": [0],
+        "resources": {"max_concurrent_trials": 2, "num_env_runners": 0},
+        "tracking": {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/planners.db"},
+    }
+    parts = [
+        {
+            "name": "p_rrt",
+            "algorithm": "rrt_star",
+            "config": {"time_limit_s": 0.2, "eval_num_tasks": 4, "tasks_per_iteration": 2},
+            "stop": {"iterations": 5},
+            **common,
+        },
+        {
+            "name": "p_sgt",
+            "algorithm": "sgt_pg",
+            "config": {
+                "tree_depth": 2,
+                "phases_per_iteration": 2,
+                "eval_num_tasks": 4,
+                "task_batch_size": 4,
+                "planner.num_samples": 4,
+                "rrt_reference_time_s": 0.2,
+            },
+            "stop": {"iterations": 2},
+            **common,
+        },
+    ]
+    path = tmp_path / "planners.yaml"
+    path.write_text("---\n".join(yaml.safe_dump(p, sort_keys=False) for p in parts))
+    assert main([str(path)]) == 0
+    out = capsys.readouterr().out
+    assert out.index("part 1 of 2: p_rrt") < out.index("part 2 of 2: p_sgt")
+    # One RRT* reference per agent, stored by the RRT* part and divided by in the SGT-PG part.
+    # (the test session's cache, set in conftest.py before Ray started: trial workers see it too)
+    cache = Path(os.environ["COPILOT_RAY_CACHE"]) / "rrt_reference"
+    assert len(list(cache.glob("maze-*-4tasks-0.2s-seed0-*.npz"))) == 2
+
+    client, parents, children = _runs(load_specs(path)[0])
+    assert sorted(p.data.tags[SWEEP_TAG] for p in parents) == ["p_rrt", "p_sgt"]
+    runs = {(r.data.tags[ALGORITHM_TAG], r.data.tags[ENV_TAG]): r for r in children}
+    assert set(runs) == {(a, e) for a in ("rrt_star", "sgt_pg") for e in ("maze-point", "maze-rigid")}
+    for (algorithm, _), run in runs.items():
+        assert run.info.status == "FINISHED" and run.data.params["env.id"] == run.data.tags[ENV_TAG]
+        success = client.get_metric_history(run.info.run_id, PATH_SUCCESS)
+        ratio = client.get_metric_history(run.info.run_id, PATH_LENGTH_VS_RRT)
+        assert len(success) == 2 and ratio  # RRT*: 2 chunks of 2 tasks; SGT-PG: 2 iterations
+        assert [m.step for m in success] == sorted({m.step for m in success})  # steps = checks, growing
+    # Nothing is run twice: without --resume a file whose parts have results is refused.
+    assert main([str(path)]) == 2
+    assert "part 'p_rrt'" in capsys.readouterr().err
