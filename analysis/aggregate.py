@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from copilot_ray.keys import SUCCESS_METRICS
+from copilot_ray.keys import ALGORITHM_TAG, SUCCESS_METRICS
 
 from . import stats
 from .load import CONFIG_KEY_AXIS, Sweep, Trial, natural_key
@@ -108,8 +108,11 @@ def summarise(
     axes = sweep.axes()
     missing = Missing()
     by_key: dict[str, list[Trial]] = {}
+    # Several algorithms (a several-spec file) may share config keys ("env.id=maze-point"): tell them apart.
+    several = len({t.tags.get(ALGORITHM_TAG, "") for t in sweep.trials}) > 1
     for t in sweep.trials:
-        by_key.setdefault(t.config_key, []).append(t)
+        key = f"{t.tags.get(ALGORITHM_TAG, '?')}: {t.config_key}" if several else t.config_key
+        by_key.setdefault(key, []).append(t)
         if not t.usable:
             missing.failed.append(t)
         else:

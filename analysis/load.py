@@ -19,11 +19,14 @@ import numpy as np
 
 from copilot_ray.keys import (
     AGENT_SUBTASK_SUCCESS_LAYER,
+    ALGORITHM_TAG,
     AXIS_TAGS,
     CONFIG_KEY_TAG,
     DIAG_PREFIX,
     EVAL_PREFIX,
     PARENT_TAG,
+    PATH_SUCCESS,
+    PATHS_PREFIX,
     REPORT_ARTIFACT,
     ROLE_SWEEP,
     ROLE_TAG,
@@ -44,6 +47,9 @@ CONFIG_KEY_AXIS = "config_key"
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
 # KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
 USABLE_STATUSES = ("FINISHED", "RUNNING")
+
+
+ALL_SWEEPS = "all"  # --parent-run all: the trials of every sweep run of the experiment
 
 
 class AnalysisError(Exception):
@@ -71,7 +77,8 @@ class Trial:
 
     @property
     def has_eval(self) -> bool:
-        return any(len(self.curves.get(k, ((), ()))[0]) for k in SUCCESS_METRICS)
+        """Evaluated at least once: the agent's success, or (planner-only baselines) its paths'."""
+        return any(len(self.curves.get(k, ((), ()))[0]) for k in (*SUCCESS_METRICS, PATH_SUCCESS))
 
 
 @dataclass
@@ -158,7 +165,8 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
     """All child runs of one sweep with their success curves and wall time.
 
     With several sweep (parent) runs in the experiment, the newest is used unless `parent_run_id` says
-    otherwise; the others are reported. Without any parent run, every trial run in the experiment is used.
+    otherwise (`"all"`: every one of them, e.g. the parts of a several-spec file; the report is logged to
+    the newest); the others are reported. Without any parent run, every trial run in the experiment is used.
     """
     client = _client(tracking_uri)
     exp = client.get_experiment_by_name(experiment)
@@ -174,6 +182,23 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         key=lambda r: r.info.start_time or 0,
         reverse=True,
     )
+    if parent_run_id == ALL_SWEEPS:  # e.g. the parts of a several-spec file: one comparison
+        children = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
+        if not children:
+            raise AnalysisError(f"experiment {experiment!r} has no child (trial) runs at {tracking_uri}")
+        trials = [_trial(client, r) for r in children]
+        trials.sort(
+            key=lambda t: (t.tags.get(ALGORITHM_TAG, ""), t.config_key, natural_key(t.seed), t.run_id)
+        )
+        names = sorted({p.data.tags.get(SWEEP_TAG, p.info.run_id) for p in parents})
+        return Sweep(
+            tracking_uri=tracking_uri,
+            experiment=experiment,
+            experiment_id=exp.experiment_id,
+            parent_run_id=parents[0].info.run_id if parents else None,
+            sweep_name=" + ".join(names) or experiment,
+            trials=trials,
+        )
     if parent_run_id is not None:
         chosen = [p for p in parents if p.info.run_id == parent_run_id]
         if not chosen:
@@ -221,7 +246,9 @@ def _trial(client, run) -> Trial:
         seed=tags.get(SEED_TAG, run.data.params.get(SEED_PARAM, "?")),
         tags=tags,
     )
-    wanted = set(SUCCESS_METRICS) | {k for k in run.data.metrics if k.startswith(DIAGNOSTIC_PREFIXES)}
+    wanted = set(SUCCESS_METRICS) | {
+        k for k in run.data.metrics if k.startswith((*DIAGNOSTIC_PREFIXES, PATHS_PREFIX))
+    }
     for key in sorted(wanted):
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
             hist = client.get_metric_history(run.info.run_id, key)

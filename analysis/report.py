@@ -5,6 +5,9 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
   final_success.png          final success per configuration with 95 % CIs (paper Fig. 2b for K)
   subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
   summary.csv, summary.md    per-configuration table
+  planners_paths.png, planners.csv, planners.md
+                             runs that logged paths/* (RRT*, SGT-PG, CO-PILOT): success, length and
+                             collision checks, each against RRT*'s (paper Fig. 4a-c), per agent
   report.md, report.html     all of the above on one page, missing/failed runs listed first
 and logs the folder to the sweep's parent MLflow run under `report/`.
 
@@ -28,7 +31,7 @@ import numpy as np
 
 from copilot_ray.keys import GIT_COMMIT_TAG, SUCCESS_PLANNED, TREES_DIR
 
-from . import figures, stats, tables
+from . import figures, paths, stats, tables
 from .aggregate import ConfigSummary, Missing, summarise
 from .load import (
     AnalysisError,
@@ -41,7 +44,7 @@ from .load import (
 )
 
 MAX_TREE_FIGURES = 8
-OWNED = ("*.png", "report.md", "report.html", "summary.csv", "summary.md")
+OWNED = ("*.png", "report.md", "report.html", "summary.csv", "summary.md", "planners.csv", "planners.md")
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -52,7 +55,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--tracking-uri", help="MLflow tracking URI (default: $MLFLOW_TRACKING_URI or a found store)"
     )
     p.add_argument("--out", type=Path, help="output folder (default: results/<experiment>/report)")
-    p.add_argument("--parent-run", help="sweep (parent) run id when the experiment holds several sweeps")
+    p.add_argument(
+        "--parent-run",
+        help="sweep (parent) run id when the experiment holds several sweeps; 'all': every one of them "
+        "(the parts of a several-spec file, e.g. sweeps/planners_maze.yaml)",
+    )
     p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
     p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
     p.add_argument("--bootstrap-reps", type=int, default=stats.DEFAULT_REPS)
@@ -98,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
         figs.append(("Final success", figures.final_success(configs, axis_name, out / "final_success.png")))
     else:
         notes.append("No run has evaluation metrics yet: no success figures.")
+    planner_figs, planner_table, planner_frame = _planner_section(sweep, out)
+    figs += planner_figs
     tree_figs, snapshots = _tree_figures(sweep, configs, args, out, notes)
     diag_figs = _diagnostic_figures(configs, snapshots, out, notes)
 
@@ -114,6 +123,13 @@ def main(argv: list[str] | None = None) -> int:
     doc = _document(
         sweep, configs, missing, axis_name, figs, tree_figs + diag_figs, table_md, frame, notes, log_to
     )
+    if planner_table:
+        at = next(i for i, part in enumerate(doc) if part[0] == "table") + 1
+        doc[at:at] = [
+            ("h2", "Planners: paths on the test tasks (Fig. 4b/4c)"),
+            ("p", paths.__doc__.split("\n\n")[1].replace("\n", " ")),
+            ("table", planner_table, planner_frame),
+        ]
     (out / "report.md").write_text(_to_markdown(doc))
     (out / "report.html").write_text(_to_html(doc, sweep.experiment))
     print(f"report: {out / 'report.md'}")
@@ -126,6 +142,21 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         print(f"logged to MLflow run {log_to} under report/")
     return 0
+
+
+# ---------------------------------------------------------------------------------------------- planners
+def _planner_section(sweep: Sweep, out: Path):
+    """(figures, markdown table, frame): the paths' figure and table (planners.md / .csv) when any run
+    logged paths/*."""
+    frame = paths.path_frame(sweep.trials)
+    if frame.empty:
+        return [], "", frame
+    frame.to_csv(out / "planners.csv", index=False)
+    table = paths.markdown(frame)
+    (out / "planners.md").write_text(table)
+    fig = paths.path_figure(sweep.trials, out / "planners_paths.png")
+    figs = [("Planners: success, length and collision checks against RRT*", fig)] if fig else []
+    return figs, table, frame
 
 
 # ---------------------------------------------------------------------------------------------- trees

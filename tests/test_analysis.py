@@ -454,3 +454,62 @@ def test_axes_fall_back_to_config_key_when_tags_do_not_separate_configs():
     assert sweep.axes() == ["K"]
     sweep.trials = [trial("K=2,lr=1", "2"), trial("K=2,lr=2", "2"), trial("K=3,lr=1", "3")]
     assert sweep.axes() == ["config_key"]
+
+
+# ------------------------------------------------------------------------------------------- planners
+def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
+    """RRT* and SGT-PG (two parts of one spec file: two sweep runs) on two agents, reported together with
+    --parent-run all: one row per (env, algorithm) with the seeds' mean of each final value."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import PATH_CHECKS_VS_RRT, PATH_LENGTH_VS_RRT, PATH_SUCCESS
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("planners", artifact_location=(tmp_path / "art").as_uri())
+    now = int(time.time() * 1000)
+    finals = {}
+    for algorithm in ("rrt_star", "sgt_pg"):
+        pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: f"p_{algorithm}"}).info.run_id
+        for env in ("maze-point", "maze-rigid"):
+            for seed in ("0", "1"):
+                tags = {
+                    PARENT_TAG: pid,
+                    ROLE_TAG: ROLE_TRIAL,
+                    SWEEP_TAG: f"p_{algorithm}",
+                    CONFIG_KEY_TAG: f"env.id={env}",  # the same keys in both parts
+                    ALGORITHM_TAG: algorithm,
+                    ENV_TAG: env,
+                    SEED_TAG: seed,
+                }
+                rid = client.create_run(exp_id, tags=tags).info.run_id
+                success = [0.2, 0.5 + 0.1 * int(seed)] if algorithm == "sgt_pg" else [1.0, 1.0]
+                ratio = [3.0, 2.0 + int(seed)] if algorithm == "sgt_pg" else [1.0, 1.0]
+                steps = [1000, 5000 + int(seed)]
+                client.log_batch(
+                    rid,
+                    metrics=[
+                        Metric(key, v, now, s)
+                        for key, vals in (
+                            (PATH_SUCCESS, success),
+                            (PATH_LENGTH_VS_RRT, ratio),
+                            (PATH_CHECKS_VS_RRT, ratio),
+                        )
+                        for s, v in zip(steps, vals, strict=True)
+                    ],
+                )
+                client.set_terminated(rid, "FINISHED")
+                finals[(env, algorithm, seed)] = (success[-1], ratio[-1])
+    out = tmp_path / "report"
+    assert main(["planners", "--tracking-uri", uri, "--out", str(out), "--parent-run", "all"]) == 0
+    frame = pd.read_csv(out / "planners.csv")
+    assert len(frame) == 4
+    row = frame[(frame.env == "maze-rigid") & (frame.algorithm == "sgt_pg")].iloc[0]
+    assert row["n_seeds"] == 2
+    assert row["success"] == pytest.approx(np.mean([finals[("maze-rigid", "sgt_pg", s)][0] for s in "01"]))
+    assert row["length / RRT*"] == pytest.approx(2.5) and row["length / RRT* max"] == 3.0
+    md = (out / "report.md").read_text()
+    assert "Planners: paths on the test tasks" in md and "planners_paths.png" in md
+    assert "| maze-point | rrt_star | 2 | 1.00 |" in md
+    assert (out / "planners_paths.png").stat().st_size > 10_000
