@@ -229,3 +229,23 @@ def test_goal_inside_an_obstacle_is_allowed_but_unreachable():
     starts, _ = inner.tasks("train")
     obs, _ = env.reset(options={"start": starts[0], "goal": goal})
     np.testing.assert_allclose(obs["desired_goal"], goal, atol=1e-6)
+
+
+def _corridors(tmp_path):
+    """Rows of free cells 0.05 high joined at the right end: a point fits (its clearance reaches 0.025 in
+    the middle of a corridor), a 0.05 stick or a 0.06 snake does not keep 0.025 from the walls."""
+    rows = ["." * 20 if r % 2 == 0 else "#" * 19 + "." for r in range(20)]
+    path = tmp_path / "corridors.txt"
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("agent", ["rigid", "snake"])
+def test_a_body_that_fits_nowhere_is_refused_when_the_env_is_built(tmp_path, agent):
+    from copilot_ray.envs.maze.layouts import BodyDoesNotFitError, LayoutError
+
+    layout = _corridors(tmp_path)
+    make("maze-point", layout=str(layout)).close()  # the point fits
+    with pytest.raises(BodyDoesNotFitError, match=rf"maze-{agent} agent's body \(a .*\) fits nowhere") as err:
+        make(f"maze-{agent}", layout=str(layout))
+    assert str(layout) in str(err.value) and isinstance(err.value, LayoutError)

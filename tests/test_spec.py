@@ -638,3 +638,67 @@ def test_shipped_ablation_spec_has_the_paper_reading_and_one_revert_per_variant(
     assert spec.variants["paper_literal"] == {"preset": "paper_literal"}
     assert spec.variants["default"] == {}
     assert all(len(v) == 1 for name, v in spec.variants.items() if name != "default")
+
+
+def test_a_layout_that_one_of_the_envs_does_not_fit_names_the_layout_and_the_env(tmp_path):
+    rows = ["." * 20 if r % 2 == 0 else "#" * 19 + "." for r in range(20)]
+    layout = tmp_path / "corridors.txt"
+    layout.write_text("\n".join(rows) + "\n")
+    data = {
+        "name": "t",
+        "env": {"id": ["maze-point", "maze-rigid"], "config": {"layout": str(layout)}},
+        "algorithm": "rrt_star",
+        "stop": {"iterations": 1},
+    }
+    with pytest.raises(SpecError) as err:
+        parse_spec(data)
+    (line,) = err.value.problems
+    assert line.startswith(
+        f"<spec>: env.config.layout: '{layout}' is invalid: building env 'maze-rigid' failed"
+    )
+    assert "BodyDoesNotFitError" in line and "fits nowhere" in line
+
+
+def test_env_id_list_is_a_grid_axis_and_builds_each_trial_on_its_env():
+    data = {
+        "name": "t",
+        "env": {"id": ["maze-point", "maze-snake"], "config": {"layout": "u-maze"}},
+        "algorithm": "sgt_pg",
+        "search": {"tree_depth": {"grid": [2, 3]}},
+        "seeds": [0, 1],
+        "stop": {"iterations": 1},
+    }
+    spec = parse_spec(data)
+    plan = spec.trial_plan()
+    assert len(plan) == spec.num_configurations() * 2 == 8
+    assert {(p["env.id"], p["tree_depth"]) for p in plan} == {
+        (e, k) for e in ("maze-point", "maze-snake") for k in (2, 3)
+    }
+    config = build_algorithm_config(plan[-1], spec)
+    assert config.env_id == plan[-1]["env.id"] and config.tree_depth == plan[-1]["tree_depth"]
+    assert to_tune_search_space(spec)["env.id"]  # a grid_search over the envs
+    with pytest.raises(SpecError, match=r"trial.env.id: 'maze-rigid' is invalid"):
+        build_algorithm_config({"env.id": "maze-rigid"}, spec)
+    for bad, why in (
+        (["maze-point", "maze-point"], "a list of distinct ones"),
+        (["maze-point", "maze-pont"], r"env.id\[1\]: 'maze-pont' is invalid: unknown env id"),
+    ):
+        with pytest.raises(SpecError, match=why):
+            parse_spec({**data, "env": {"id": bad}})
+
+
+def test_a_file_of_several_specs_is_checked_whole_naming_the_part(tmp_path):
+    good = "name: a\nenv: {id: maze-point}\nalgorithm: rrt_star\nstop: {iterations: 1}\n"
+    bad = "name: b\nenv: {id: maze-point}\nalgorithm: rrt_star\nconfig: {time_limit_s: 0}\nstop: {iterations: 1}\n"
+    path = tmp_path / "two.yaml"
+    path.write_text(good + "---\n" + bad)
+    with pytest.raises(SpecError) as err:
+        load_specs(path)
+    assert err.value.problems == [
+        f"part 2 of 2: {path}: config.time_limit_s: 0 is invalid: time_limit_s must be a number > 0"
+    ]
+    path.write_text(good + "---\n" + good)
+    with pytest.raises(SpecError, match="name: 'a' is invalid: every part of a spec file needs its own name"):
+        load_specs(path)
+    with pytest.raises(SpecError, match="expected one YAML document, found 2"):
+        load_spec(path)

@@ -287,7 +287,7 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     assert sorted(p.data.tags[SWEEP_TAG] for p in parents) == ["p_rrt", "p_sgt"]
     runs = {(r.data.tags[ALGORITHM_TAG], r.data.tags[ENV_TAG]): r for r in children}
     assert set(runs) == {(a, e) for a in ("rrt_star", "sgt_pg") for e in ("maze-point", "maze-rigid")}
-    for (algorithm, _), run in runs.items():
+    for run in runs.values():
         assert run.info.status == "FINISHED" and run.data.params["env.id"] == run.data.tags[ENV_TAG]
         success = client.get_metric_history(run.info.run_id, PATH_SUCCESS)
         ratio = client.get_metric_history(run.info.run_id, PATH_LENGTH_VS_RRT)

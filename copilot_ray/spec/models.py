@@ -22,6 +22,7 @@ from copilot_ray.algorithms.registry import (
     get_algorithm,
 )
 from copilot_ray.envs import env_ids, make
+from copilot_ray.envs.maze.layouts import LayoutError
 from copilot_ray.settings import Setting, is_int, is_number
 from copilot_ray.settings import problems as setting_problems
 from copilot_ray.spec.errors import Issue, Issues, SpecError, did_you_mean, short
@@ -367,7 +368,7 @@ class SweepSpec(_Model):
             ]
             if named:
                 path = f"env.config.{named[0]}"
-            elif type(err).__name__ == "LayoutError" and "layout" in self.env.config:
+            elif isinstance(err, LayoutError) and "layout" in self.env.config:
                 path = "env.config.layout"
             value = self.env.config.get(path[len("env.config.") :], self.env.config)
             return [Issue(path, value, f"building env {env_id!r} failed: {type(err).__name__}: {text}")]

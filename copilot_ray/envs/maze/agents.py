@@ -21,6 +21,7 @@ class AgentGeometry(ABC):
     """Kinematics and collision geometry of one agent kind."""
 
     name: str
+    body: str  # what collides, in words (error messages)
     config_dim: int
     action_dim: int
     # Wrapped angles among the configuration's dims, and each dim's weight in `distance`
@@ -87,6 +88,7 @@ class PointMass(AgentGeometry):
     """
 
     name = "point"
+    body = "a point"
     config_dim = 2
     action_dim = 2
 

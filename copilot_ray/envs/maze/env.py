@@ -17,7 +17,7 @@ from .layouts import Layout, load_layout
 from .render import render_maze
 from .rigid_body import RigidBody
 from .snake import Snake
-from .tasks import SPLITS, sample_task_pairs, split_rng
+from .tasks import SPLITS, check_body_fits, sample_task_pairs, split_rng
 
 # Agent kinds (the maze env's `agent` argument); a new agent is an AgentGeometry and one line here.
 AGENTS: dict[str, type[AgentGeometry]] = {"point": PointMass, "rigid": RigidBody, "snake": Snake}
@@ -102,6 +102,9 @@ class GoalMazeEnv(gym.Env):
         self.obstacles = Obstacles.from_layout(self.layout)
         self.agent_geometry: AgentGeometry = AGENTS[agent](speed=float(config["speed"]))
         self.success_radius = float(config["success_radius"])
+        check_body_fits(
+            self.agent_geometry, self.obstacles, self.success_radius, self.layout.name, self.layout.to_text()
+        )
         self.goal_reward = float(config["goal_reward"])
         self.max_episode_steps = int(config["max_episode_steps"])
         self.render_mode = config["render_mode"]

@@ -27,6 +27,14 @@ class LayoutError(ValueError):
         self.source, self.line, self.column, self.reason = source, line, column, reason
 
 
+class BodyDoesNotFitError(LayoutError):
+    """An agent's body fits nowhere in a layout (the message names the agent, its body and the layout)."""
+
+    def __init__(self, source: str, reason: str):
+        ValueError.__init__(self, f"{source}: {reason}")
+        self.source, self.line, self.column, self.reason = source, 0, 0, reason
+
+
 @dataclass(frozen=True)
 class Layout:
     """An occupancy grid: `grid[r, c]` is True where cell (row r from the top, column c) is an obstacle."""

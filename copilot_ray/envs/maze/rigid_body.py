@@ -42,6 +42,7 @@ class RigidBody(ExtendedBody):
     """The stick described in the module docstring; configuration (x, y, theta)."""
 
     name = "rigid"
+    body = f"a stick of length {LENGTH:g}"
     config_dim = 3
     action_dim = 3
     angle_dims = (2,)

@@ -47,6 +47,7 @@ class Snake(ExtendedBody):
     """The chain described in the module docstring; configuration (x, y, theta1, theta2, theta3)."""
 
     name = "snake"
+    body = f"a chain of {LINKS} links of length {LINK:g}"
     config_dim = 5
     action_dim = 5
     angle_dims = (2,)

@@ -6,6 +6,7 @@ import numpy as np
 
 from .agents import AgentGeometry
 from .geometry import Obstacles
+from .layouts import BodyDoesNotFitError
 
 # Each split draws from its own seed stream, so train and test never share a pair for the same seed.
 SPLITS = {"train": 0, "test": 1, "uniform": 2}
@@ -15,6 +16,42 @@ def split_rng(split: str, seed: int) -> np.random.Generator:
     if split not in SPLITS:
         raise ValueError(f"unknown task split {split!r}; valid: {', '.join(SPLITS)}")
     return np.random.default_rng(np.random.SeedSequence([int(seed), SPLITS[split]]))
+
+
+FIT_SAMPLES = 50_000  # configurations tried before a body is declared not to fit a layout
+_FITS: dict[tuple, bool] = {}  # (agent, layout, margin) -> checked once per process
+
+
+def check_body_fits(agent: AgentGeometry, obstacles: Obstacles, margin: float, layout: str, grid_key) -> None:
+    """Raises BodyDoesNotFitError unless some configuration of `agent` has clearance >= `margin` (tasks
+    need one; rejection sampling would otherwise search forever). Uniform samples in growing batches,
+    up to FIT_SAMPLES; an ordinary layout answers with its first batch. Cached per process.
+
+    Every agent's (x, y) (the first two dims) is a point of its body, so the body's clearance is at most
+    that point's: the cheap point clearance rules most samples out before the body's is computed."""
+    key = (type(agent).__name__, agent.body, layout, grid_key, float(margin))
+    if _FITS.get(key):
+        return
+    rng = np.random.default_rng(0)
+    low, high = agent.bounds
+    tried, best, batch = 0, -np.inf, 256
+    while tried < FIT_SAMPLES:
+        configs = low + (high - low) * rng.random((batch, agent.config_dim))
+        point = obstacles.clearance(configs[:, :2])
+        candidates = configs[point >= margin]
+        clearance = agent.clearance(obstacles, candidates) if len(candidates) else point
+        best = max(best, float(clearance.max()))
+        if best >= margin:
+            _FITS[key] = True
+            return
+        tried += batch
+        batch = min(4 * batch, FIT_SAMPLES - tried) or 1
+    raise BodyDoesNotFitError(
+        layout,
+        f"the maze-{agent.name} agent's body ({agent.body}) fits nowhere in this layout with the clearance "
+        f"tasks need (>= {margin:g}, the success radius): the largest clearance among {tried:,} random "
+        f"configurations was {best:.4f}; widen its free cells or use a smaller agent",
+    )
 
 
 def _free_configs(
