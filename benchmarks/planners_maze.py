@@ -63,6 +63,13 @@ def main() -> None:
     parser.add_argument("--rrt-time-limit", type=float, default=3.0)
     parser.add_argument("--depth", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--angles",
+        choices=["raw", "wrapped", "scaled"],
+        default="scaled",
+        help="raw: angles as plain coordinates (mean midpoint, clipped); wrapped: short-way midpoints and "
+        "wrapped samples; scaled: wrapped + the std of each dim divided by its distance weight",
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     planner_settings = {**defaults("planner"), **PRESETS["paper_literal"]["planner"]}
@@ -82,7 +89,13 @@ def main() -> None:
         torch.manual_seed(args.seed)
         low, high = maze.goal_space.low, maze.goal_space.high
         planner = SubgoalPlanner.from_settings(
-            planner_settings, maze.goal_dim, args.depth, low, high, args.seed
+            {**planner_settings, "angles": args.angles},
+            maze.goal_dim,
+            args.depth,
+            low,
+            high,
+            args.seed,
+            geometry=maze.agent_geometry,
         )
         checks = CountedChecks(maze.segments_collide)
         cost = SegmentCost(

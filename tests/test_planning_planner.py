@@ -373,3 +373,45 @@ def test_planner_at_paper_settings_stays_stable_on_four_rooms():
     assert all(torch.isfinite(p).all() for p in planner.nets.parameters())
     assert max_kl < 10.0, max_kl
     assert after < 0.5 * before, (before, after)
+
+
+def test_angle_dims_take_the_short_way_wrap_samples_and_scale_the_std():
+    low, high = np.array([0.0, -np.pi]), np.array([1.0, np.pi])
+    planner = SubgoalPlanner(
+        2, 1, low, high, std=0.1, angle_dims=(1,), std_scale=[1.0, 5.0], last_init_scale=0.0
+    )
+    starts, goals = np.array([[0.2, 3.0]]), np.array([[0.6, -3.0]])
+    mean = planner.sample(starts, goals, deterministic=True)[0, 1]
+    # across the seam the midpoint of 3.0 and -3.0 is pi (short way), not 0 (half a turn away)
+    assert mean[0] == pytest.approx(0.4) and abs(abs(mean[1]) - np.pi) < 1e-5
+    samples = planner.sample(np.repeat(starts, 4000, 0), np.repeat(goals, 4000, 0), rng=0)[:, 1]
+    assert (samples[:, 1] >= -np.pi).all() and (samples[:, 1] < np.pi).all()  # wrapped, never clipped
+    assert np.std(samples[:, 0]) == pytest.approx(0.1, rel=0.1)
+    spread = np.angle(np.exp(1j * (samples[:, 1] - np.pi)))  # offsets from pi, wrapped
+    assert np.std(spread) == pytest.approx(0.1 * 5.0, rel=0.1)  # std x std_scale in the angle
+    # the density sees the wrapped offset: a sample just across the seam is as likely as its mirror
+    near = np.array(
+        [[[0.2, 3.0], [0.4, np.pi - 0.05], [0.6, -3.0]], [[0.2, 3.0], [0.4, -np.pi + 0.05], [0.6, -3.0]]]
+    )
+    logp = planner.log_prob(near, 1).detach().numpy()
+    assert logp[0] == pytest.approx(logp[1], abs=1e-4)
+    restored = SubgoalPlanner.from_state_dict(planner.state_dict())
+    assert restored.angle_dims == (1,) and restored._std_t.tolist() == planner._std_t.tolist()
+
+
+def test_from_settings_applies_the_angles_setting_to_an_env_geometry():
+    from copilot_ray.algorithms.copilot.settings import defaults
+    from copilot_ray.envs import make
+
+    geometry = make("maze-rigid", layout="u-maze").unwrapped.agent_geometry
+    settings = defaults("planner")
+    low, high = geometry.bounds
+    by_mode = {
+        mode: SubgoalPlanner.from_settings({**settings, "angles": mode}, 3, 2, low, high, geometry=geometry)
+        for mode in ("raw", "wrapped", "scaled")
+    }
+    assert by_mode["raw"].angle_dims == () and by_mode["wrapped"].angle_dims == (2,)
+    assert by_mode["wrapped"].std_scale.tolist() == [1, 1, 1]
+    assert by_mode["scaled"].std_scale.tolist() == pytest.approx([1.0, 1.0, 1 / 0.025])
+    with pytest.raises(ValueError, match="angles must be one of"):
+        SubgoalPlanner.from_settings({**settings, "angles": "polar"}, 3, 2, low, high, geometry=geometry)

@@ -46,6 +46,10 @@ __all__ = ["SubgoalPlanner", "group_baseline"]
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 NOISE_MODES = ("absolute", "relative")
+# How pi_p treats a goal space's angles (`SubgoalPlanner.from_settings(..., geometry=)`): raw: as plain
+# coordinates (the reference code, which only had positions); wrapped: short-way midpoints, wrapped samples;
+# scaled: wrapped, and each dim's std divided by its distance weight (the same exploration in distance units).
+ANGLE_MODES = ("raw", "wrapped", "scaled")
 MIN_STD = 1e-3  # floor of a relative std (goal units): a zero-length parent segment keeps a density
 
 
@@ -111,15 +115,40 @@ class SubgoalPlanner:
         augment_reversed: ask ``construct_trees`` to also train on every sample with start and goal
             swapped (the reference code does this); costs of reversed trees are re-evaluated there, so an
             asymmetric time cost stays correct.
+        angle_dims: goal dims that are angles in [-pi, pi): a sub-goal's base is the short-way midpoint of
+            its parents (not the raw mean, which flips the body half a turn across the seam), samples are
+            wrapped rather than clipped, and densities use the wrapped difference.
+        std_scale: per-dim factor on ``std`` ([d]; default ones): with a distance that weights dims
+            differently (an angle as far as the body's tip moves), ``1 / weight`` makes the exploration
+            the same size in distance units in every dim.
         seed: seed of the torch initialisation.
     """
 
     @classmethod
     def from_settings(
-        cls, settings: Mapping[str, Any], goal_dim: int, depth: int, low, high, seed: int | None = 0
+        cls,
+        settings: Mapping[str, Any],
+        goal_dim: int,
+        depth: int,
+        low,
+        high,
+        seed: int | None = 0,
+        *,
+        geometry: Any = None,
+        angle_dims: Sequence[int] = (),
+        std_scale: Sequence[float] | None = None,
     ) -> SubgoalPlanner:
         """pi_p from a `planner` settings dict (the `planner.*` settings of CO-PILOT: hidden, std, noise,
-        lr, clip, epochs, max_grad_norm, target_kl, max_kl; the others steer the algorithm, not pi_p)."""
+        lr, clip, epochs, max_grad_norm, target_kl, max_kl, angles; the others steer the algorithm, not
+        pi_p). `geometry` (an env's agent geometry: `angle_dims`, `distance_weights`) applies
+        `settings["angles"]`; without it `angle_dims` and `std_scale` are used as given."""
+        mode = settings.get("angles", "raw")
+        if mode not in ANGLE_MODES:
+            raise ValueError(f"angles must be one of {ANGLE_MODES}, got {mode!r}")
+        if geometry is not None and mode != "raw":
+            angle_dims = tuple(geometry.angle_dims)
+            if mode == "scaled":
+                std_scale = 1.0 / np.asarray(geometry.distance_weights, np.float64)
         return cls(
             goal_dim,
             depth,
@@ -134,6 +163,8 @@ class SubgoalPlanner:
             max_grad_norm=settings["max_grad_norm"],
             target_kl=settings["target_kl"],
             max_kl=settings["max_kl"],
+            angle_dims=angle_dims,
+            std_scale=std_scale,
             seed=seed,
         )
 
@@ -157,6 +188,8 @@ class SubgoalPlanner:
         normalize_advantages: bool = True,
         augment_reversed: bool = False,
         last_init_scale: float = 0.01,
+        angle_dims: Sequence[int] = (),
+        std_scale: Sequence[float] | None = None,
         seed: int | None = 0,
     ) -> None:
         _check_planner_args(goal_dim, low, high, noise, clip_eps, epochs, target_kl, max_kl)
@@ -164,6 +197,16 @@ class SubgoalPlanner:
         self.depth = check_depth(depth)
         self.low, self.high = _bounds(low, high, self.goal_dim)
         self.noise = noise
+        self.angle_dims = tuple(int(i) for i in angle_dims)
+        if any(not 0 <= i < self.goal_dim for i in self.angle_dims):
+            raise ValueError(f"angle_dims must index the {self.goal_dim} goal dims, got {angle_dims!r}")
+        self._angle = np.zeros(self.goal_dim, bool)
+        self._angle[list(self.angle_dims)] = True
+        self._angle_t = torch.as_tensor(self._angle)
+        scale = np.ones(self.goal_dim) if std_scale is None else np.asarray(std_scale, np.float64)
+        if scale.shape != (self.goal_dim,) or not np.all(np.isfinite(scale) & (scale > 0)):
+            raise ValueError(f"std_scale must be {self.goal_dim} positive numbers, got {std_scale!r}")
+        self.std_scale = scale.astype(np.float32)
         self.set_std(std)
         self.hidden = tuple(int(h) for h in hidden)
         self.shared_across_layers = bool(shared_across_layers)
@@ -202,8 +245,8 @@ class SubgoalPlanner:
         std_arr = np.broadcast_to(np.asarray(std, dtype=np.float32), (self.goal_dim,)).copy()
         if not np.all(std_arr > 0):
             raise ValueError(f"std must be > 0, got std={std!r}")
-        self.std = std_arr
-        self._std_t = torch.as_tensor(self.std, dtype=torch.float32)
+        self.std = std_arr  # as set (what checkpoints store); the noise is std * std_scale
+        self._std_t = torch.as_tensor(self.std * self.std_scale, dtype=torch.float32)
 
     # ------------------------------------------------------------------ config / persistence
     def config(self) -> dict:
@@ -225,6 +268,8 @@ class SubgoalPlanner:
             "normalize_advantages": self.normalize_advantages,
             "augment_reversed": self.augment_reversed,
             "last_init_scale": self.last_init_scale,
+            "angle_dims": list(self.angle_dims),
+            "std_scale": self.std_scale.tolist(),
         }
 
     def state_dict(self) -> dict:
@@ -264,7 +309,10 @@ class SubgoalPlanner:
     def mean(self, left: torch.Tensor, right: torch.Tensor, k: int) -> torch.Tensor:
         """Mean sub-goal of layer k's policy between endpoints ``left``/``right`` [..., d] (torch)."""
         x = torch.cat([(left - self._center) / self._half, (right - self._center) / self._half], dim=-1)
-        return (left + right) / 2.0 + self._net(k)(x) * self._half
+        base = (left + right) / 2.0
+        if self.angle_dims:  # the short way round: left + wrap(right - left) / 2
+            base = torch.where(self._angle_t, left + _wrap_t(right - left) / 2.0, base)
+        return base + self._net(k)(x) * self._half
 
     def _layer_mean(self, trees_t: torch.Tensor, K: int, k: int) -> torch.Tensor:
         li, ri = parent_indices(K, k)
@@ -292,6 +340,8 @@ class SubgoalPlanner:
         if not deterministic:
             rng = _as_rng(rng)
             mu = mu + rng.standard_normal(mu.shape).astype(np.float32) * std
+        if self.angle_dims:  # angles wrap instead of being clipped (an angle's bounds are its seam)
+            mu[..., self._angle] = np.mod(mu[..., self._angle] + np.pi, 2 * np.pi) - np.pi
         if self.low is not None:
             mu = np.clip(mu, self.low, self.high)
         trees[:, mid] = mu
@@ -336,7 +386,10 @@ class SubgoalPlanner:
             mid = new_layer_indices(K, k)
             mu = self._layer_mean(trees_t, K, k)
             std = self._layer_std(trees_t, K, k)
-            z = (trees_t[:, _tidx(mid)] - mu) / std
+            diff = trees_t[:, _tidx(mid)] - mu
+            if self.angle_dims:
+                diff = torch.where(self._angle_t, _wrap_t(diff), diff)
+            z = diff / std
             log_std = torch.log(std).expand_as(z).sum(dim=(1, 2))
             n_terms = len(mid) * self.goal_dim
             total = total - 0.5 * (z * z).sum(dim=(1, 2)) - log_std - n_terms * _LOG_SQRT_2PI
@@ -428,6 +481,11 @@ class SubgoalPlanner:
             "nonfinite_skipped": float(skipped),
             "rolled_back": rolled_back,
         }
+
+
+def _wrap_t(x: torch.Tensor) -> torch.Tensor:
+    """Angles (differences) into [-pi, pi)."""
+    return torch.remainder(x + math.pi, 2 * math.pi) - math.pi
 
 
 def _check_planner_args(goal_dim, low, high, noise, clip_eps, epochs, target_kl, max_kl) -> None:

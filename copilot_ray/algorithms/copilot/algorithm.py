@@ -335,7 +335,9 @@ class CoPilot(SAC):
         self.planner = (
             None
             if cfg.tree_depth == 0
-            else SubgoalPlanner.from_settings(cfg.planner, env.goal_dim, cfg.tree_depth, low, high, seed)
+            else SubgoalPlanner.from_settings(
+                cfg.planner, env.goal_dim, cfg.tree_depth, low, high, seed, geometry=env.agent_geometry
+            )
         )
         c = cfg.cost_model
         self.cost_model = TimeCostModel(

@@ -29,7 +29,7 @@ from copilot_ray.planning.alpha_schedule import CLOCKS as ALPHA_CLOCKS
 from copilot_ray.planning.alpha_schedule import KINDS as ALPHA_KINDS
 from copilot_ray.planning.alpha_schedule import PRESETS as ALPHA_PRESETS
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
-from copilot_ray.planning.planner import NOISE_MODES
+from copilot_ray.planning.planner import ANGLE_MODES, NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 from copilot_ray.settings import (
     Setting,
@@ -295,6 +295,18 @@ _PLANNER = [
         "planner phases over which the std is annealed (warm start included)",
         1,
     ),
+    _choice(
+        "planner.angles",
+        "planner",
+        "scaled",
+        "angles of the goal space (maze-rigid, maze-snake): raw coordinates, wrapped (short-way midpoints), "
+        "or wrapped with each dim's std divided by its distance weight",
+        ANGLE_MODES,
+        why="SGT-PG alone on maze-rigid, one seed, first 20 four-rooms test tasks: raw 0.00 free finest "
+        "paths from ~40 phases on, wrapped 0.00 after 100 phases, scaled 0.25-0.35 over the first 100 "
+        "(`benchmarks/planners_maze.py --agents rigid --phases 100 --eval-every 25 --angles ...`); no "
+        "angles in maze-point, where all three are the same",
+    ),
     _float("planner.lr", "planner", 0.005, "pi_p's Adam learning rate (paper 4.1)", 0.0, lo_open=True),
     _float(
         "planner.clip", "planner", 0.2, "PPO's clip range (paper 4.1)", 0.0, 1.0, lo_open=True, hi_open=True
@@ -469,7 +481,9 @@ _DEFAULT_READINGS: dict[str, Any] = {
     s.key: s.default for s in SETTINGS.values() if s.why and s.target in ("copilot", "training")
 }
 _DEFAULT_READINGS["agent_collision_penalty"] = SETTINGS["agent_collision_penalty"].default
-_DEFAULT_READINGS["planner"] = {k: SETTINGS[f"planner.{k}"].default for k in ("std", "noise", "std_final")}
+_DEFAULT_READINGS["planner"] = {
+    k: SETTINGS[f"planner.{k}"].default for k in ("std", "noise", "std_final", "angles")
+}
 
 PRESETS: dict[str, dict[str, Any]] = {
     # The measured defaults again (undoes another preset; a sweep axis value).
@@ -484,7 +498,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "failed_subtask_cost": "end_state",
         "planner_warm_start": 0,
         # The reference code's planner noise: a fixed absolute std.
-        "planner": {"std": 0.05, "noise": "absolute", "std_final": None},
+        "planner": {"std": 0.05, "noise": "absolute", "std_final": None, "angles": "raw"},
         # "For RL training with SAC, we use its default hyperparameters": SAC's initial temperature 1.
         "initial_alpha": 1.0,
     },

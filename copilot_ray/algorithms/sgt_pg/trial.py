@@ -21,7 +21,13 @@ class SGTPGTrial(PlanningTrial):
         torch.manual_seed(cfg.seed)
         maze = env.unwrapped
         self.planner = SubgoalPlanner.from_settings(
-            cfg.planner, maze.goal_dim, cfg.tree_depth, maze.goal_space.low, maze.goal_space.high, cfg.seed
+            cfg.planner,
+            maze.goal_dim,
+            cfg.tree_depth,
+            maze.goal_space.low,
+            maze.goal_space.high,
+            cfg.seed,
+            geometry=maze.agent_geometry,
         )
         self.checks = CountedChecks(maze.segments_collide)
         self.cost = SegmentCost(
