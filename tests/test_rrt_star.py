@@ -51,3 +51,11 @@ def test_an_unreachable_goal_is_not_solved():
     start = env.unwrapped.tasks("test")[0][0].astype(np.float64)
     result = rrt.plan(start, goal, 1e-3)
     assert not result.solved and result.length == float("inf") and len(result.path) == 0
+
+
+def test_a_start_in_an_obstacle_is_refused_naming_it():
+    env = make("maze-rigid", layout="four-rooms")
+    rrt = rrt_star_for_env(env, time_limit_s=0.05)
+    with pytest.raises(ValueError, match=r"start \[0.5, 0.5, 0.0\] lies in an obstacle"):
+        rrt.plan(np.array([0.5, 0.5, 0.0]), np.array([0.1, 0.1, 0.0]), 0.025)
+    env.close()

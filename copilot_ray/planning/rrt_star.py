@@ -130,7 +130,14 @@ class RRTStar:
     # ------------------------------------------------------------------------------------ query
     def plan(self, start: np.ndarray, goal: np.ndarray, goal_radius: float) -> RRTStarResult:
         """Plan from `start` to within `goal_radius` of `goal` for `time_limit_s` seconds (RRT* keeps
-        improving its path until then)."""
+        improving its path until then). A start in collision is refused (OMPL would only log it); a goal
+        in an obstacle is allowed (its radius may still hold free configurations) and simply not solved."""
+        start = np.asarray(start, np.float64)
+        if start.shape != (self.dim,) or not bool(self.is_free(start)):
+            raise ValueError(
+                f"start {np.round(start, 4).tolist()} lies in an obstacle or outside the configuration space "
+                f"(a {self.dim}-d configuration within {self.low.tolist()} .. {self.high.tolist()})"
+            )
         counts = {"state": 0, "motion": 0}
         si = ob.SpaceInformation(self.space)
 
