@@ -2,6 +2,7 @@
 
     PYTHONPATH=. python benchmarks/planners_maze.py [--agents point rigid snake] [--layout four-rooms]
         [--phases 400] [--eval-every 100] [--tasks 20] [--rrt-time-limit 3.0] [--depth 5]
+        [--angles raw|wrapped|scaled]
 
 SGT-PG is the sub-goal-tree planner pi_p (copilot_ray.planning, the reference code's settings: constant
 std 0.05, K = 5) trained alone on the fixed Euclidean + collision cost (alpha = 1, no agent, 30 training
@@ -28,27 +29,8 @@ from rrt_star import rrt_on_test_tasks  # noqa: E402 - benchmarks/rrt_star.py, n
 
 from copilot_ray.algorithms.copilot.settings import PRESETS, defaults  # noqa: E402
 from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees  # noqa: E402
+from copilot_ray.planning.path_metrics import CountedChecks, score_paths  # noqa: E402
 from copilot_ray.planning.subgoal_tree import layer_indices  # noqa: E402
-
-
-class CountedChecks:
-    """`segments_collide` that counts the motions it was asked about."""
-
-    def __init__(self, check):
-        self.check, self.count = check, 0
-
-    def __call__(self, a, b):
-        self.count += len(a)
-        return self.check(a, b)
-
-
-def path_figures(maze, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(collision-free [N], length [N]) of paths [N, P, d] in the env's own checks and distance."""
-    n, p, d = paths.shape
-    a, b = paths[:, :-1].reshape(-1, d), paths[:, 1:].reshape(-1, d)
-    free = ~maze.segments_collide(a, b).reshape(n, p - 1).any(axis=1)
-    length = maze.goal_distance(a, b).reshape(n, p - 1).sum(axis=1)
-    return free, length
 
 
 def main() -> None:
@@ -112,9 +94,8 @@ def main() -> None:
             if phase % args.eval_every and phase != args.phases:
                 continue
             trees = planner.sample(starts, goals, deterministic=True)
-            free, length = path_figures(
-                maze, trees[:, layer_indices(args.depth, args.depth)].astype(np.float64)
-            )
+            scores = score_paths(maze, trees[:, layer_indices(args.depth, args.depth)], goals)
+            free, length = scores.success, scores.length
             both = free & rrt_solved
             ratio = float(np.mean(length[both] / rrt_length[both])) if both.any() else float("nan")
             print(
