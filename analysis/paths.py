@@ -68,7 +68,7 @@ def path_frame(trials: list[Trial]) -> pd.DataFrame:
     for (algorithm, env), group in _groups(path_trials(trials)).items():
         row: dict[str, object] = {"env": env, "algorithm": algorithm, "n_seeds": len(group)}
         for key, name in COLUMNS.items():
-            finals = [float(t.curves[key][1][-1]) for t in group if key in t.curves and len(t.curves[key][1])]
+            finals = [_final(t, key) for t in group]
             finals = [v for v in finals if math.isfinite(v)]
             row[name] = float(np.mean(finals)) if finals else math.nan
             row[f"{name} min"] = float(np.min(finals)) if finals else math.nan
@@ -76,6 +76,14 @@ def path_frame(trials: list[Trial]) -> pd.DataFrame:
         row["env steps"] = float(np.mean([t.curves[PATH_SUCCESS][0][-1] for t in group]))
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _final(trial: Trial, key: str) -> float:
+    """`key` at the trial's last evaluation; NaN when it was undefined there (an undefined figure, e.g. a
+    length with no successful path, is not logged, so an older value would otherwise pass for the last)."""
+    steps, values = trial.curves.get(key, ((), ()))
+    last = trial.curves[PATH_SUCCESS][0][-1]
+    return float(values[-1]) if len(steps) and steps[-1] == last else math.nan
 
 
 def markdown(frame: pd.DataFrame) -> str:

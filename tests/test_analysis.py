@@ -487,17 +487,15 @@ def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
                 success = [0.2, 0.5 + 0.1 * int(seed)] if algorithm == "sgt_pg" else [1.0, 1.0]
                 ratio = [3.0, 2.0 + int(seed)] if algorithm == "sgt_pg" else [1.0, 1.0]
                 steps = [1000, 5000 + int(seed)]
+                lengths = [(s, v) for s, v in zip(steps, ratio, strict=True)]
+                if env == "maze-point" and algorithm == "sgt_pg" and seed == "1":
+                    success[-1] = 0.0  # no successful path at the end: its length ratio is not logged then
+                    lengths = lengths[:1]
                 client.log_batch(
                     rid,
-                    metrics=[
-                        Metric(key, v, now, s)
-                        for key, vals in (
-                            (PATH_SUCCESS, success),
-                            (PATH_LENGTH_VS_RRT, ratio),
-                            (PATH_CHECKS_VS_RRT, ratio),
-                        )
-                        for s, v in zip(steps, vals, strict=True)
-                    ],
+                    metrics=[Metric(PATH_SUCCESS, v, now, s) for s, v in zip(steps, success, strict=True)]
+                    + [Metric(PATH_CHECKS_VS_RRT, v, now, s) for s, v in zip(steps, ratio, strict=True)]
+                    + [Metric(PATH_LENGTH_VS_RRT, v, now, s) for s, v in lengths],
                 )
                 client.set_terminated(rid, "FINISHED")
                 finals[(env, algorithm, seed)] = (success[-1], ratio[-1])
@@ -509,6 +507,9 @@ def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
     assert row["n_seeds"] == 2
     assert row["success"] == pytest.approx(np.mean([finals[("maze-rigid", "sgt_pg", s)][0] for s in "01"]))
     assert row["length / RRT*"] == pytest.approx(2.5) and row["length / RRT* max"] == 3.0
+    # a seed whose last evaluation had no length does not count with an older one
+    point = frame[(frame.env == "maze-point") & (frame.algorithm == "sgt_pg")].iloc[0]
+    assert point["length / RRT*"] == 2.0 and point["checks / RRT*"] == pytest.approx(2.5)
     md = (out / "report.md").read_text()
     assert "Planners: paths on the test tasks" in md and "planners_paths.png" in md
     assert "| maze-point | rrt_star | 2 | 1.00 |" in md
