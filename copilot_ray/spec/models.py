@@ -42,6 +42,10 @@ class _Model(BaseModel):
             known = [f.alias or n for n, f in cls.model_fields.items()]
             unknown = [k for k in data if k not in known]
             if unknown:
+                # Raising here stops pydantic's own checks: say what is missing too, so that one run of
+                # --check lists every problem at this level.
+                required = [f.alias or n for n, f in cls.model_fields.items() if f.is_required()]
+                missing = [k for k in required if k not in data]
                 raise Issues(
                     [
                         Issue(
@@ -52,6 +56,7 @@ class _Model(BaseModel):
                         )
                         for k in unknown
                     ]
+                    + [Issue(k, None, "required key is missing", show_value=False) for k in missing]
                 )
         return data
 
