@@ -405,7 +405,10 @@ def report_sweep(
     _say("")
     _say(f"Tune results: {', '.join(tune_paths)}")
     _say(f"MLflow store: {uri} (experiment {spec.experiment!r}, parent run {parent_id})")
-    _say(f"  mlflow ui --backend-store-uri {uri}")
+    if uri.startswith(("http://", "https://")):
+        _say(f"  the MLflow UI is the server's own page: {uri}")
+    else:
+        _say(f"  mlflow ui --backend-store-uri {uri}")
     if interrupted:
         _say(f"interrupted: state saved. Resume with: python -m copilot_ray.sweep {spec.source} --resume")
     elif errored:

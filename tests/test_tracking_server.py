@@ -1,0 +1,85 @@
+"""A sweep and its report against a real MLflow tracking server (SQLite backend, local artifact root,
+bound to 127.0.0.1): runs, metrics and artifacts all go through the server's HTTP API."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+import yaml
+
+from copilot_ray.keys import CHECKPOINT_ARTIFACT, CONFIG_ARTIFACT, ENV_STEPS, ROLE_TAG, ROLE_TRIAL, TREES_DIR
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.ray
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def mlflow_server(tmp_path):
+    port = _free_port()
+    artifacts = tmp_path / "server_artifacts"
+    mlflow = Path(sys.executable).with_name("mlflow")
+    proc = subprocess.Popen(
+        [str(mlflow), "server", "--backend-store-uri", f"sqlite:///{tmp_path / 'server.db'}",
+         "--artifacts-destination", str(artifacts), "--host", "127.0.0.1", "--port", str(port),
+         "--workers", "1"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )  # fmt: skip
+    url = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(120):
+            try:
+                if urllib.request.urlopen(f"{url}/health", timeout=1).status == 200:
+                    break
+            except OSError:
+                time.sleep(0.5)
+        else:
+            pytest.fail("the MLflow server did not come up within 60 s")
+        yield url, artifacts
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)  # the server and its workers
+        proc.wait(timeout=30)
+
+
+def test_sweep_and_report_through_a_tracking_server(ray_session, tmp_path, mlflow_server, capsys):
+    import mlflow
+
+    from analysis.report import main as report_main
+    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep import run_sweep
+
+    url, artifacts = mlflow_server
+    data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
+    data.update(tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130})
+    data["search"] = {"tree_depth": {"grid": [1]}}
+    path = tmp_path / "smoke.yaml"
+    path.write_text(yaml.safe_dump(data))
+    outcome = run_sweep(load_spec(path), tracking_uri=url)
+    assert outcome.status == "finished" and outcome.tracking_uri == url
+    assert f"the MLflow UI is the server's own page: {url}" in capsys.readouterr().out
+
+    client = mlflow.MlflowClient(url)
+    exp = client.get_experiment_by_name("smoke")
+    (trial,) = [r for r in client.search_runs([exp.experiment_id]) if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
+    assert client.get_metric_history(trial.info.run_id, ENV_STEPS)
+    names = {a.path for a in client.list_artifacts(trial.info.run_id)}
+    assert {CONFIG_ARTIFACT, CHECKPOINT_ARTIFACT, TREES_DIR} <= names
+    # ... and the files are where the server keeps them, not in a local path the client chose
+    assert list(artifacts.rglob(f"{trial.info.run_id}/artifacts/{CONFIG_ARTIFACT}"))
+    assert not (tmp_path / "results" / "smoke" / "mlruns").exists()
+
+    assert report_main(["smoke", "--tracking-uri", url, "--out", str(tmp_path / "report")]) == 0
+    assert list(artifacts.rglob(f"{outcome.parent_run_id}/artifacts/report/success_vs_env_steps.png"))
