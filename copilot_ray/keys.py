@@ -20,6 +20,7 @@ from typing import Any
 ENV_STEPS = "env_runners/num_env_steps_sampled_lifetime"
 TRAINING_ITERATION = "training_iteration"
 TIME_TOTAL_S = "time_total_s"
+NODE_ID = "node_id"  # the Ray node a sweep trial's result came from (a string; Tune's result.json)
 
 # CO-PILOT's own metrics (copilot_ray.algorithms.copilot), all under "copilot/".
 COPILOT_PREFIX = "copilot/"

@@ -23,6 +23,7 @@ from copilot_ray.keys import (
     ENV_STEPS,
     EVAL_FRESH,
     EVAL_PREFIX,
+    NODE_ID,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
     SEED_PARAM,
@@ -89,6 +90,7 @@ class SpecTrial:
             else:
                 ev[name] = self._last_eval.get(name, float("nan"))
         ev[eval_leaf(EVAL_FRESH)] = 1.0 if fresh else 0.0
+        result[NODE_ID] = ray.get_runtime_context().get_node_id()
         return result
 
     def get_state(self, *args, **kwargs):

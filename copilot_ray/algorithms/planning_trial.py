@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import ray
 from ray import tune
 
 from copilot_ray import keys
@@ -58,6 +59,7 @@ class PlanningTrial(tune.Trainable):
     def step(self) -> dict:
         metrics, checks, done = self.iterate()
         result = nested({**metrics, keys.PATH_COLLISION_CHECKS: float(checks), keys.ENV_STEPS: int(checks)})
+        result[keys.NODE_ID] = ray.get_runtime_context().get_node_id()
         if done:
             result["done"] = True
         return result
