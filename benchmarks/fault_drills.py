@@ -1,0 +1,210 @@
+"""Fault drills: a small real sweep on local Ray, a process killed with SIGKILL in the middle, and what
+MLflow and Tune hold afterwards.
+
+    PYTHONPATH=. python benchmarks/fault_drills.py [--drills driver trial] [--iterations 6] [--keep DIR]
+
+Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2, one at a time,
+`--iterations` iterations each, a checkpoint every iteration):
+
+* driver: SIGKILL the sweep driver and every process it started (Ray's too) once the first trial has 3
+  results, then `python -m copilot_ray.sweep SPEC --resume` to the end.
+* trial: SIGKILL the first trial's worker process (the pid in its results) once it has 3 results; Tune
+  retries it from its last checkpoint (FailureConfig) and the sweep ends by itself.
+
+Each prints "drill NAME: runs lost L, duplicated D, restarted from scratch S" (all 0 when nothing was
+lost) with what it checked: every planned trial has exactly one MLflow run, FINISHED, whose iterations
+1..N each appear once and whose env steps only grow; the parent run is closed; a trial that had a
+checkpoint never started again at iteration 1 (Tune's result.json of that trial has one first iteration).
+Exit status 1 when a drill found anything lost, duplicated or restarted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def write_spec(directory: Path, name: str, iterations: int) -> Path:
+    data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
+    data.update(name=name, tracking={"storage": str(directory / "results")}, stop={"iterations": iterations})
+    path = directory / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def sweep(spec: Path, *args: str) -> subprocess.Popen:
+    env = {**os.environ, "RAY_AUTH_MODE": "disabled", "PYTHONPATH": str(ROOT)}
+    log = open(spec.with_suffix(f".{int(time.time())}.log"), "w")  # noqa: SIM115 - lives with the process
+    return subprocess.Popen(
+        [sys.executable, "-m", "copilot_ray.sweep", str(spec), *args],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        env=env,
+        start_new_session=True,
+    )
+
+
+def result_rows(root: Path) -> dict[str, list[dict]]:
+    """Tune's result.json rows per trial folder."""
+    out = {}
+    for f in sorted(root.rglob("result.json")):
+        rows = []
+        for line in f.read_text().splitlines():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:  # a line being written
+                pass
+        out[f.parent.name] = rows
+    return out
+
+
+def wait_for_results(root: Path, count: int, proc: subprocess.Popen, timeout: float = 600) -> list[dict]:
+    """The first trial's rows once it has `count` results."""
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        trials = result_rows(root)
+        if trials:
+            first = trials[min(trials)]
+            if len(first) >= count:
+                return first
+        if proc.poll() is not None:
+            raise RuntimeError(f"the sweep ended (rc {proc.returncode}) before the kill")
+        time.sleep(0.5)
+    raise TimeoutError("no results in time")
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below `pid` (Linux: read from /proc; Ray's daemons included, which start their own
+    sessions but stay children of the driver)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = [], [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def kill_tree(pid: int) -> int:
+    """SIGKILL a process and every process it started (gathered first, then all at once)."""
+    procs = [*descendants(pid), pid]
+    for p in procs:
+        try:
+            os.kill(p, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    time.sleep(2)
+    return len(procs)
+
+
+def audit(spec_path: Path, iterations: int) -> dict[str, int]:
+    """Lost / duplicated / restarted counts from MLflow and Tune's files, with a line per finding."""
+    import mlflow
+
+    from copilot_ray.keys import ENV_STEPS, ROLE_SWEEP, ROLE_TAG, ROLE_TRIAL, TRAINING_ITERATION, TRIAL_ID_TAG
+    from copilot_ray.spec import load_spec
+
+    spec = load_spec(spec_path)
+    client = mlflow.MlflowClient(spec.tracking.uri)
+    exp = client.get_experiment_by_name(spec.experiment)
+    runs = client.search_runs([exp.experiment_id], max_results=1000)
+    parents = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_SWEEP]
+    children = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
+    found = {"lost": 0, "duplicated": 0, "restarted": 0}
+    planned = len(spec.trial_plan())
+    by_trial: dict[str, list] = {}
+    for run in children:
+        by_trial.setdefault(run.data.tags[TRIAL_ID_TAG], []).append(run)
+    finished = [r for r in children if r.info.status == "FINISHED"]
+    found["lost"] += planned - len({r.data.tags[TRIAL_ID_TAG] for r in finished})
+    found["duplicated"] += sum(len(v) - 1 for v in by_trial.values()) + max(0, len(parents) - 1)
+    if not parents or parents[0].info.status != "FINISHED":
+        print(f"  parent run not closed: {[p.info.status for p in parents]}")
+        found["lost"] += 1
+    for run in children:
+        iters = [int(m.value) for m in client.get_metric_history(run.info.run_id, TRAINING_ITERATION)]
+        steps = [m.step for m in client.get_metric_history(run.info.run_id, ENV_STEPS)]
+        if sorted(iters) != list(range(1, iterations + 1)):
+            print(f"  run {run.info.run_name}: iterations {sorted(iters)}")
+            found["duplicated" if len(iters) > len(set(iters)) else "lost"] += 1
+        if steps != sorted(set(steps)):
+            print(f"  run {run.info.run_name}: env steps not strictly growing {steps}")
+            found["duplicated"] += 1
+    for trial, rows in result_rows(Path(spec.tracking.storage) / spec.name / "tune").items():
+        starts = sum(1 for r in rows if r.get("training_iteration") == 1)
+        if starts > 1:
+            print(f"  trial {trial}: started at iteration 1 {starts} times")
+            found["restarted"] += 1
+    return found
+
+
+def drill_driver(directory: Path, iterations: int) -> dict[str, int]:
+    spec = write_spec(directory, "drill_driver", iterations)
+    proc = sweep(spec)
+    rows = wait_for_results(directory / "results" / "drill_driver" / "tune", 3, proc)
+    killed = kill_tree(proc.pid)
+    print(f"  killed the driver and {killed - 1} processes it started after iteration {len(rows)}")
+    resumed = sweep(spec, "--resume")
+    if resumed.wait(timeout=900) != 0:
+        raise RuntimeError(f"--resume exited {resumed.returncode} (log next to {spec})")
+    return audit(spec, iterations)
+
+
+def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
+    spec = write_spec(directory, "drill_trial", iterations)
+    proc = sweep(spec)
+    rows = wait_for_results(directory / "results" / "drill_trial" / "tune", 3, proc)
+    pid = int(rows[-1]["pid"])
+    os.kill(pid, signal.SIGKILL)
+    print(f"  killed trial process {pid} after iteration {len(rows)}")
+    if proc.wait(timeout=900) != 0:
+        raise RuntimeError(
+            f"the sweep exited {proc.returncode} after the trial was killed (log next to {spec})"
+        )
+    return audit(spec, iterations)
+
+
+DRILLS = {"driver": drill_driver, "trial": drill_trial}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--drills", nargs="+", default=list(DRILLS), choices=list(DRILLS))
+    parser.add_argument("--iterations", type=int, default=6, help="iterations per trial")
+    parser.add_argument("--keep", type=Path, help="work in this folder and keep it (default: a temp dir)")
+    args = parser.parse_args()
+    directory = args.keep or Path(tempfile.mkdtemp(prefix="copilot_drills_"))
+    directory.mkdir(parents=True, exist_ok=True)
+    bad = 0
+    for name in args.drills:
+        started = time.time()
+        print(f"drill {name} (in {directory}):", flush=True)
+        found = DRILLS[name](directory, args.iterations)
+        print(
+            f"drill {name}: runs lost {found['lost']}, duplicated {found['duplicated']}, "
+            f"restarted from scratch {found['restarted']} ({time.time() - started:.0f} s)",
+            flush=True,
+        )
+        bad += sum(found.values())
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
