@@ -51,6 +51,7 @@ from copilot_ray.keys import (
     EVAL_FRESH,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
+    PATHS_PREFIX,
     RESOLVED_SPEC_ARTIFACT,
     SEED_PARAM,
     SPEC_ARTIFACT,
@@ -135,6 +136,12 @@ SUMMARY_METRICS = {
 }
 
 
+def _last_row(df, column: str) -> float:
+    if df is None or column not in df.columns or not len(df):
+        return float("nan")
+    return float(df[column].iloc[-1])
+
+
 def _last_valid(df, column: str) -> float:
     if df is None or column not in df.columns:
         return float("nan")
@@ -163,7 +170,12 @@ def rows_from_grid(grid) -> list[TrialRow]:
                 config_key=config_key(flat),
                 seed=flat.get(SEED_PARAM),
                 status=status,
-                figures={key: _last_valid(df, key) for key in SUMMARY_METRICS},
+                # success: the last evaluation's; a path figure: the last result's (NaN where it was
+                # undefined then, e.g. a length ratio with no successful path, not an older value)
+                figures={
+                    key: (_last_row(df, key) if key.startswith(PATHS_PREFIX) else _last_valid(df, key))
+                    for key in SUMMARY_METRICS
+                },
                 env_steps=int(result_value(m, ENV_STEPS, 0) or 0),
                 wall_s=float(m.get(TIME_TOTAL_S, 0.0) or 0.0),
             )

@@ -296,3 +296,26 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     # Nothing is run twice: without --resume a file whose parts have results is refused.
     assert main([str(path)]) == 2
     assert "part 'p_rrt'" in capsys.readouterr().err
+
+
+def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
+    from copilot_ray.keys import PATH_LENGTH_VS_RRT, PATH_SUCCESS, SUCCESS_DIRECT
+    from copilot_ray.sweep import TrialRow, summary_table
+
+    nan = float("nan")
+
+    def row(key, seed, success, ratio):
+        figures = {
+            SUCCESS_PLANNED: nan,
+            SUCCESS_DIRECT: nan,
+            PATH_SUCCESS: success,
+            PATH_LENGTH_VS_RRT: ratio,
+        }
+        return TrialRow(f"t{seed}", key, seed, "finished", figures, 1000, 10.0)
+
+    table = summary_table([row("env.id=maze-point", 0, 0.7, 3.0), row("env.id=maze-point", 1, 0.9, 2.0),
+                           row("env.id=maze-rigid", 0, 0.0, nan)])  # fmt: skip
+    header, _, point, rigid = table.splitlines()
+    assert "path success" in header and "length / RRT*" in header and "success_planned" not in header
+    assert "0.80 ± 0.14" in point and "2.50 ± 0.71" in point
+    assert rigid.split("|")[4].strip() == "-"  # no successful path at the end: no length ratio

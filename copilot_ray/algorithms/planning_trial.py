@@ -9,7 +9,8 @@ carries the same number under its own name.
 A subclass implements ``start(cfg, env)``, ``iterate() -> (metrics, collision_checks, done)``,
 ``state() -> dict`` and ``restore(state)``; this class turns the trial's flat Tune config into the
 algorithm's config (``copilot_ray.spec.build_algorithm_config``), builds the env, nests the metrics the
-way an RLlib result nests them, and checkpoints ``state()`` with pickle.
+way an RLlib result nests them, and checkpoints ``state()`` with pickle. Outside a sweep, give it the
+config itself: ``RRTStarTrial(config={"algorithm_config": RRTStarConfig.from_settings(values, run)})``.
 """
 
 from __future__ import annotations
