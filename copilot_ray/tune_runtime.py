@@ -44,8 +44,6 @@ from copilot_ray.spec import (
 )
 from copilot_ray.tracking import TrialRuns, describe_trial, load_spec_cached, trial_flat
 
-CHECKPOINT_FREQUENCY = 1  # iterations between checkpoints (and the synced copilot_trees/)
-MAX_FAILURES = 2
 _LAST_EVAL_STATE = "copilot_trial_last_eval"
 
 
@@ -268,10 +266,13 @@ def build_tuner(
             name=exp_name,
             storage_path=str(root / "tune"),
             stop=tune_stop(spec),
+            # (the synced copilot_trees/ follow the checkpoints)
             checkpoint_config=tune.CheckpointConfig(
-                checkpoint_frequency=CHECKPOINT_FREQUENCY, checkpoint_at_end=True, num_to_keep=2
+                checkpoint_frequency=spec.fault_tolerance.checkpoint_every,
+                checkpoint_at_end=True,
+                num_to_keep=2,
             ),
-            failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
+            failure_config=tune.FailureConfig(max_failures=spec.fault_tolerance.max_failures),
             # copilot_trees/ is written to the trial's working dir; sync it into the trial folder.
             sync_config=tune.SyncConfig(sync_artifacts=True),
             callbacks=callbacks,

@@ -702,3 +702,23 @@ def test_a_file_of_several_specs_is_checked_whole_naming_the_part(tmp_path):
         load_specs(path)
     with pytest.raises(SpecError, match="expected one YAML document, found 2"):
         load_spec(path)
+
+
+def test_fault_tolerance_is_checked_and_planned():
+    base = {"name": "t", "env": {"id": "maze-point"}, "algorithm": "rrt_star", "stop": {"iterations": 1}}
+    spec = parse_spec(base)
+    assert (spec.fault_tolerance.checkpoint_every, spec.fault_tolerance.max_failures) == (1, 2)
+    spec = parse_spec({**base, "fault_tolerance": {"checkpoint_every": 5, "max_failures": -1}})
+    assert (
+        "a checkpoint every 5 iteration(s); a failed trial is retried from it without limit"
+        in format_plan(spec)
+    )
+    with pytest.raises(SpecError) as err:
+        parse_spec({**base, "fault_tolerance": {"checkpoint_every": 0, "max_failures": -2, "retries": 3}})
+    assert err.value.problems[0].startswith("<spec>: fault_tolerance.retries: unknown key")
+    with pytest.raises(SpecError) as err:
+        parse_spec({**base, "fault_tolerance": {"checkpoint_every": 0, "max_failures": -2}})
+    assert err.value.problems == [
+        "<spec>: fault_tolerance.checkpoint_every: 0 is invalid: must be an integer >= 1",
+        "<spec>: fault_tolerance.max_failures: -2 is invalid: must be >= 0, or -1 for no limit",
+    ]

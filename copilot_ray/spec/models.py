@@ -255,6 +255,26 @@ class StopSpec(_Model):
         return self
 
 
+class FaultToleranceSpec(_Model):
+    """How a trial survives a crash: checkpoints every ``checkpoint_every`` iterations (a retried or
+    resumed trial repeats at most that many - 1), and ``max_failures`` retries from the last one (-1:
+    without limit) before the trial is marked ERROR and the sweep goes on without it."""
+
+    checkpoint_every: int = 1
+    max_failures: int = 2
+
+    @model_validator(mode="after")
+    def _ranges(self) -> FaultToleranceSpec:
+        issues = []
+        if self.checkpoint_every < 1:
+            issues.append(Issue("checkpoint_every", self.checkpoint_every, "must be an integer >= 1"))
+        if self.max_failures < -1:
+            issues.append(Issue("max_failures", self.max_failures, "must be >= 0, or -1 for no limit"))
+        if issues:
+            raise Issues(issues)
+        return self
+
+
 class ResourcesSpec(_Model):
     max_concurrent_trials: int = 1
     num_env_runners: int = 0
@@ -302,6 +322,7 @@ class SweepSpec(_Model):
     scheduler: SchedulerSpec | None = None
     stop: StopSpec
     resources: ResourcesSpec = Field(default_factory=ResourcesSpec)
+    fault_tolerance: FaultToleranceSpec = Field(default_factory=FaultToleranceSpec)
     tracking: TrackingSpec = Field(default_factory=TrackingSpec)
 
     _source: str = PrivateAttr(default="<spec>")

@@ -67,6 +67,11 @@ def format_plan(spec: SweepSpec) -> str:
         + f"{spec.resources.max_concurrent_trials} at a time ({b['waves']} wave(s)), "
         f"{spec.resources.cpus_per_trial} CPU(s) per trial, {b['cpus']} CPU(s) in use"
     )
+    ft = spec.fault_tolerance
+    retries = "without limit" if ft.max_failures == -1 else f"up to {ft.max_failures} time(s)"
+    lines.append(
+        f"  a checkpoint every {ft.checkpoint_every} iteration(s); a failed trial is retried from it {retries}"
+    )
     return "\n".join(lines)
 
 
