@@ -10,6 +10,10 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
   results, then `python -m copilot_ray.sweep SPEC --resume` to the end.
 * trial: SIGKILL the first trial's worker process (the pid in its results) once it has 3 results; Tune
   retries it from its last checkpoint (FailureConfig) and the sweep ends by itself.
+* nan: one configuration, seeds 0 and 1, and `COPILOT_RAY_FAULT=planner_nan@3:seed=1` (NaN into seed 1's
+  planner weights at iteration 3; copilot_ray/algorithms/copilot/health.py): seed 1 must stop with the
+  reason in the console and in its MLflow run (FAILED, tag copilot.error) after its retries, seed 0 must
+  finish; "lost" counts only runs that should have finished.
 
 Each prints "drill NAME: runs lost L, duplicated D, restarted from scratch S" (all 0 when nothing was
 lost) with what it checked: every planned trial has exactly one MLflow run, FINISHED, whose iterations
@@ -35,16 +39,17 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def write_spec(directory: Path, name: str, iterations: int) -> Path:
+def write_spec(directory: Path, name: str, iterations: int, **changes) -> Path:
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
     data.update(name=name, tracking={"storage": str(directory / "results")}, stop={"iterations": iterations})
+    data.update(changes)
     path = directory / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
 
 
-def sweep(spec: Path, *args: str) -> subprocess.Popen:
-    env = {**os.environ, "RAY_AUTH_MODE": "disabled", "PYTHONPATH": str(ROOT)}
+def sweep(spec: Path, *args: str, env_extra: dict | None = None) -> subprocess.Popen:
+    env = {**os.environ, "RAY_AUTH_MODE": "disabled", "PYTHONPATH": str(ROOT), **(env_extra or {})}
     log = open(spec.with_suffix(f".{int(time.time())}.log"), "w")  # noqa: SIM115 - lives with the process
     return subprocess.Popen(
         [sys.executable, "-m", "copilot_ray.sweep", str(spec), *args],
@@ -114,11 +119,21 @@ def kill_tree(pid: int) -> int:
     return len(procs)
 
 
-def audit(spec_path: Path, iterations: int) -> dict[str, int]:
-    """Lost / duplicated / restarted counts from MLflow and Tune's files, with a line per finding."""
+def audit(spec_path: Path, iterations: int, failing_seeds: tuple[str, ...] = ()) -> dict[str, int]:
+    """Lost / duplicated / restarted counts from MLflow and Tune's files, with a line per finding.
+    Trials of `failing_seeds` are expected to end FAILED with a reason instead of finishing."""
     import mlflow
 
-    from copilot_ray.keys import ENV_STEPS, ROLE_SWEEP, ROLE_TAG, ROLE_TRIAL, TRAINING_ITERATION, TRIAL_ID_TAG
+    from copilot_ray.keys import (
+        ENV_STEPS,
+        ERROR_TAG,
+        ROLE_SWEEP,
+        ROLE_TAG,
+        ROLE_TRIAL,
+        SEED_TAG,
+        TRAINING_ITERATION,
+        TRIAL_ID_TAG,
+    )
     from copilot_ray.spec import load_spec
 
     spec = load_spec(spec_path)
@@ -128,14 +143,21 @@ def audit(spec_path: Path, iterations: int) -> dict[str, int]:
     parents = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_SWEEP]
     children = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
     found = {"lost": 0, "duplicated": 0, "restarted": 0}
-    planned = len(spec.trial_plan())
+    failing = [r for r in children if r.data.tags.get(SEED_TAG) in failing_seeds]
+    for run in failing:
+        reason = run.data.tags.get(ERROR_TAG, "")
+        print(f"  run {run.info.run_name}: {run.info.status}, copilot.error = {reason!r}")
+        if run.info.status != "FAILED" or "non-finite" not in reason:
+            found["lost"] += 1
+    children = [r for r in children if r not in failing]
+    planned = len(spec.trial_plan()) - len(failing_seeds)
     by_trial: dict[str, list] = {}
     for run in children:
         by_trial.setdefault(run.data.tags[TRIAL_ID_TAG], []).append(run)
     finished = [r for r in children if r.info.status == "FINISHED"]
     found["lost"] += planned - len({r.data.tags[TRIAL_ID_TAG] for r in finished})
     found["duplicated"] += sum(len(v) - 1 for v in by_trial.values()) + max(0, len(parents) - 1)
-    if not parents or parents[0].info.status != "FINISHED":
+    if not parents or parents[0].info.status not in ("FINISHED", "FAILED" if failing_seeds else "FINISHED"):
         print(f"  parent run not closed: {[p.info.status for p in parents]}")
         found["lost"] += 1
     for run in children:
@@ -148,6 +170,8 @@ def audit(spec_path: Path, iterations: int) -> dict[str, int]:
             print(f"  run {run.info.run_name}: env steps not strictly growing {steps}")
             found["duplicated"] += 1
     for trial, rows in result_rows(Path(spec.tracking.storage) / spec.name / "tune").items():
+        if any(str(r.get("config", {}).get("seed")) in failing_seeds for r in rows[:1]):
+            continue  # retried from its checkpoint by design
         starts = sum(1 for r in rows if r.get("training_iteration") == 1)
         if starts > 1:
             print(f"  trial {trial}: started at iteration 1 {starts} times")
@@ -181,7 +205,20 @@ def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
     return audit(spec, iterations)
 
 
-DRILLS = {"driver": drill_driver, "trial": drill_trial}
+def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
+    spec = write_spec(directory, "drill_nan", iterations, search={"tree_depth": {"grid": [1]}}, seeds=[0, 1])
+    proc = sweep(spec, env_extra={"COPILOT_RAY_FAULT": "planner_nan@3:seed=1"})
+    code = proc.wait(timeout=900)
+    log = max(directory.glob("drill_nan.*.log")).read_text()
+    errors = [line for line in log.splitlines() if "ERROR:" in line]
+    print(f"  sweep exit status {code}; console: {errors[-1].strip() if errors else '(no ERROR line)'}")
+    found = audit(spec, iterations, failing_seeds=("1",))
+    if not errors or "non-finite" not in errors[-1]:
+        found["lost"] += 1
+    return found
+
+
+DRILLS = {"driver": drill_driver, "trial": drill_trial, "nan": drill_nan}
 
 
 def main() -> int:

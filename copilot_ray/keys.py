@@ -99,6 +99,7 @@ ROLE_TAG = "copilot.role"
 ROLE_SWEEP = "sweep"  # ROLE_TAG of the parent run, one per sweep
 ROLE_TRIAL = "trial"  # ROLE_TAG of a child run, one per trial
 TRIAL_ID_TAG = "copilot.trial_id"
+ERROR_TAG = "copilot.error"  # a FAILED trial run: the last line of its error (exception and message)
 CONFIG_KEY_TAG = "copilot.config_key"
 TUNE_PATH_TAG = "copilot.tune_path"
 PARENT_TAG = "mlflow.parentRunId"

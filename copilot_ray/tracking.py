@@ -30,6 +30,7 @@ from copilot_ray.keys import (
     ENV_STEPS,
     ENV_TAG,
     ERROR_ARTIFACT,
+    ERROR_TAG,
     GIT_COMMIT_TAG,
     K_TAG,
     PARENT_TAG,
@@ -554,6 +555,7 @@ class TrialRuns:
         error_file = getattr(trial, "error_file", None)
         if status == "FAILED" and error_file and Path(error_file).is_file():
             self.client.log_artifact(run_id, error_file, ERROR_ARTIFACT)
+            self.client.set_tag(run_id, ERROR_TAG, error_reason(error_file) or "(no message)")
 
     def kill_unfinished(self, trials) -> None:
         """Interrupted (Ctrl-C / SIGTERM): runs of unfinished trials wait, KILLED, for --resume."""
@@ -562,6 +564,15 @@ class TrialRuns:
             done = trial.status == "ERROR" or (trial.last_result or {}).get("done")
             if run_id is not None and not done:  # (cleanup marks stopped trials TERMINATED)
                 self.client.set_terminated(run_id, status="KILLED")
+
+
+def error_reason(error_file: str | None, limit: int = 300) -> str:
+    """The last line of a Tune trial's error file: the exception and its message ("" without one)."""
+    try:
+        lines = [line.strip() for line in Path(error_file).read_text().splitlines() if line.strip()]
+    except (OSError, TypeError):
+        return ""
+    return lines[-1][:limit] if lines else ""
 
 
 def _tree_dirs(trial) -> list[Path]:

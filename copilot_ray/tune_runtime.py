@@ -42,7 +42,7 @@ from copilot_ray.spec import (
     to_tune_search_space,
     tune_stop,
 )
-from copilot_ray.tracking import TrialRuns, describe_trial, load_spec_cached, trial_flat
+from copilot_ray.tracking import TrialRuns, describe_trial, error_reason, load_spec_cached, trial_flat
 
 _LAST_EVAL_STATE = "copilot_trial_last_eval"
 
@@ -180,10 +180,12 @@ class ProgressPrinter(Callback):
         _say(f"{self._head(trial)}  done")
 
     def on_trial_recover(self, iteration, trials, trial, **info):
-        _say(f"{self._head(trial)}  failed, retrying from its last checkpoint ({trial.error_file})")
+        reason = error_reason(trial.error_file) or "(no message)"
+        _say(f"{self._head(trial)}  failed ({reason}), retrying from its last checkpoint")
 
     def on_trial_error(self, iteration, trials, trial, **info):
-        _say(f"{self._head(trial)}  ERROR, see {trial.error_file}")
+        reason = error_reason(trial.error_file)
+        _say(f"{self._head(trial)}  ERROR: {reason or '(no message)'}; details: {trial.error_file}")
 
 
 def _say(line: str) -> None:

@@ -148,3 +148,18 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
             restored.stop()
     finally:
         algo.stop()
+
+
+def test_non_finite_planner_weights_stop_the_run_naming_them(ray_session, monkeypatch):
+    from copilot_ray.algorithms.copilot.health import FAULT_ENV, NonFiniteStateError
+
+    monkeypatch.setenv(FAULT_ENV, "planner_nan@2")  # the fault drill's hook: NaN at iteration 2's start
+    algo = tiny_config(num_env_runners=0).build_algo()
+    try:
+        algo.train()
+        with pytest.raises(
+            NonFiniteStateError, match=r"iteration 2: non-finite \(NaN or inf\) weights in the planner"
+        ):
+            algo.train()
+    finally:
+        algo.stop()

@@ -58,6 +58,7 @@ from copilot_ray.algorithms.copilot.diagnostics import (
     tau_hat_profile,
     traversal_diagnostics,
 )
+from copilot_ray.algorithms.copilot.health import check_finite, fill_nan, injected_fault
 from copilot_ray.algorithms.copilot.settings import (
     PRESETS,
     SETTINGS,
@@ -432,6 +433,10 @@ class CoPilot(SAC):
         `Algorithm.train()` reduces into the iteration's result dict.
         """
         cfg = self.config
+        broken = injected_fault(self.iteration + 1, cfg.seed)  # a fault drill (health.py); None in real runs
+        if broken is not None:
+            fill_nan(self._learned_parts().get(broken, ()))
+        check_finite(self._learned_parts(), self.iteration + 1, "at the start of the iteration")
         if not self._warm_started:
             self._warm_start_planner()
         n_tasks = min(cfg.task_batch_size, len(self.train_starts))
@@ -469,6 +474,7 @@ class CoPilot(SAC):
             timing["planner_s"] += t1 - t0
             timing["agent_s"] += t2 - t1
             timing["cost_model_s"] += t3 - t2
+        check_finite(self._learned_parts(), self.iteration + 1, "after its planner and cost-model updates")
 
         for key, values in stats.items():
             self.metrics.log_value(keys.metric_path(key), float(np.mean(values)), window=1)
@@ -495,6 +501,13 @@ class CoPilot(SAC):
             self.metrics.log_value(
                 keys.metric_path(keys.TIME_PREFIX + "eval_s"), time.perf_counter() - t, window=1
             )
+
+    def _learned_parts(self) -> dict[str, list]:
+        """The driver-side learned weights that every plan depends on (health.check_finite)."""
+        parts = {"cost_model": list(self.cost_model.net.parameters())}
+        if self.planner is not None:
+            parts["planner"] = list(self.planner.parameters())
+        return parts
 
     # ---------------------------------------------------------------------------- planner phase
     def _segment_cost(self, alpha: float) -> SegmentCost:
