@@ -10,6 +10,9 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
   results, then `python -m copilot_ray.sweep SPEC --resume` to the end.
 * trial: SIGKILL the first trial's worker process (the pid in its results) once it has 3 results; Tune
   retries it from its last checkpoint (FailureConfig) and the sweep ends by itself.
+* runner: the smoke sweep with one env runner per trial; SIGKILL that runner's process once the first
+  trial has 2 results: Ray restarts the actor, CO-PILOT counts the sub-tasks the runner took with it
+  (`copilot/agent/subtasks_lost`, printed) and the trial goes on without a Tune retry.
 * nan: one configuration, seeds 0 and 1, and `COPILOT_RAY_FAULT=planner_nan@3:seed=1` (NaN into seed 1's
   planner weights at iteration 3; copilot_ray/algorithms/copilot/health.py): seed 1 must stop with the
   reason in the console and in its MLflow run (FAILED, tag copilot.error) after its retries, seed 0 must
@@ -205,6 +208,49 @@ def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
     return audit(spec, iterations)
 
 
+def drill_runner(directory: Path, iterations: int) -> dict[str, int]:
+    import mlflow
+
+    from copilot_ray.keys import AGENT_SUBTASKS_LOST
+    from copilot_ray.spec import load_spec
+
+    config = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())["config"]
+    # one sub-task per sampling round: many rounds per iteration, so the kill lands inside one
+    config["subtasks_per_sample"] = 1
+    spec = write_spec(directory, "drill_runner", iterations, resources={"num_env_runners": 1}, config=config)
+    proc = sweep(spec)
+    wait_for_results(directory / "results" / "drill_runner" / "tune", 2, proc)
+    runners = [p for p in descendants(proc.pid) if "EnvRunner" in _cmdline(p)]
+    if not runners:
+        raise RuntimeError("no env runner process found under the sweep driver")
+    os.kill(runners[0], signal.SIGKILL)
+    print(f"  killed env runner process {runners[0]}")
+    if proc.wait(timeout=900) != 0:
+        raise RuntimeError(f"the sweep exited {proc.returncode} (log next to {spec})")
+    found = audit(spec, iterations)
+    log = max(directory.glob("drill_runner.*.log")).read_text()
+    if "retrying from its last checkpoint" in log:
+        print("  a trial was retried from its checkpoint instead of going on")
+        found["restarted"] += 1
+    loaded = load_spec(spec)
+    client = mlflow.MlflowClient(loaded.tracking.uri)
+    exp = client.get_experiment_by_name(loaded.experiment)
+    lost = sum(
+        m.value
+        for run in client.search_runs([exp.experiment_id])
+        for m in client.get_metric_history(run.info.run_id, AGENT_SUBTASKS_LOST)
+    )
+    print(f"  sub-tasks lost with the runner, as logged: {lost:.0f}")
+    return found
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
 def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
     spec = write_spec(directory, "drill_nan", iterations, search={"tree_depth": {"grid": [1]}}, seeds=[0, 1])
     proc = sweep(spec, env_extra={"COPILOT_RAY_FAULT": "planner_nan@3:seed=1"})
@@ -218,7 +264,7 @@ def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
     return found
 
 
-DRILLS = {"driver": drill_driver, "trial": drill_trial, "nan": drill_nan}
+DRILLS = {"driver": drill_driver, "trial": drill_trial, "runner": drill_runner, "nan": drill_nan}
 
 
 def main() -> int:

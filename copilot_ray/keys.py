@@ -57,6 +57,9 @@ PLANNER_NONFINITE_SKIPPED = "copilot/planner/nonfinite_skipped"
 AGENT_STEPS_LAYER = "copilot/agent/steps_layer_"
 AGENT_SUCCESS_LAYER = "copilot/agent/success_layer_"
 AGENT_SUBTASK_SUCCESS_LAYER = "copilot/agent/subtask_success_layer_"
+# Sub-tasks of this iteration that an env runner took with it when it died (RLlib restores the runner
+# before the next iteration; these are not traversed, so not learned from and not in D_tau).
+AGENT_SUBTASKS_LOST = "copilot/agent/subtasks_lost"
 
 # Diagnostics (copilot_ray.algorithms.copilot.diagnostics): why a run does (not) learn.
 DIAG_PREFIX = "copilot/diag/"

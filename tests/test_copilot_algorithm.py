@@ -163,3 +163,34 @@ def test_non_finite_planner_weights_stop_the_run_naming_them(ray_session, monkey
             algo.train()
     finally:
         algo.stop()
+
+
+def test_an_env_runner_dying_mid_iteration_loses_its_subtasks_countably_and_comes_back(ray_session):
+    import ray
+
+    algo = tiny_config(num_env_runners=1).copilot(subtasks_per_sample=2).build_algo()
+    try:
+        first = algo.train()
+        assert lookup(first, ("copilot", "agent", "subtasks_lost")) == 0
+        learn, killed = algo._learn, []
+
+        def learn_then_kill(episodes):  # after the first sampling round of iteration 2
+            learn(episodes)
+            if not killed:
+                (actor,) = algo.env_runner_group._worker_manager._actors.values()
+                ray.kill(actor, no_restart=False)  # as if its process died: Ray restarts it
+                killed.append(actor)
+
+        algo._learn = learn_then_kill
+        second = algo.train()  # goes on without the runner's remaining sub-tasks
+        algo._learn = learn
+        lost = lookup(second, ("copilot", "agent", "subtasks_lost"))
+        # 3 tasks x 2 repetitions x 7 sub-tasks per tree; at most 2 of the first repetition were sampled
+        assert 0 < lost <= 3 * 2 * 7 - 2
+        third = algo.train()  # RLlib restored the runner before this iteration
+        assert lookup(third, ("copilot", "agent", "subtasks_lost")) == 0
+        assert algo.env_runner_group.num_healthy_remote_env_runners() == 1
+        steps = [lookup(r, EXPECTED_METRICS[-1]) for r in (first, second, third)]
+        assert steps[0] < steps[1] < steps[2]
+    finally:
+        algo.stop()

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import logging
 import time
 from collections import defaultdict
 from collections.abc import Mapping
@@ -81,6 +82,8 @@ from copilot_ray.planning import (
 )
 from copilot_ray.planning.path_metrics import CountedChecks, RRTReference, path_metrics, rrt_reference
 
+logger = logging.getLogger(__name__)
+RUNNER_RESTORE_TIMEOUT_S = 120  # waiting for a failed env runner to come back when none is left
 _STATE_KEY = "copilot"
 DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
 # Tasks per planner phase of the warm start: the paper's task mini-batch for the maze.
@@ -363,6 +366,7 @@ class CoPilot(SAC):
         # Every segment the planner's cost asks about: the "collision checks" of Fig. 4c; checkpointed.
         self._planner_checks = CountedChecks(env.segments_collide)
         self._rrt_reference: RRTReference | None = None  # computed at the first evaluation that needs it
+        self._subtasks_lost = 0  # this iteration's, taken by env runners that died (AGENT_SUBTASKS_LOST)
         self._warm_started = cfg.planner_warm_start == 0 or self.planner is None
         directions = self._rng.standard_normal(self.test_starts.shape)
         self._tau_probe = (self.test_starts, directions / np.linalg.norm(directions, axis=1, keepdims=True))
@@ -437,6 +441,7 @@ class CoPilot(SAC):
         if broken is not None:
             fill_nan(self._learned_parts().get(broken, ()))
         check_finite(self._learned_parts(), self.iteration + 1, "at the start of the iteration")
+        self._subtasks_lost = 0
         if not self._warm_started:
             self._warm_start_planner()
         n_tasks = min(cfg.task_batch_size, len(self.train_starts))
@@ -478,6 +483,7 @@ class CoPilot(SAC):
 
         for key, values in stats.items():
             self.metrics.log_value(keys.metric_path(key), float(np.mean(values)), window=1)
+        self.metrics.log_value(keys.metric_path(keys.AGENT_SUBTASKS_LOST), self._subtasks_lost, window=1)
         self.metrics.log_value(keys.metric_path(keys.DTAU_SIZE), len(self.cost_model.dataset), window=1)
         try:
             q_mean = float(self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, "qf_mean")))
@@ -616,8 +622,25 @@ class CoPilot(SAC):
 
     # ------------------------------------------------------------------------------ agent phase
     def _runner_ids(self) -> list[int]:
-        n = self.env_runner_group.num_remote_env_runners()
-        return list(range(1, n + 1)) if n > 0 else [0]
+        """The runners to traverse on: the local one without remote runners, else the healthy remote
+        ones, after trying to bring back failed ones (as RLlib does before each iteration: a runner that
+        died in one repetition is back for the next)."""
+        group = self.env_runner_group
+        if group.num_remote_env_runners() == 0:
+            return [0]
+        if group.num_healthy_remote_env_runners() < group.num_remote_env_runners():
+            self.restore_env_runners(group)
+        # With none left, wait for Ray to restart one (its actors restart on their own, in seconds).
+        deadline = time.monotonic() + RUNNER_RESTORE_TIMEOUT_S
+        while not group.healthy_env_runner_ids() and time.monotonic() < deadline:
+            time.sleep(1.0)
+            self.restore_env_runners(group)
+        healthy = sorted(group.healthy_env_runner_ids())
+        if not healthy:
+            raise RuntimeError(
+                f"every env runner has failed and none came back within {RUNNER_RESTORE_TIMEOUT_S} s"
+            )
+        return healthy
 
     def _traverse(self, trees: np.ndarray, task_ids: np.ndarray) -> dict[str, np.ndarray]:
         """Bottom-up traversal of every tree on the env runners, with SAC updates in between.
@@ -633,17 +656,24 @@ class CoPilot(SAC):
         plans = {rid: (trees[s], task_ids[s]) for rid, s in shares.items()}
         depth = cfg.tree_depth
 
+        # Every call returns its runner's index: a runner that dies mid-iteration is simply missing from
+        # the results (RLlib's restart_failed_env_runners), and its sub-tasks are counted as lost.
         def load(runner):
             tr, ids = plans[runner.worker_index]
-            return runner.env.unwrapped.call("load_plan", tr, depth, ids)[0]
+            return runner.worker_index, runner.env.unwrapped.call("load_plan", tr, depth, ids)[0]
 
-        remaining = dict(
-            zip(
-                runner_ids,
-                self.env_runner_group.foreach_env_runner(load, local_env_runner=local),
-                strict=True,
+        loaded = dict(
+            self.env_runner_group.foreach_env_runner(
+                load, local_env_runner=local, remote_worker_ids=None if local else runner_ids
             )
         )
+        per_tree = 2 ** (depth + 1) - 1  # sub-tasks of one tree, all layers
+        remaining = {}
+        for rid in runner_ids:
+            if rid in loaded:
+                remaining[rid] = loaded[rid]
+            else:
+                self._lose_subtasks(rid, len(shares[rid]) * per_tree)
         chunk = cfg.subtasks_per_sample
         records: list[dict[str, np.ndarray]] = []
         while any(remaining.values()):
@@ -651,9 +681,10 @@ class CoPilot(SAC):
             def sample(runner):
                 left = runner.env.unwrapped.call("remaining")[0]
                 if left == 0:
-                    return [], runner.get_metrics(), 0
+                    return runner.worker_index, [], runner.get_metrics(), 0
                 episodes = runner.sample(num_episodes=min(chunk, left), explore=True)
-                return episodes, runner.get_metrics(), runner.env.unwrapped.call("remaining")[0]
+                left = runner.env.unwrapped.call("remaining")[0]
+                return runner.worker_index, episodes, runner.get_metrics(), left
 
             active = [rid for rid, n in remaining.items() if n > 0]
             results = self.env_runner_group.foreach_env_runner(
@@ -661,16 +692,33 @@ class CoPilot(SAC):
             )
             episodes = []
             runner_metrics = []
-            for rid, (eps, metrics, left) in zip(active, results, strict=True):
+            answered = set()
+            for rid, eps, metrics, left in results:
+                answered.add(rid)
                 remaining[rid] = left
                 episodes.extend(eps)
                 runner_metrics.append(metrics)
+            for rid in set(active) - answered:  # died during this round
+                self._lose_subtasks(rid, remaining.pop(rid))
             self.metrics.aggregate(runner_metrics, key=ENV_RUNNER_RESULTS)
             episodes = [e for e in episodes if not e.get_infos(-1).get("subtask_idle", False)]
             if episodes:
                 records.append(_subtask_records(episodes))
                 self._learn(episodes)
+        if not records:
+            raise RuntimeError("no sub-task of this repetition was traversed: every env runner failed")
         return {k: np.concatenate([r[k] for r in records]) for k in records[0]}
+
+    def _lose_subtasks(self, runner_id: int, count: int) -> None:
+        """A runner died with `count` sub-tasks of this repetition: counted, logged, not hidden."""
+        self._subtasks_lost += int(count)
+        logger.warning(
+            "env runner %d failed during the traversal: its %d remaining sub-tasks of this repetition are "
+            "lost (%s; RLlib restores the runner before the next iteration)",
+            runner_id,
+            count,
+            keys.AGENT_SUBTASKS_LOST,
+        )
 
     def _learn(self, episodes) -> None:
         new_steps = sum(len(e) for e in episodes)
