@@ -8,6 +8,8 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
 
 * driver: SIGKILL the sweep driver and every process it started (Ray's too) once the first trial has 3
   results, then `python -m copilot_ray.sweep SPEC --resume` to the end.
+* driver_optuna: the same with an Optuna searcher (3 samples of tree depth 1 or 2); also checks that the
+  study holds 3 COMPLETE trials and no other.
 * trial: SIGKILL the first trial's worker process (the pid in its results) once it has 3 results; Tune
   retries it from its last checkpoint (FailureConfig) and the sweep ends by itself.
 * runner: the smoke sweep with one env runner per trial; SIGKILL that runner's process once the first
@@ -194,6 +196,39 @@ def drill_driver(directory: Path, iterations: int) -> dict[str, int]:
     return audit(spec, iterations)
 
 
+def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
+    import optuna
+
+    spec = write_spec(
+        directory,
+        "drill_optuna",
+        iterations,
+        search={"tree_depth": {"categorical": [1, 2]}},
+        searcher={
+            "type": "optuna",
+            "metric": "copilot/eval/success_planned",
+            "mode": "max",
+            "num_samples": 3,
+            "seed": 0,
+        },
+    )
+    proc = sweep(spec)
+    rows = wait_for_results(directory / "results" / "drill_optuna" / "tune", 3, proc)
+    killed = kill_tree(proc.pid)
+    print(f"  killed the driver and {killed - 1} processes it started after iteration {len(rows)}")
+    resumed = sweep(spec, "--resume")
+    if resumed.wait(timeout=900) != 0:
+        raise RuntimeError(f"--resume exited {resumed.returncode} (log next to {spec})")
+    found = audit(spec, iterations)
+    storage = f"sqlite:///{directory / 'results' / 'drill_optuna' / 'optuna.db'}"
+    (summary,) = optuna.get_all_study_summaries(storage)
+    states = [t.state.name for t in optuna.load_study(study_name=summary.study_name, storage=storage).trials]
+    print(f"  Optuna study {summary.study_name}: {states}")
+    found["lost"] += max(0, 3 - states.count("COMPLETE"))
+    found["duplicated"] += max(0, len(states) - 3)
+    return found
+
+
 def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
     spec = write_spec(directory, "drill_trial", iterations)
     proc = sweep(spec)
@@ -264,7 +299,13 @@ def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
     return found
 
 
-DRILLS = {"driver": drill_driver, "trial": drill_trial, "runner": drill_runner, "nan": drill_nan}
+DRILLS = {
+    "driver": drill_driver,
+    "driver_optuna": drill_driver_optuna,
+    "trial": drill_trial,
+    "runner": drill_runner,
+    "nan": drill_nan,
+}
 
 
 def main() -> int:
