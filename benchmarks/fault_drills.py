@@ -184,15 +184,21 @@ def audit(spec_path: Path, iterations: int, failing_seeds: tuple[str, ...] = ())
     return found
 
 
-def drill_driver(directory: Path, iterations: int) -> dict[str, int]:
-    spec = write_spec(directory, "drill_driver", iterations)
+def kill_driver_then_resume(spec: Path, tune_dir: Path) -> None:
+    """Start the sweep, SIGKILL its driver and everything it started at the first trial's 3rd result,
+    then run `--resume` to the end."""
     proc = sweep(spec)
-    rows = wait_for_results(directory / "results" / "drill_driver" / "tune", 3, proc)
+    rows = wait_for_results(tune_dir, 3, proc)
     killed = kill_tree(proc.pid)
     print(f"  killed the driver and {killed - 1} processes it started after iteration {len(rows)}")
     resumed = sweep(spec, "--resume")
     if resumed.wait(timeout=900) != 0:
         raise RuntimeError(f"--resume exited {resumed.returncode} (log next to {spec})")
+
+
+def drill_driver(directory: Path, iterations: int) -> dict[str, int]:
+    spec = write_spec(directory, "drill_driver", iterations)
+    kill_driver_then_resume(spec, directory / "results" / "drill_driver" / "tune")
     return audit(spec, iterations)
 
 
@@ -212,13 +218,7 @@ def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
             "seed": 0,
         },
     )
-    proc = sweep(spec)
-    rows = wait_for_results(directory / "results" / "drill_optuna" / "tune", 3, proc)
-    killed = kill_tree(proc.pid)
-    print(f"  killed the driver and {killed - 1} processes it started after iteration {len(rows)}")
-    resumed = sweep(spec, "--resume")
-    if resumed.wait(timeout=900) != 0:
-        raise RuntimeError(f"--resume exited {resumed.returncode} (log next to {spec})")
+    kill_driver_then_resume(spec, directory / "results" / "drill_optuna" / "tune")
     found = audit(spec, iterations)
     storage = f"sqlite:///{directory / 'results' / 'drill_optuna' / 'optuna.db'}"
     (summary,) = optuna.get_all_study_summaries(storage)

@@ -16,6 +16,7 @@ config itself: ``RRTStarTrial(config={"algorithm_config": RRTStarConfig.from_set
 from __future__ import annotations
 
 import pickle
+from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -49,7 +50,7 @@ def config_from_trial(config: Mapping[str, Any]) -> Any:
     return build_algorithm_config(trial_flat(config), spec)
 
 
-class PlanningTrial(tune.Trainable):
+class PlanningTrial(tune.Trainable, ABC):
     """Base of RRTStarTrial and SGTPGTrial (see the module docstring)."""
 
     def setup(self, config: dict) -> None:
@@ -60,7 +61,8 @@ class PlanningTrial(tune.Trainable):
     def step(self) -> dict:
         metrics, checks, done = self.iterate()
         result = nested({**metrics, keys.PATH_COLLISION_CHECKS: float(checks), keys.ENV_STEPS: int(checks)})
-        result[keys.NODE_ID] = ray.get_runtime_context().get_node_id()
+        if ray.is_initialized():  # (asking for the context outside Ray would start one)
+            result[keys.NODE_ID] = ray.get_runtime_context().get_node_id()
         if done:
             result["done"] = True
         return result
@@ -77,14 +79,18 @@ class PlanningTrial(tune.Trainable):
         self.env.close()
 
     # ------------------------------------------------------------------ what a subclass provides
+    @abstractmethod
     def start(self, cfg: Any, env: Any) -> None:
-        raise NotImplementedError
+        """Set up the run from the algorithm's config and the built env."""
 
+    @abstractmethod
     def iterate(self) -> tuple[dict[str, float], int, bool]:
-        raise NotImplementedError
+        """One iteration: (``paths/*`` metrics, collision checks so far, done)."""
 
+    @abstractmethod
     def state(self) -> dict:
-        raise NotImplementedError
+        """Everything ``restore`` needs to continue exactly (picklable)."""
 
+    @abstractmethod
     def restore(self, state: dict) -> None:
-        raise NotImplementedError
+        """Continue from a ``state()``."""
