@@ -67,13 +67,19 @@ class WaypointRollout:
 
 
 def follow_waypoints(
-    envs: list, policy: Policy, waypoints: np.ndarray, tau_max: int, with_delta: bool = False
+    envs: list,
+    policy: Policy,
+    waypoints: np.ndarray,
+    tau_max: int,
+    with_delta: bool = False,
+    max_total_steps: int | None = None,
 ) -> WaypointRollout:
     """Each env starts at waypoints[i, 0] and heads for waypoints[i, 1], [i, 2], ... in turn.
 
     A sub-task ends when its waypoint is reached or after tau_max steps; the next one starts from
     wherever the agent stopped. `with_delta`: the policy also sees waypoint - position
-    (agent_input="state_goal_delta").
+    (agent_input="state_goal_delta"). `max_total_steps`: a budget for the whole path (the rollout
+    stops there, the rest of its waypoints unreached).
     """
     n, p, _ = waypoints.shape
     obs = np.zeros((n, envs[0].observation_space["observation"].shape[0]), np.float32)
@@ -99,12 +105,13 @@ def follow_waypoints(
             collided[i] |= bool(info.get("collision", False))
             steps_in[i] += 1
             total[i] += 1
-            if reached or steps_in[i] >= tau_max:
+            out_of_budget = max_total_steps is not None and total[i] >= max_total_steps
+            if reached or steps_in[i] >= tau_max or out_of_budget:
                 t = target[i] - 1
                 sub_steps[i, t], sub_reached[i, t] = steps_in[i], bool(reached)
                 steps_in[i] = 0
                 target[i] += 1
-                if target[i] >= p:
+                if target[i] >= p or out_of_budget:
                     active[i] = False
                 else:
                     o, _ = envs[i].reset(options={"start": pos[i], "goal": waypoints[i, target[i]]})
@@ -142,6 +149,7 @@ def evaluate_copilot(
     tree_policy: str | None = None,
     step_limit_of: Callable[[int], int] | None = None,
     with_delta: bool = False,
+    planned_total_steps: int | None = None,
 ) -> CopilotEvaluation:
     """Success of each policy in `policies` (e.g. deterministic and sampled actions) on the tasks.
 
@@ -149,6 +157,9 @@ def evaluate_copilot(
     sub-goal (default tau_max); direct: the agent alone, with the step budget of the finest plan,
     tau_max * 2^K. The trees of the first `tree_tasks` tasks are traversed layer by layer with
     `policies[tree_policy]` (default: the first policy) for the sub-goal tree figure.
+    `planner`: anything with `sample(starts, goals, deterministic=True) -> [N, P, d]` waypoints (a
+    SoRB graph too); `planned_total_steps` caps a planned rollout's steps in all. Without a planner
+    the planned rollout is the direct one when their budgets agree (run once).
     """
 
     step_limit_of = step_limit_of or (lambda k: tau_max)
@@ -162,11 +173,17 @@ def evaluate_copilot(
     )
     by_action = {}
     for name, policy in policies.items():
-        planned = follow_waypoints(envs, policy, trees, step_limit_of(depth), with_delta)
-        # The agent alone gets the same step budget as the finest plan.
-        direct = follow_waypoints(
-            envs, policy, np.stack([starts, goals], axis=1), tau_max * 2**depth, with_delta
+        planned = follow_waypoints(
+            envs, policy, trees, step_limit_of(depth), with_delta, max_total_steps=planned_total_steps
         )
+        # The agent alone gets the same step budget as the finest plan.
+        direct_budget = tau_max * 2**depth
+        if planner is None and step_limit_of(depth) == direct_budget and planned_total_steps is None:
+            direct = planned  # the same rollout
+        else:
+            direct = follow_waypoints(
+                envs, policy, np.stack([starts, goals], axis=1), direct_budget, with_delta
+            )
         by_action[name] = {
             eval_leaf(SUCCESS_PLANNED): float(planned.success.mean()),
             eval_leaf(SUCCESS_DIRECT): float(direct.success.mean()),

@@ -35,7 +35,10 @@ PLANNING_SHARE = "copilot/time/planning_share"
 EVAL_PREFIX = "copilot/eval/"
 SUCCESS_PLANNED = "copilot/eval/success_planned"
 SUCCESS_DIRECT = "copilot/eval/success_direct"
-SUCCESS_METRICS = (SUCCESS_PLANNED, SUCCESS_DIRECT)
+# The one figure every algorithm reports (Fig. 2a / 4a compare it): CO-PILOT's success_planned, the
+# agent-only baselines' (SAC, HER, PPO) success_direct, SoRB's success along its graph's waypoints.
+EVAL_SUCCESS = "copilot/eval/success"
+SUCCESS_METRICS = (EVAL_SUCCESS, SUCCESS_PLANNED, SUCCESS_DIRECT)
 REACHED_PLANNED = "copilot/eval/reached_planned"
 REACHED_DIRECT = "copilot/eval/reached_direct"
 SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"

@@ -57,10 +57,14 @@ class SpecTrial:
     ``build_algorithm_config(flat, spec)`` (spec loaded from ``_spec_path``), so Tune's placement
     group fits the env runners and RLlib's checkpointing is untouched.
 
-    Every result carries ``copilot/eval/success_*`` (Tune's strict metric check and Optuna need the
-    searched metric in every result): iterations without an evaluation repeat the last evaluated
-    value (NaN before the first one) and set ``copilot/eval/fresh`` to 0 (1 when evaluated now).
+    Every result carries the trial's ``eval_metrics`` (``copilot/eval/success`` and
+    ``success_planned`` / ``success_direct`` where the algorithm has them; Tune's strict metric check
+    and Optuna need the searched metric in every result): iterations without an evaluation repeat the
+    last evaluated value (NaN before the first one) and set ``copilot/eval/fresh`` to 0 (1 when
+    evaluated now).
     """
+
+    eval_metrics: tuple[str, ...] = SUCCESS_METRICS
 
     def __init__(self, config=None, **kwargs):
         if isinstance(config, dict) and SPEC_PATH_KEY in config:
@@ -79,7 +83,7 @@ class SpecTrial:
         ev = result
         for part in metric_path(EVAL_PREFIX.rstrip("/")):
             ev = ev.setdefault(part, {})
-        names = [eval_leaf(key) for key in SUCCESS_METRICS]
+        names = [eval_leaf(key) for key in self.eval_metrics]
         # RLlib reports a window-1 stat logged in an earlier iteration as NaN: not an evaluation.
         fresh = all(_is_number(ev.get(name)) for name in names)
         for name in names:
@@ -161,16 +165,18 @@ class ProgressPrinter(Callback):
         _say(f"{self._head(trial)}  started")
 
     def on_trial_result(self, iteration, trials, trial, result, **info):
-        planned, direct = (result_value(result, key) for key in SUCCESS_METRICS)
+        success, planned, direct = (result_value(result, key) for key in SUCCESS_METRICS)
         steps = result_value(result, ENV_STEPS, 0)
         mark = "" if result_value(result, EVAL_FRESH, 1.0) else " (last eval)"
-        if planned is None and direct is None:  # a planner-only baseline: its paths' figures
+        if success is None:  # a planner-only baseline: its paths' figures
             figures = (
                 f"paths success {_fmt(result_value(result, PATH_SUCCESS))} "
                 f"length/RRT* {_fmt(result_value(result, PATH_LENGTH_VS_RRT))}"
             )
+        elif planned is None:
+            figures = f"success {_fmt(success)}{mark}"
         else:
-            figures = f"success planned {_fmt(planned)} direct {_fmt(direct)}{mark}"
+            figures = f"success {_fmt(success)} (planned {_fmt(planned)} direct {_fmt(direct)}){mark}"
         _say(
             f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
             f"env_steps {int(steps):8d}  {figures}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"

@@ -34,6 +34,17 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.copilot.algorithm:CoPilotConfig",
         "copilot_ray.tune_runtime:CoPilotTrial",
     ),
+    # The agent-only baselines (CO-PILOT's agent at tree depth 0): SAC, and SAC with HER's replay.
+    "sac": (
+        "copilot_ray.algorithms.sac.settings",
+        "copilot_ray.algorithms.sac.algorithm:GoalSACConfig",
+        "copilot_ray.algorithms.sac.trial:GoalSACTrial",
+    ),
+    "her": (
+        "copilot_ray.algorithms.sac.her_settings",
+        "copilot_ray.algorithms.sac.algorithm:HERConfig",
+        "copilot_ray.algorithms.sac.trial:GoalSACTrial",
+    ),
     # Planner-only baselines (the paper's Fig. 4b/4c): plain Tune trainables, no RLlib.
     "rrt_star": (
         "copilot_ray.algorithms.rrt_star.settings",

@@ -75,13 +75,17 @@ def make_rllib_replay_buffer(config):
 
 
 class FastLearnerUpdater:
-    """Flat transition buffer -> N gradient steps in one `learner_group.update(batch=...)` call."""
+    """Flat transition buffer -> N gradient steps in one `learner_group.update(batch=...)` call.
 
-    def __init__(self, config, learner_group):
+    `buffer`: any buffer with `add_episodes`, `sample(n, rng, columns)`, `get_state` / `set_state`
+    (default: a `FlatTransitionBuffer` of the config's replay capacity; HER passes its own)."""
+
+    def __init__(self, config, learner_group, buffer=None):
         self.config = config
         self.learner_group = learner_group
-        capacity = int(config.replay_buffer_config.get("capacity", 1_000_000))
-        self.buffer = FlatTransitionBuffer(capacity)
+        if buffer is None:
+            buffer = FlatTransitionBuffer(replay_capacity(config))
+        self.buffer = buffer
         seed = 0 if config.seed is None else int(config.seed)
         self.rng = np.random.default_rng([seed, 1])  # its own stream: buffer sampling
 
@@ -104,6 +108,11 @@ class FastLearnerUpdater:
     def set_state(self, state: dict[str, Any]) -> None:
         self.buffer.set_state(state["buffer"])
         self.rng.bit_generator.state = state["rng"]
+
+
+def replay_capacity(config) -> int:
+    """Transitions the agent's replay buffer keeps (RLlib's `replay_buffer_config["capacity"]`)."""
+    return int(config.replay_buffer_config.get("capacity", 1_000_000))
 
 
 def make_agent_updater(algo):

@@ -370,13 +370,17 @@ class CoPilot(SAC):
         self._warm_started = cfg.planner_warm_start == 0 or self.planner is None
         directions = self._rng.standard_normal(self.test_starts.shape)
         self._tau_probe = (self.test_starts, directions / np.linalg.norm(directions, axis=1, keepdims=True))
-        self.agent_updater = make_agent_updater(self)
+        self.agent_updater = self._make_agent_updater()
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
         # exact over the run instead of rounded per sampling round.
         self.gradient_steps = GradientStepSchedule(
             cfg.utd_ratio(), learning_starts=cfg.num_steps_sampled_before_learning_starts
         )
         self._artifact_dir: Path | None = None
+
+    def _make_agent_updater(self):
+        """What turns sampled episodes into SAC gradient steps (agent_updates.py; HER swaps its buffer in)."""
+        return make_agent_updater(self)
 
     # --------------------------------------------------------------------------- training step
     @override(DQN)
@@ -763,8 +767,13 @@ class CoPilot(SAC):
             step_limit_of=lambda k: self.rules.step_limit_of(k, cfg.tree_depth),
             with_delta=self.rules.agent_input == "state_goal_delta",
         )
-        for key, value in result.headline(cfg.eval_action).items():
+        headline = result.headline(cfg.eval_action)
+        for key, value in headline.items():
             self.metrics.log_value(keys.metric_path(keys.EVAL_PREFIX + key), value, window=1)
+        # The figure every algorithm reports: CO-PILOT's is the agent following the plan.
+        self.metrics.log_value(
+            keys.metric_path(keys.EVAL_SUCCESS), headline[keys.eval_leaf(keys.SUCCESS_PLANNED)], window=1
+        )
         for action, values in result.by_action.items():
             for key, value in values.items():
                 self.metrics.log_value(

@@ -84,6 +84,21 @@ class TraversalRules:
             return self.reward_scale / 2**layer
         return self.reward_scale
 
+    def reward(
+        self, env_reward: np.ndarray, reached: np.ndarray, collision: np.ndarray, layer: int = 0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(reward, terminated) of transitions, batched: the goal env's reward times `reward_factor`,
+        minus the collision penalty; terminated on reaching the sub-goal (or colliding, with
+        agent_collision="terminate"). TraversalEnv.step and HER's relabelled rewards both use it."""
+        reward = np.asarray(env_reward, np.float64) * self.reward_factor(layer)
+        terminated = np.asarray(reached, bool)
+        if self.agent_collision != "none":
+            collision = np.asarray(collision, bool)
+            reward = reward - self.agent_collision_penalty * collision
+            if self.agent_collision == "terminate":
+                terminated = terminated | collision
+        return reward, terminated
+
 
 @dataclass(frozen=True)
 class SubTask:
@@ -173,7 +188,7 @@ class TraversalEnv(gym.Env):
         self._position = obs["achieved_goal"].copy()
         self._start = self._position.copy()
         self._steps = 0
-        return self._flat(obs), {}
+        return self._flat(obs), {"achieved_goal": self._position.copy()}
 
     def _flat(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         achieved = obs["achieved_goal"] if self._with_delta else None
@@ -204,13 +219,11 @@ class TraversalEnv(gym.Env):
         layer = self._current.layer if self._current is not None else 0
         collision = bool(info.get("collision", False))
         # Sub-task reward (paper Eq. 6: R / 2^k, so every layer's traversal is worth R in total).
-        reward = float(reward) * self.rules.reward_factor(layer)
-        terminated = bool(reached)
-        if collision and self.rules.agent_collision != "none":
-            reward -= self.rules.agent_collision_penalty
-            terminated = terminated or self.rules.agent_collision == "terminate"
+        reward, terminated = self.rules.reward(reward, reached, collision, layer)
+        reward, terminated = float(reward), bool(terminated)
         truncated = (not terminated) and self._steps >= self._limit
-        out_info = {"collision": collision}
+        # The achieved goal of every step: what hindsight relabelling (HER, SoRB) takes goals from.
+        out_info = {"collision": collision, "achieved_goal": self._position}
         if terminated or truncated:
             out_info.update(
                 subtask_idle=self._current is None,

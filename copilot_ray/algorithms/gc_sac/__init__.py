@@ -5,6 +5,7 @@ Pieces:
     concat(obs, action)).
   * `GCSACTorchLearner`: one backward pass, per-gradient-step target updates, NaN guard.
   * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
+  * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
   * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
   * `use_fast_learner(config)`: switch a SACConfig to all of the above.
@@ -19,6 +20,7 @@ from copilot_ray.algorithms.gc_sac.catalog import (
     count_parameters,
 )
 from copilot_ray.algorithms.gc_sac.config import use_fast_learner, uses_fast_learner
+from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout, HindsightReplayBuffer
 from copilot_ray.algorithms.gc_sac.learner import (
     GC_SAC_KEY,
     NONFINITE_SKIPPED_KEY,
@@ -41,6 +43,8 @@ __all__ = [
     "GCSACCatalog",
     "GCSACTorchLearner",
     "GCSACTorchRLModule",
+    "GoalLayout",
+    "HindsightReplayBuffer",
     "GradientStepSchedule",
     "bellman_target",
     "count_parameters",

@@ -161,6 +161,13 @@ class GoalMazeEnv(gym.Env):
         reward = np.where(reached, self.goal_reward, 0.0)
         return float(reward) if np.ndim(reward) == 0 else reward
 
+    def compute_terminated(
+        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None
+    ) -> Any:
+        """Whether the goal is reached (the episode ends there): [N, d] -> bool [N]; [d] -> bool."""
+        reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
+        return bool(reached) if np.ndim(reached) == 0 else reached
+
     def sample_tasks(
         self, n: int, split: str = "train", seed: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -256,7 +263,7 @@ class GoalMazeEnv(gym.Env):
         obs = self._obs()
         info = self._info(collision=collision)
         reward = self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
-        terminated = bool(info["distance"] <= self.success_radius)
+        terminated = self.compute_terminated(obs["achieved_goal"], obs["desired_goal"], info)
         truncated = not terminated and self._steps >= self.max_episode_steps
         return obs, reward, terminated, truncated, info
 

@@ -1,0 +1,8 @@
+"""The SAC and HER baselines as sweep trials (the registry's third entry; imports Ray Tune)."""
+
+from copilot_ray.algorithms.sac.algorithm import GoalSAC
+from copilot_ray.tune_runtime import SpecTrial
+
+
+class GoalSACTrial(SpecTrial, GoalSAC):
+    """GoalSAC (SAC or HER, by its config) as a sweep trial (see SpecTrial)."""
