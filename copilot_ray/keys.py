@@ -43,6 +43,10 @@ REACHED_PLANNED = "copilot/eval/reached_planned"
 REACHED_DIRECT = "copilot/eval/reached_direct"
 SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"
 PLANNED_COLLISION_FREE = "copilot/eval/planned_collision_free"
+# SoRB's search graph at each evaluation: edges kept, waypoints per test path (its start and goal too).
+SORB_GRAPH_EDGES = "sorb/graph_edges"
+SORB_WAYPOINTS = "sorb/waypoints_mean"
+SORB_GRAPH_S = "sorb/graph_s"
 # Set by the sweep's trial on every result: 1 when this iteration evaluated, 0 when the success
 # metrics repeat the last evaluation.
 EVAL_FRESH = "copilot/eval/fresh"

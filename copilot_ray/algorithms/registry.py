@@ -45,6 +45,11 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.sac.algorithm:HERConfig",
         "copilot_ray.algorithms.sac.trial:GoalSACTrial",
     ),
+    "sorb": (
+        "copilot_ray.algorithms.sorb.settings",
+        "copilot_ray.algorithms.sorb.algorithm:SoRBConfig",
+        "copilot_ray.algorithms.sorb.trial:SoRBTrial",
+    ),
     # Planner-only baselines (the paper's Fig. 4b/4c): plain Tune trainables, no RLlib.
     "rrt_star": (
         "copilot_ray.algorithms.rrt_star.settings",

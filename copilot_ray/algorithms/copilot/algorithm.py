@@ -743,9 +743,21 @@ class CoPilot(SAC):
         )
 
     # ------------------------------------------------------------------------------- evaluation
+    def _evaluation_plan(self, n: int) -> dict[str, Any]:
+        """How the planned evaluation runs: the planner (anything with `sample(starts, goals,
+        deterministic=True)`), the steps per waypoint of layer k and a total cap. SoRB returns its graph."""
+        return {
+            "planner": self.planner,
+            "step_limit_of": lambda k: self.rules.step_limit_of(k, self.config.tree_depth),
+            "planned_total_steps": None,
+        }
+
     def _evaluate(self) -> None:
         cfg = self.config
         n = min(cfg.eval_num_tasks, len(self.test_starts))
+        plan = self._evaluation_plan(n)
+        if plan is None:  # nothing to evaluate yet (SoRB's pre-training)
+            return
         module = self.get_module(DEFAULT_MODULE_ID)
         seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
         policies = {
@@ -758,14 +770,13 @@ class CoPilot(SAC):
             goal_env_id=cfg.goal_env,
             goal_env_config=cfg.goal_env_config,
             policies=policies,
-            planner=self.planner,
             starts=self.test_starts[:n],
             goals=self.test_goals[:n],
             depth=cfg.tree_depth,
             tau_max=cfg.tau_max,
             tree_tasks=min(cfg.eval_tree_tasks, n),
-            step_limit_of=lambda k: self.rules.step_limit_of(k, cfg.tree_depth),
             with_delta=self.rules.agent_input == "state_goal_delta",
+            **plan,
         )
         headline = result.headline(cfg.eval_action)
         for key, value in headline.items():

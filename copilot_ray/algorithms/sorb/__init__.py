@@ -1,0 +1,1 @@
+"""SoRB (Search on the Replay Buffer) as a registered baseline (`algorithm: sorb`)."""

@@ -1,0 +1,164 @@
+"""SoRB (Search on the Replay Buffer; Eysenbach, Salakhutdinov and Levine, 2019) on CO-PILOT's agent:
+`SoRBConfig` and `SoRB`.
+
+Training is the HER baseline's goal-conditioned SAC (copilot_ray.algorithms.sac). At each evaluation,
+once `sorb.pretrain_env_steps` env steps are done, SoRB builds a graph over `sorb.graph_size` states
+drawn from its replay buffer (graph.py): the weight of edge i -> j is the agent's estimated number of
+steps from state i to state j's achieved goal, read off its critic, and edges longer than
+`sorb.max_edge_steps` are dropped. Each test task is routed start -> graph -> goal by shortest path and
+the agent follows the waypoints (`sorb.waypoint_steps` each, `tau_max` steps in all, the budget every
+method gets).
+
+Distance from the critic. The reward is sparse (R = goal_reward x reward_scale on arrival, the episode
+ending there), so a policy that arrives in d steps has Q = R * gamma^(d - 1) and
+d = 1 + log(Q / R) / log(gamma). SoRB's own critic predicts distances directly (reward -1 per step,
+gamma 1, optionally distributional and an ensemble); here the project's SAC critic is reused
+unchanged, its twin-Q minimum at the actor's mean action is turned into steps, and Q is clipped to
+[R * 1e-6, R] (an entropy bonus can push it outside). Left out: the distributional critic and the
+critic ensemble (the twin minimum is the only pessimism), and SoRB's graph cleaning.
+
+Logged at each evaluation after pre-training: `copilot/eval/success` and `success_planned` = following
+the graph's waypoints, `success_direct` = the agent alone; `sorb/graph_edges`, `sorb/waypoints_mean`,
+`sorb/graph_s`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.core.columns import Columns
+from ray.rllib.utils.annotations import override
+from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+from copilot_ray import keys
+from copilot_ray.algorithms.registry import RunContext
+from copilot_ray.algorithms.sac.algorithm import GoalSAC, HERConfig
+from copilot_ray.algorithms.sorb import settings as sorb_settings
+from copilot_ray.algorithms.sorb.graph import ReplayGraph, pad_front
+
+_SEARCH_DEFAULTS = {s.field: s.default for s in sorb_settings.SEARCH}
+# Rows per critic call when building the graph (memory: rows x hidden floats per layer).
+_CRITIC_CHUNK = 32_768
+
+
+class SoRBConfig(HERConfig):
+    """The HER baseline's config plus SoRB's search settings (`.search(...)`, `sorb.*` in specs)."""
+
+    def __init__(self, algo_class=None):
+        super().__init__(algo_class=algo_class or SoRB)
+        self.sorb: dict[str, Any] = dict(_SEARCH_DEFAULTS)
+
+    @classmethod
+    def from_settings(cls, values: Mapping[str, Any], run: RunContext) -> SoRBConfig:
+        search = {k.split(".", 1)[1]: v for k, v in values.items() if k.startswith("sorb.")}
+        config = super().from_settings({k: v for k, v in values.items() if not k.startswith("sorb.")}, run)
+        return config.search(**search)
+
+    def search(self, **settings: Any) -> SoRBConfig:
+        """SoRB's settings: pretrain_env_steps, graph_size, max_edge_steps, waypoint_steps."""
+        unknown = sorted(set(settings) - set(_SEARCH_DEFAULTS))
+        if unknown:
+            raise ValueError(
+                f"SoRBConfig.search: unknown setting {unknown[0]!r}; known: {sorted(_SEARCH_DEFAULTS)}"
+            )
+        self.sorb = {**self.sorb, **settings}
+        return self
+
+    @override(HERConfig)
+    def validate(self) -> None:
+        for s in sorb_settings.SEARCH:
+            if (why := s.problem(self.sorb.get(s.field))) is not None:
+                raise ValueError(f"SoRBConfig: {s.key}={self.sorb.get(s.field)!r} is invalid: {why}")
+        if self.num_learners != 0:
+            raise ValueError(
+                f"SoRBConfig: num_learners={self.num_learners!r} is invalid: the search reads the critic of "
+                "the local learner; use 0"
+            )
+        super().validate()
+
+    def uses_hindsight_buffer(self) -> bool:
+        return True  # the graph's states come from it, relabelling or not
+
+
+class SoRB(GoalSAC):
+    """Goal-conditioned SAC whose evaluation searches a graph over its replay buffer (module docstring)."""
+
+    @classmethod
+    @override(GoalSAC)
+    def get_default_config(cls):
+        return SoRBConfig()
+
+    @torch.no_grad()
+    def critic_distance(
+        self, observations: np.ndarray, achieved: np.ndarray, goals: np.ndarray
+    ) -> np.ndarray:
+        """Estimated agent steps from each (observation, achieved goal) to each goal: see the module
+        docstring. Batched, in chunks."""
+        module = self.learner_group._learner.module[DEFAULT_MODULE_ID]
+        layout = self.agent_updater.buffer.layout
+        reward = float(self.goal_env.unwrapped.goal_reward) * self.rules.reward_factor(0)
+        log_gamma = np.log(self.config.gamma)
+        out = np.empty(len(goals))
+        for lo in range(0, len(goals), _CRITIC_CHUNK):
+            hi = lo + _CRITIC_CHUNK
+            obs = torch.as_tensor(layout.compose(observations[lo:hi], goals[lo:hi], achieved[lo:hi]))
+            mean, _ = module.pi(module.pi_encoder({Columns.OBS: obs})["encoder_out"]).chunk(2, dim=-1)
+            q = module.compute_q_values({Columns.OBS: obs, Columns.ACTIONS: torch.tanh(mean)})
+            ratio = np.clip(q.numpy().astype(np.float64) / reward, 1e-6, 1.0)
+            out[lo:hi] = 1.0 + np.log(ratio) / log_gamma
+        return out
+
+    @override(GoalSAC)
+    def _evaluation_plan(self, n: int) -> dict[str, Any] | None:
+        cfg = self.config
+        steps = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
+        if steps < cfg.sorb["pretrain_env_steps"] or len(self.agent_updater.buffer) == 0:
+            return None
+        t0 = time.perf_counter()
+        observations, achieved = self.agent_updater.buffer.sample_states(cfg.sorb["graph_size"], self._rng)
+        graph = ReplayGraph.build(observations, achieved, self.critic_distance, cfg.sorb["max_edge_steps"])
+        search = _GraphWaypoints(graph, self.goal_env)
+        self.metrics.log_value(keys.metric_path(keys.SORB_GRAPH_EDGES), graph.num_edges, window=1)
+        self.metrics.log_value(keys.metric_path(keys.SORB_GRAPH_S), time.perf_counter() - t0, window=1)
+        self._search = search
+        return {
+            "planner": search,
+            "step_limit_of": lambda k: cfg.sorb["waypoint_steps"],
+            "planned_total_steps": cfg.tau_max,
+        }
+
+    @override(GoalSAC)
+    def _evaluate(self) -> None:
+        self._search = None
+        super()._evaluate()
+        if self._search is not None:
+            self.metrics.log_value(
+                keys.metric_path(keys.SORB_WAYPOINTS), self._search.mean_waypoints, window=1
+            )
+
+
+class _GraphWaypoints:
+    """A SoRB graph behind the planner interface evaluation takes: `sample(starts, goals)` ->
+    [N, P, d] waypoints (front-padded with the start where a route is shorter than the longest)."""
+
+    def __init__(self, graph: ReplayGraph, goal_env):
+        self.graph = graph
+        self.goal_env = goal_env
+        self.mean_waypoints = float("nan")
+
+    def sample(self, starts: np.ndarray, goals: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        # The agent's observation at each start (the goal env's own, whatever its observation is).
+        observations = np.stack(
+            [
+                self.goal_env.reset(options={"start": s, "goal": g})[0]["observation"]
+                for s, g in zip(starts, goals)
+            ]
+        )
+        paths = self.graph.waypoints(observations, starts.astype(np.float32), goals.astype(np.float32))
+        self.mean_waypoints = float(np.mean([len(p) for p in paths]))
+        return pad_front(paths)

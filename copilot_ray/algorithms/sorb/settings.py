@@ -1,0 +1,61 @@
+"""Every setting of the SoRB baseline (``algorithm: sorb``), declared once.
+
+SoRB trains the same goal-conditioned SAC as the HER baseline (its settings, relabelling included) and
+adds search at test time: a graph over ``sorb.graph_size`` replayed states whose edges are the critic's
+distance estimates up to ``sorb.max_edge_steps``; the agent follows the shortest path's waypoints
+(``sorb.waypoint_steps`` steps each, ``tau_max`` in all, the same budget as every other method). It
+"starts later": no search, and no evaluation, before ``sorb.pretrain_env_steps`` env steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from copilot_ray import keys
+from copilot_ray.algorithms.sac.settings import AGENT, HINDSIGHT, combination_problems
+from copilot_ray.settings import int_setting
+
+SEARCH = [
+    int_setting(
+        "sorb.pretrain_env_steps",
+        "sorb",
+        20_000,
+        "env steps of goal-conditioned SAC before the first search (and evaluation): SoRB starts later",
+        0,
+    ),
+    int_setting("sorb.graph_size", "sorb", 500, "replayed states in the search graph (its nodes)", 2),
+    int_setting(
+        "sorb.max_edge_steps",
+        "sorb",
+        50,
+        "longest edge kept, in the critic's estimated agent steps (SoRB's cutoff)",
+        1,
+    ),
+    int_setting(
+        "sorb.waypoint_steps",
+        "sorb",
+        100,
+        "steps the agent may take towards one waypoint before heading for the next",
+        1,
+    ),
+]
+# SoRB's agent may also train without relabelling (her.n_sampled_goal 0).
+_HINDSIGHT = [
+    replace(
+        s, check=lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, rule="an integer >= 0"
+    )
+    if s.key == "her.n_sampled_goal"
+    else s
+    for s in HINDSIGHT
+]
+SETTINGS = {s.key: s for s in (*AGENT, *_HINDSIGHT, *SEARCH)}
+METRICS: tuple[str, ...] = (
+    keys.EVAL_SUCCESS,
+    keys.SUCCESS_PLANNED,
+    keys.SUCCESS_DIRECT,
+    keys.ENV_STEPS,
+    keys.SORB_GRAPH_EDGES,
+    keys.SORB_WAYPOINTS,
+)
+
+__all__ = ["METRICS", "SETTINGS", "combination_problems"]

@@ -1,0 +1,8 @@
+"""SoRB as a sweep trial (the registry's third entry; imports Ray Tune)."""
+
+from copilot_ray.algorithms.sorb.algorithm import SoRB
+from copilot_ray.tune_runtime import SpecTrial
+
+
+class SoRBTrial(SpecTrial, SoRB):
+    """SoRB as a sweep trial (see SpecTrial)."""
