@@ -156,7 +156,7 @@ class _GraphWaypoints:
         observations = np.stack(
             [
                 self.goal_env.reset(options={"start": s, "goal": g})[0]["observation"]
-                for s, g in zip(starts, goals)
+                for s, g in zip(starts, goals, strict=True)
             ]
         )
         paths = self.graph.waypoints(observations, starts.astype(np.float32), goals.astype(np.float32))
