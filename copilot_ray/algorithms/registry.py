@@ -50,6 +50,11 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.sorb.algorithm:SoRBConfig",
         "copilot_ray.algorithms.sorb.trial:SoRBTrial",
     ),
+    "ppo": (
+        "copilot_ray.algorithms.ppo.settings",
+        "copilot_ray.algorithms.ppo.algorithm:GoalPPOConfig",
+        "copilot_ray.algorithms.ppo.trial:GoalPPOTrial",
+    ),
     # Planner-only baselines (the paper's Fig. 4b/4c): plain Tune trainables, no RLlib.
     "rrt_star": (
         "copilot_ray.algorithms.rrt_star.settings",

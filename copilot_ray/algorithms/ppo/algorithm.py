@@ -1,0 +1,210 @@
+"""RLlib's PPO on the flattened goal env: `GoalTaskEnv`, `GoalPPOConfig` and `GoalPPO`.
+
+    config = GoalPPOConfig().environment("maze-point", env_config={"layout": "four-rooms"})
+    algo = config.build_algo()
+
+The user names the goal-conditioned env; `validate()` swaps in `GoalTaskEnv` (as CO-PILOT swaps in its
+traversal env) and keeps the goal env's id and config. `training_step` is RLlib's PPO's; every
+`eval_interval` iterations the policy runs on the same test tasks as every other method, with the same
+step budget (`tau_max`), and logs `copilot/eval/success` (= `success_direct`).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from ray.rllib.algorithms.ppo import PPO, PPOConfig
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.utils.annotations import override
+from ray.tune.registry import register_env
+
+from copilot_ray import keys
+from copilot_ray.algorithms.copilot.traversal_env import TraversalRules
+from copilot_ray.algorithms.ppo import settings as ppo_settings
+from copilot_ray.algorithms.registry import RunContext
+from copilot_ray.envs import make
+from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.evaluation import evaluate_copilot
+
+GOAL_TASK_ENV_ID = "copilot-goal-task"
+DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
+_TASK_KEYS = [s.key for s in ppo_settings.TASK]
+_RULE_KEYS = [k for k in _TASK_KEYS if k in TraversalRules.__dataclass_fields__]
+
+
+class GoalTaskEnv(gym.Env):
+    """One episode = one training task (s0, g) of the goal env, drawn by the goal env's own reset
+    (its `task_split`), with a flat observation (`flat_observation`) and at most `tau_max` steps.
+    Rewarded as every agent here: `TraversalRules.reward` at layer 0."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, config: Mapping[str, Any]):
+        self.goal_env = make(config["goal_env"], **dict(config.get("goal_env_config") or {}))
+        self.rules = TraversalRules.from_config(config)
+        self._with_delta = self.rules.agent_input == "state_goal_delta"
+        obs_space = self.goal_env.observation_space["observation"]
+        goal_space = self.goal_env.unwrapped.goal_space
+        low, high = [obs_space.low, goal_space.low], [obs_space.high, goal_space.high]
+        if self._with_delta:
+            low.append(goal_space.low - goal_space.high)
+            high.append(goal_space.high - goal_space.low)
+        self.observation_space = gym.spaces.Box(
+            np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32), dtype=np.float32
+        )
+        self.action_space = self.goal_env.action_space
+        self._steps = 0
+
+    def _flat(self, obs: Mapping[str, np.ndarray]) -> np.ndarray:
+        return flat_observation(
+            obs["observation"], obs["desired_goal"], obs["achieved_goal"] if self._with_delta else None
+        )
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.goal_env.reset(seed=seed, options=options)
+        self._steps = 0
+        return self._flat(obs), info
+
+    def step(self, action):
+        obs, reward, reached, _, info = self.goal_env.step(np.clip(action, -1.0, 1.0))
+        self._steps += 1
+        reward, terminated = self.rules.reward(reward, reached, bool(info.get("collision", False)))
+        truncated = not terminated and self._steps >= self.rules.tau_max
+        return self._flat(obs), float(reward), bool(terminated), bool(truncated), info
+
+
+def register_goal_task_env() -> None:
+    register_env(GOAL_TASK_ENV_ID, GoalTaskEnv)
+
+
+class GoalPPOConfig(PPOConfig):
+    """RLlib's `PPOConfig` plus the task and evaluation settings of settings.py (`.goal_task(...)`)."""
+
+    def __init__(self, algo_class=None):
+        super().__init__(algo_class=algo_class or GoalPPO)
+        self.goal_env: str | None = None
+        self.goal_env_config: dict[str, Any] = {}
+        self.num_env_runners = 0  # as every algorithm here: sampling in the run's own process unless asked
+        for s in ppo_settings.TASK:
+            setattr(self, s.key, copy.deepcopy(s.default))
+        self.training(**{s.key: s.default for s in ppo_settings.TRAINING})
+
+    @classmethod
+    def from_settings(cls, values: Mapping[str, Any], run: RunContext) -> GoalPPOConfig:
+        training = {k: v for k, v in values.items() if ppo_settings.SETTINGS[k].target == "training"}
+        task = {k: v for k, v in values.items() if k in _TASK_KEYS}
+        return (
+            cls()
+            .environment(run.env_id, env_config=dict(run.env_config))
+            .env_runners(num_env_runners=run.num_env_runners)
+            .resources(num_cpus_for_main_process=run.num_cpus_for_main_process)
+            .debugging(seed=run.seed)
+            .training(**training)
+            .goal_task(**task)
+        )
+
+    def goal_task(self, **settings: Any) -> GoalPPOConfig:
+        """tau_max, reward_scale, agent_collision, agent_collision_penalty, agent_input, eval_interval,
+        eval_num_tasks, eval_action (settings.py)."""
+        unknown = sorted(set(settings) - set(_TASK_KEYS))
+        if unknown:
+            raise ValueError(f"GoalPPOConfig.goal_task: unknown setting {unknown[0]!r}; known: {_TASK_KEYS}")
+        for key, value in settings.items():
+            setattr(self, key, value)
+        return self
+
+    @override(PPOConfig)
+    def validate(self) -> None:
+        for key in _TASK_KEYS:
+            value = getattr(self, key)
+            if (why := ppo_settings.SETTINGS[key].problem(value)) is not None:
+                raise ValueError(f"GoalPPOConfig: {key}={value!r} is invalid: {why}")
+        if self.env is None:
+            raise ValueError(
+                'GoalPPOConfig: env=None is invalid: call .environment("maze-point", env_config={...})'
+            )
+        if self.env != GOAL_TASK_ENV_ID:
+            self.goal_env = self.env
+            self.goal_env_config = copy.deepcopy(dict(self.env_config or {}))
+            self.env = GOAL_TASK_ENV_ID
+        self.env_config = {
+            "goal_env": self.goal_env,
+            "goal_env_config": self.goal_env_config,
+            **{k: getattr(self, k) for k in _RULE_KEYS},
+        }
+        register_goal_task_env()
+        super().validate()
+
+
+class PPOModulePolicy:
+    """Actions of a PPO RLModule: its Gaussian's mean, or (`sampled=True`) a sample, clipped to [-1, 1]
+    as the env clips them."""
+
+    def __init__(self, module, sampled: bool = False, seed: int = 0):
+        self.module = module
+        self.sampled = sampled
+        self.generator = torch.Generator().manual_seed(seed)
+
+    @torch.no_grad()
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        out = self.module.forward_inference({"obs": torch.as_tensor(obs, dtype=torch.float32)})
+        mean, log_std = out["action_dist_inputs"].chunk(2, dim=-1)
+        if self.sampled:
+            mean = mean + torch.randn(mean.shape, generator=self.generator) * torch.exp(log_std)
+        return torch.clamp(mean, -1.0, 1.0).numpy()
+
+
+class GoalPPO(PPO):
+    """RLlib's PPO plus the common evaluation (module docstring)."""
+
+    @classmethod
+    @override(PPO)
+    def get_default_config(cls):
+        return GoalPPOConfig()
+
+    @override(PPO)
+    def setup(self, config) -> None:
+        register_goal_task_env()
+        super().setup(config)
+        env = make(self.config.goal_env, **self.config.goal_env_config).unwrapped
+        self.test_starts, self.test_goals = env.tasks("test")
+
+    @override(PPO)
+    def training_step(self) -> None:
+        super().training_step()
+        cfg = self.config
+        if cfg.eval_interval and (self.iteration + 1) % cfg.eval_interval == 0:
+            self._evaluate()
+
+    def _evaluate(self) -> None:
+        cfg = self.config
+        n = min(cfg.eval_num_tasks, len(self.test_starts))
+        module = self.get_module(DEFAULT_MODULE_ID)
+        seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
+        policies = {DETERMINISTIC: PPOModulePolicy(module), SAMPLED: PPOModulePolicy(module, True, seed)}
+        policies = {cfg.eval_action: policies[cfg.eval_action], **policies}
+        result = evaluate_copilot(
+            goal_env_id=cfg.goal_env,
+            goal_env_config=cfg.goal_env_config,
+            policies=policies,
+            planner=None,
+            starts=self.test_starts[:n],
+            goals=self.test_goals[:n],
+            depth=0,
+            tau_max=cfg.tau_max,
+            with_delta=cfg.agent_input == "state_goal_delta",
+        )
+        direct = (keys.SUCCESS_DIRECT, keys.REACHED_DIRECT)
+        for action, values in result.by_action.items():
+            for key in direct:
+                value = values[keys.eval_leaf(key)]
+                self.metrics.log_value(keys.metric_path(keys.eval_by_action(key, action)), value, window=1)
+                if action == cfg.eval_action:
+                    self.metrics.log_value(keys.metric_path(key), value, window=1)
+        headline = result.by_action[cfg.eval_action][keys.eval_leaf(keys.SUCCESS_DIRECT)]
+        self.metrics.log_value(keys.metric_path(keys.EVAL_SUCCESS), headline, window=1)
