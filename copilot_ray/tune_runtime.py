@@ -142,8 +142,8 @@ class ProgressPrinter(Callback):
         info = self._info.get(trial.trial_id)
         if info is None:
             info = self._info[trial.trial_id] = self._describe(trial.config)
-        if info["b"] is None:  # not CO-PILOT: name the algorithm and the env instead
-            depth = "" if info["K"] is None else f" K={info['K']}"
+        if info["algorithm"] != "copilot":  # name the algorithm and the env instead
+            depth = f" K={info['K']}" if isinstance(info["K"], int) and info["K"] > 0 else ""
             return (
                 f"[{trial.trial_id}] {info['config_key']:<18} {info['algorithm']} on {info['env']}{depth} "
                 f"seed={info['seed']}"

@@ -1,0 +1,124 @@
+"""HER's replay buffer: relabelled goals come from the right place, rewards are recomputed, state round-trips."""
+
+import numpy as np
+import pytest
+
+from copilot_ray.algorithms.gc_sac import GoalLayout, HindsightReplayBuffer
+from copilot_ray.algorithms.gc_sac.replay_buffer import NEXT_OBS, OBS, REWARDS, TERMINATEDS
+
+LAYOUT = GoalLayout(obs_dim=2, goal_dim=2, with_delta=True)
+RADIUS = 0.01
+
+
+def reward_fn(next_achieved, goals, collisions):
+    reached = np.linalg.norm(next_achieved - goals, axis=1) <= RADIUS
+    return np.where(reached, 1.0, 0.0) - 0.5 * collisions, reached
+
+
+def line_episode(buffer, x0, steps, goal=(9.0, 9.0), collide_at=()):
+    """An episode moving +1 in x per step from (x0, 0): achieved goal = observation."""
+    pos = np.stack([x0 + np.arange(steps + 1), np.zeros(steps + 1)], axis=1).astype(np.float32)
+    collisions = np.isin(np.arange(steps), collide_at)
+    buffer.add_episode(
+        pos, pos, np.array(goal, np.float32), np.ones((steps, 1)), np.zeros(steps), False, collisions
+    )
+    return pos
+
+
+def make(n_sampled_goal=4, capacity=1000, goal_selection="future"):
+    return HindsightReplayBuffer(capacity, LAYOUT, reward_fn, n_sampled_goal, goal_selection)
+
+
+def test_future_goals_come_from_the_same_episode_at_or_after_the_step():
+    buf = make(n_sampled_goal=4)
+    line_episode(buf, 0, 10)  # x = 0..10, episode A
+    line_episode(buf, 100, 10)  # x = 100..110, episode B
+    batch = buf.sample(4000, np.random.default_rng(0))
+    obs, goal = LAYOUT.split(batch[OBS])
+    relabelled = goal[:, 1] != 9.0
+    assert 0.75 < relabelled.mean() <= 0.8  # her_ratio 4/5 (the real goal has y = 9, relabelled ones y = 0)
+    g, x = goal[relabelled, 0], obs[relabelled, 0]
+    same_episode = (x < 50) == (g < 50)
+    assert same_episode.all()
+    # "future": the next achieved goal of this step or a later one
+    assert (g >= x + 1).all()
+    # the goal - achieved part is rebuilt for the new goal
+    np.testing.assert_allclose(batch[OBS][:, 4:], goal - obs)
+
+
+def test_relabelled_rewards_and_terminations_are_recomputed():
+    buf = make(n_sampled_goal=4)
+    line_episode(buf, 0, 6, collide_at=(2,))
+    batch = buf.sample(3000, np.random.default_rng(1))
+    next_obs, goal = LAYOUT.split(batch[NEXT_OBS])
+    reached = np.linalg.norm(next_obs - goal, axis=1) <= RADIUS
+    assert reached.any() and (~reached).any()
+    relabelled = goal[:, 1] != 9.0
+    np.testing.assert_array_equal(batch[TERMINATEDS][relabelled], reached[relabelled])
+    # reward 1 on reaching, -0.5 for the transition that collided (x 2 -> 3)
+    expected = reached.astype(float) - 0.5 * (next_obs[:, 0] == 3.0)
+    np.testing.assert_allclose(batch[REWARDS][relabelled], expected[relabelled])
+    # transitions with their real goal keep their stored reward (0 here: the real goal is never reached)
+    assert (batch[REWARDS][~relabelled] == 0).all()
+
+
+def test_final_strategy_and_no_relabelling():
+    buf = make(n_sampled_goal=1, goal_selection="final")
+    line_episode(buf, 0, 5)
+    _, goal = LAYOUT.split(buf.sample(500, np.random.default_rng(2))[OBS])
+    assert set(np.unique(goal[:, 0])) == {5.0, 9.0}  # the episode's last achieved goal, or the real one
+    plain = make(n_sampled_goal=0)
+    line_episode(plain, 0, 5)
+    _, goal = LAYOUT.split(plain.sample(200, np.random.default_rng(2))[OBS])
+    assert (goal[:, 0] == 9.0).all()
+
+
+def test_future_goals_stay_valid_when_the_ring_wraps():
+    buf = make(n_sampled_goal=4, capacity=25)
+    for start in range(0, 1000, 100):  # ten 10-step episodes into 25 rows
+        line_episode(buf, start, 10)
+    assert len(buf) == 25 and buf.num_added == 100
+    batch = buf.sample(5000, np.random.default_rng(3))
+    obs, goal = LAYOUT.split(batch[OBS])
+    relabelled = goal[:, 1] != 9.0
+    # a relabelled goal lies later on the same episode's line (episodes are 100 apart)
+    assert (
+        (goal[relabelled, 0] - obs[relabelled, 0] >= 1) & (goal[relabelled, 0] - obs[relabelled, 0] <= 10)
+    ).all()
+
+
+def test_state_round_trip_samples_the_same_batch():
+    buf = make()
+    for start in range(0, 500, 100):
+        line_episode(buf, start, 7)
+    copy = make()
+    copy.set_state(buf.get_state())
+    a = buf.sample(64, np.random.default_rng(4))
+    b = copy.sample(64, np.random.default_rng(4))
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
+    line_episode(buf, 900, 3)
+    line_episode(copy, 900, 3)
+    np.testing.assert_array_equal(
+        buf.sample(32, np.random.default_rng(5))[OBS], copy.sample(32, np.random.default_rng(5))[OBS]
+    )
+
+
+def test_bad_arguments_are_named():
+    with pytest.raises(ValueError, match="goal_selection='later'"):
+        make(goal_selection="later")
+    with pytest.raises(ValueError, match="n_sampled_goal must be >= 0"):
+        make(n_sampled_goal=-1)
+    buf = make()
+    with pytest.raises(ValueError, match="needs 4 observations"):
+        buf.add_episode(
+            np.zeros((3, 2)),
+            np.zeros((3, 2)),
+            np.zeros(2),
+            np.zeros((3, 1)),
+            np.zeros(3),
+            False,
+            np.zeros(3, bool),
+        )
+    with pytest.raises(ValueError, match="empty"):
+        buf.sample(1, np.random.default_rng(0))
