@@ -19,6 +19,7 @@ from copilot_ray.keys import (  # noqa: E402
     DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
     DIAG_SUCCESS_AFTER_FAILED,
     DIAG_SUCCESS_AFTER_REACHED,
+    EVAL_SUCCESS,
     PLANNED_COLLISION_FREE,
     REACHED_PLANNED,
     SUCCESS_DIRECT,
@@ -30,10 +31,13 @@ from .aggregate import ConfigSummary  # noqa: E402
 from .load import TreeSnapshot  # noqa: E402
 
 TITLES = {
+    EVAL_SUCCESS: "each method's headline (CO-PILOT, SoRB: along their plans; SAC, HER, PPO: agent alone)",
     SUCCESS_PLANNED: "agent following the planner's finest path",
     SUCCESS_DIRECT: "agent alone (no planner)",
 }
-MAX_CURVES = 12  # more lines than this are unreadable; the best ones by final planned success are kept
+MAX_CURVES = 12  # more lines than this are unreadable; the best ones by final success are kept
+PLANNED_AND_DIRECT = (SUCCESS_PLANNED, SUCCESS_DIRECT)
+BY_METHOD = (EVAL_SUCCESS,)  # the paper's Fig. 2a / 4a: one figure every algorithm reports
 DPI = 120
 
 
@@ -47,21 +51,25 @@ def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
         return configs, 0
 
     def score(c):
-        m = c.metrics.get(SUCCESS_PLANNED)
+        m = c.metrics.get(EVAL_SUCCESS) or c.metrics.get(SUCCESS_PLANNED)
         return m.final_iqm if m and np.isfinite(m.final_iqm) else -1.0
 
     keep = set(id(c) for c in sorted(configs, key=score, reverse=True)[:MAX_CURVES])
     return [c for c in configs if id(c) in keep], len(configs) - MAX_CURVES
 
 
-def success_curves(configs: list[ConfigSummary], axis_name: str, path: Path) -> Path:
-    """Two panels (planned, direct): IQM over seeds and its 95 % bootstrap band, one colour per
-    configuration. Solid where every seed of the configuration has data, dashed where only some do
-    (seeds are never extrapolated past their last evaluation)."""
+def success_curves(
+    configs: list[ConfigSummary], axis_name: str, path: Path, metrics: tuple[str, ...] = PLANNED_AND_DIRECT
+) -> Path:
+    """One panel per metric (planned and direct; `BY_METHOD`: the common success, paper Fig. 4a): IQM
+    over seeds and its 95 % bootstrap band, one colour per configuration. Solid where every seed of the
+    configuration has data, dashed where only some do (seeds are never extrapolated past their last
+    evaluation)."""
     shown, dropped = _select(configs)
     colors = _colors(len(shown))
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
-    for ax, metric in zip(axes, (SUCCESS_PLANNED, SUCCESS_DIRECT), strict=True):
+    fig, axes = plt.subplots(1, len(metrics), figsize=(6 * len(metrics) + 1, 4.5), sharey=True, squeeze=False)
+    axes = axes[0]
+    for ax, metric in zip(axes, metrics, strict=True):
         for c, color in zip(shown, colors, strict=True):
             m = c.metrics.get(metric)
             if m is None or m.curve is None:
@@ -110,16 +118,18 @@ def success_curves(configs: list[ConfigSummary], axis_name: str, path: Path) -> 
     return path
 
 
-def final_success(configs: list[ConfigSummary], axis_name: str, path: Path) -> Path:
-    """Grouped bars (planned, direct) of final success with 95 % CIs, and each seed as a dot."""
+def final_success(
+    configs: list[ConfigSummary], axis_name: str, path: Path, metrics: tuple[str, ...] = PLANNED_AND_DIRECT
+) -> Path:
+    """Grouped bars (one per metric: planned and direct, or `BY_METHOD`'s common success, paper
+    Fig. 2a) of final success with 95 % CIs, and each seed as a dot."""
     shown, dropped = _select(configs)
     x = np.arange(len(shown))
-    width = 0.38
+    width = 0.76 / len(metrics)
     fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(shown) + 3), 4.5))
-    for offset, metric, color in (
-        (-width / 2, SUCCESS_PLANNED, "tab:blue"),
-        (width / 2, SUCCESS_DIRECT, "tab:orange"),
-    ):
+    palette = ("tab:blue", "tab:orange", "tab:green")
+    for i, metric in enumerate(metrics):
+        offset, color = (i - (len(metrics) - 1) / 2) * width, palette[i % len(palette)]
         vals, lo, hi = [], [], []
         for c in shown:
             m = c.metrics.get(metric)
@@ -153,7 +163,7 @@ def final_success(configs: list[ConfigSummary], axis_name: str, path: Path) -> P
     ax.set_xlabel(axis_name)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)
-    paper = " (paper Fig. 2b)" if axis_name == "K" else ""
+    paper = " (paper Fig. 2b)" if axis_name == "K" else " (paper Fig. 2a)" if metrics == BY_METHOD else ""
     extra = f"; {dropped} more configurations not drawn" if dropped else ""
     ax.set_title(
         f"Final success by {axis_name}{paper}\nIQM over seeds, 95% bootstrap CI, dots: seeds{extra}",

@@ -3,6 +3,9 @@
 Reads one sweep from MLflow and writes, under --out (default `results/<experiment>/report`):
   success_vs_env_steps.png   success (planned, direct) against env steps, IQM + 95 % bootstrap band
   final_success.png          final success per configuration with 95 % CIs (paper Fig. 2b for K)
+  success_by_method.png, final_success_by_method.png
+                             when the runs hold several algorithms: copilot/eval/success (each
+                             method's headline) against env steps and at the end (paper Fig. 4a, 2a)
   subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
   summary.csv, summary.md    per-configuration table
   planners_paths.png, planners.csv, planners.md
@@ -29,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from copilot_ray.keys import GIT_COMMIT_TAG, SUCCESS_PLANNED, TREES_DIR
+from copilot_ray.keys import ALGORITHM_TAG, GIT_COMMIT_TAG, SUCCESS_PLANNED, TREES_DIR
 
 from . import figures, paths, stats, tables
 from .aggregate import ConfigSummary, Missing, summarise
@@ -103,6 +106,21 @@ def main(argv: list[str] | None = None) -> int:
             )
         )
         figs.append(("Final success", figures.final_success(configs, axis_name, out / "final_success.png")))
+        if len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1:
+            # Several algorithms: the one success figure they all report, per method (paper Fig. 2a, 4a).
+            by = figures.BY_METHOD
+            figs.append(
+                (
+                    "Success against environment steps, by method (paper Fig. 4a)",
+                    figures.success_curves(configs, "method", out / "success_by_method.png", by),
+                )
+            )
+            figs.append(
+                (
+                    "Final success by method (paper Fig. 2a)",
+                    figures.final_success(configs, "method", out / "final_success_by_method.png", by),
+                )
+            )
     else:
         notes.append("No run has evaluation metrics yet: no success figures.")
     planner_figs, planner_table, planner_frame = _planner_section(sweep, out)

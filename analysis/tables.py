@@ -8,11 +8,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from copilot_ray.keys import SUCCESS_DIRECT, SUCCESS_PLANNED
+from copilot_ray.keys import EVAL_SUCCESS, SUCCESS_DIRECT, SUCCESS_PLANNED
 
 from .aggregate import THRESHOLDS, ConfigSummary
 
-SHORT = {SUCCESS_PLANNED: "planned", SUCCESS_DIRECT: "direct"}
+# success: what every algorithm reports (copilot/eval/success); planned / direct: where an algorithm has them
+SHORT = {EVAL_SUCCESS: "success", SUCCESS_PLANNED: "planned", SUCCESS_DIRECT: "direct"}
 NOT_REACHED = "not reached"
 
 

@@ -514,3 +514,49 @@ def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
     assert "Planners: paths on the test tasks" in md and "planners_paths.png" in md
     assert "| maze-point | rrt_star | 2 | 1.00 |" in md
     assert (out / "planners_paths.png").stat().st_size > 10_000
+
+
+def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_path):
+    """CO-PILOT (planned, direct, success) against PPO (success, direct only), two parts of one spec file:
+    the table's success column is each method's headline, and the Fig. 2a / 4a figures are drawn."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("baselines", artifact_location=(tmp_path / "art").as_uri())
+    now = int(time.time() * 1000)
+    finals = {"copilot": {"0": 0.8, "1": 0.9}, "ppo": {"0": 0.1, "1": 0.3}}
+    for algorithm, seeds in finals.items():
+        pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: f"b_{algorithm}"}).info.run_id
+        for seed, final in seeds.items():
+            tags = {
+                PARENT_TAG: pid,
+                ROLE_TAG: ROLE_TRIAL,
+                SWEEP_TAG: f"b_{algorithm}",
+                CONFIG_KEY_TAG: "default",
+                ALGORITHM_TAG: algorithm,
+                ENV_TAG: "maze-point",
+                SEED_TAG: seed,
+            }
+            rid = client.create_run(exp_id, tags=tags).info.run_id
+            values = [final / 2, final]
+            metrics = [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
+            metrics += [Metric(SUCCESS_DIRECT, v / 2, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
+            if algorithm == "copilot":
+                metrics += [
+                    Metric(SUCCESS_PLANNED, v, now, s) for s, v in zip(STEPS[:2], values, strict=True)
+                ]
+            client.log_batch(rid, metrics=metrics)
+            client.set_terminated(rid, "FINISHED")
+    out = tmp_path / "report"
+    assert main(["baselines", "--tracking-uri", uri, "--out", str(out), "--parent-run", "all"]) == 0
+    frame = pd.read_csv(out / "summary.csv").set_index("configuration")
+    assert frame.loc["algorithm=ppo", "success_final_iqm"] == pytest.approx(0.2)
+    assert frame.loc["algorithm=copilot", "success_final_iqm"] == pytest.approx(0.85)
+    assert np.isnan(frame.loc["algorithm=ppo", "planned_final_iqm"])  # PPO has no plan
+    for name in ("success_by_method.png", "final_success_by_method.png"):
+        assert (out / name).stat().st_size > 10_000
+        assert name in (out / "report.md").read_text()
