@@ -70,6 +70,7 @@ class Trial:
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     wall_time_s: float = float("nan")
     tree_artifacts: list[str] = field(default_factory=list)
+    tracking_uri: str = ""  # the store it came from (report --also-from: several stores)
 
     @property
     def usable(self) -> bool:
@@ -161,6 +162,24 @@ def _all_runs(client, experiment_id: str, filter_string: str = "") -> list:
 # ---------------------------------------------------------------------------------------------- sweep
 
 
+def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
+    """Adds every trial run of the same experiment in another store (runs that ran apart, e.g. two
+    sweeps side by side with their own SQLite files); returns how many. Run ids must not repeat."""
+    other = load_sweep(tracking_uri, sweep.experiment, ALL_SWEEPS)
+    known = {t.run_id for t in sweep.trials}
+    twice = sorted(known & {t.run_id for t in other.trials})
+    if twice:
+        raise AnalysisError(
+            f"runs {twice[:3]} are in {tracking_uri} and in {sweep.tracking_uri}: give each store once"
+        )
+    sweep.trials.extend(other.trials)
+    sweep.trials.sort(
+        key=lambda t: (t.tags.get(ALGORITHM_TAG, ""), t.config_key, natural_key(t.seed), t.run_id)
+    )
+    sweep.sweep_name += " + " + other.sweep_name
+    return len(other.trials)
+
+
 def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = None) -> Sweep:
     """All child runs of one sweep with their success curves and wall time.
 
@@ -245,6 +264,7 @@ def _trial(client, run) -> Trial:
         config_key=tags.get(CONFIG_KEY_TAG, "default"),
         seed=tags.get(SEED_TAG, run.data.params.get(SEED_PARAM, "?")),
         tags=tags,
+        tracking_uri=str(client.tracking_uri),
     )
     wanted = set(SUCCESS_METRICS) | {
         k for k in run.data.metrics if k.startswith((*DIAGNOSTIC_PREFIXES, PATHS_PREFIX))

@@ -40,6 +40,7 @@ from .load import (
     AnalysisError,
     Sweep,
     Trial,
+    add_trials_from,
     load_sweep,
     load_tree_snapshots,
     log_report_artifacts,
@@ -63,6 +64,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="sweep (parent) run id when the experiment holds several sweeps; 'all': every one of them "
         "(the parts of a several-spec file, e.g. sweeps/planners_maze.yaml)",
     )
+    p.add_argument(
+        "--also-from",
+        action="append",
+        default=[],
+        metavar="URI",
+        help="another tracking store whose trial runs of the same experiment join the comparison "
+        "(sweeps that ran side by side, each with its own SQLite file); repeatable",
+    )
     p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
     p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
     p.add_argument("--bootstrap-reps", type=int, default=stats.DEFAULT_REPS)
@@ -82,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         uri = resolve_tracking_uri(args.tracking_uri, experiment=args.experiment)
         sweep = load_sweep(uri, args.experiment, args.parent_run)
+        for extra in args.also_from:
+            add_trials_from(sweep, resolve_tracking_uri(extra, experiment=args.experiment))
     except AnalysisError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -204,7 +215,9 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
         files = trial.tree_artifacts
         picks = sorted({int(round(i)) for i in np.linspace(0, len(files) - 1, max(1, args.stages))})
         try:
-            snaps = load_tree_snapshots(sweep.tracking_uri, trial.run_id, [files[i] for i in picks])
+            snaps = load_tree_snapshots(
+                trial.tracking_uri or sweep.tracking_uri, trial.run_id, [files[i] for i in picks]
+            )
             if snaps[0].depth == 0:
                 notes.append(f"{c.label} has tree depth 0 (no planner, plain SAC): no sub-goal tree to draw.")
                 continue

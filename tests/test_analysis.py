@@ -517,19 +517,21 @@ def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
 
 
 def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_path):
-    """CO-PILOT (planned, direct, success) against PPO (success, direct only), two parts of one spec file:
-    the table's success column is each method's headline, and the Fig. 2a / 4a figures are drawn."""
+    """CO-PILOT (planned, direct, success) against PPO (success, direct only), from two stores
+    (--also-from): the table's success column is each method's headline, and the Fig. 2a / 4a figures
+    are drawn; a store given twice is refused."""
     import mlflow
     from mlflow.entities import Metric
 
     from copilot_ray.keys import EVAL_SUCCESS
 
-    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
-    client = mlflow.MlflowClient(uri)
-    exp_id = client.create_experiment("baselines", artifact_location=(tmp_path / "art").as_uri())
     now = int(time.time() * 1000)
     finals = {"copilot": {"0": 0.8, "1": 0.9}, "ppo": {"0": 0.1, "1": 0.3}}
-    for algorithm, seeds in finals.items():
+    uris = {}
+    for algorithm, seeds in finals.items():  # two sweeps that ran side by side, one SQLite file each
+        uri = uris[algorithm] = f"sqlite:///{tmp_path / algorithm}.db"
+        client = mlflow.MlflowClient(uri)
+        exp_id = client.create_experiment("baselines", artifact_location=(tmp_path / algorithm).as_uri())
         pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: f"b_{algorithm}"}).info.run_id
         for seed, final in seeds.items():
             tags = {
@@ -552,7 +554,8 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
             client.log_batch(rid, metrics=metrics)
             client.set_terminated(rid, "FINISHED")
     out = tmp_path / "report"
-    assert main(["baselines", "--tracking-uri", uri, "--out", str(out), "--parent-run", "all"]) == 0
+    argv = ["baselines", "--tracking-uri", uris["copilot"], "--out", str(out), "--parent-run", "all"]
+    assert main([*argv, "--also-from", uris["ppo"]]) == 0
     frame = pd.read_csv(out / "summary.csv").set_index("configuration")
     assert frame.loc["algorithm=ppo", "success_final_iqm"] == pytest.approx(0.2)
     assert frame.loc["algorithm=copilot", "success_final_iqm"] == pytest.approx(0.85)
@@ -560,3 +563,4 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
     for name in ("success_by_method.png", "final_success_by_method.png"):
         assert (out / name).stat().st_size > 10_000
         assert name in (out / "report.md").read_text()
+    assert main([*argv, "--also-from", uris["copilot"]]) == 2  # the same runs twice
