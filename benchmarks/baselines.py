@@ -3,6 +3,11 @@ slow the learner down.
 
     PYTHONPATH=. .venv/bin/python benchmarks/baselines.py demo    [--seeds 0 1]
     PYTHONPATH=. .venv/bin/python benchmarks/baselines.py speed   [--updates 512 --repeats 5]
+    PYTHONPATH=. .venv/bin/python benchmarks/baselines.py search  --checkpoint TRIAL_DIR/checkpoint_N
+
+search: SoRB's search on a trained HER (or SAC) checkpoint (e.g. the last one of a `her` trial of
+`sweeps/baselines_maze.yaml`): the same agent and replay, the test tasks followed with the graph's
+waypoints and alone, for several graph sizes and edge cutoffs (`--graph-sizes`, `--cutoffs`).
 
 demo: SAC, HER, SoRB and PPO on the demo's open maze (`sweeps/demo.yaml`'s env: no walls, speed 0.05,
 success radius 0.1, 40 steps per task), each for its own env-step budget (the off-policy agents 4k, as
@@ -119,7 +124,7 @@ def speed(updates: int, repeats: int) -> None:
         )
     timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: 0}
     rates: dict[str, list[float]] = {kind: [] for kind in algos}
-    for kind, algo in algos.items():  # warm-up
+    for algo in algos.values():  # warm-up
         algo.agent_updater.update(64, timesteps)
     for r in range(repeats):
         for kind, algo in algos.items():
@@ -146,6 +151,66 @@ def speed(updates: int, repeats: int) -> None:
         print(f"| {kind} | {statistics.median(values):.0f} | {statistics.median(values) / base:.3f} |")
 
 
+def search(
+    checkpoint: str, graph_sizes: list[int], cutoffs: list[int], waypoint_steps: int, tasks: int
+) -> None:
+    """SoRB's search on a trained HER (or SAC, SoRB) checkpoint: the same agent, replay and test tasks,
+    followed with and without the graph, for several graph sizes and edge cutoffs."""
+    import ray
+
+    from copilot_ray.algorithms.sorb.algorithm import SoRBConfig
+    from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    # The trial's own config (env, settings) as it ran, rebuilt as SoRB's.
+    from ray.rllib.algorithms.algorithm import Algorithm
+
+    trained = Algorithm.from_checkpoint(checkpoint)
+    old = trained.config
+    config = SoRBConfig().environment(old.goal_env, env_config=old.goal_env_config)
+    config.copilot(**{k: getattr(old, k) for k in ("tau_max", "agent_input", "reward_scale")})
+    config.training(gamma=old.gamma).debugging(seed=old.seed)
+    state = trained.get_state()
+    trained.stop()
+    algo = config.build_algo()
+    algo.set_state(state)
+    n = min(tasks, len(algo.test_starts))
+    policy = {"deterministic": ModulePolicy(algo.get_module())}
+    print(
+        f"{checkpoint}: {len(algo.agent_updater.buffer)} transitions, {n} test tasks, tau_max {config.tau_max}"
+    )
+    print("| graph size | max edge steps | edges | waypoints | success with search | agent alone | graph s |")
+    print("|---|---|---|---|---|---|---|")
+    for size in graph_sizes:
+        for cutoff in cutoffs:
+            # The built config is frozen; its search settings are a dict read at each evaluation.
+            algo.config.sorb.update(
+                pretrain_env_steps=0, graph_size=size, max_edge_steps=cutoff, waypoint_steps=waypoint_steps
+            )
+            t0 = time.perf_counter()
+            plan = algo._evaluation_plan(n)
+            graph_s = time.perf_counter() - t0
+            result = evaluate_copilot(
+                goal_env_id=algo.config.goal_env,
+                goal_env_config=algo.config.goal_env_config,
+                policies=policy,
+                starts=algo.test_starts[:n],
+                goals=algo.test_goals[:n],
+                depth=0,
+                tau_max=config.tau_max,
+                with_delta=config.agent_input == "state_goal_delta",
+                **plan,
+            )
+            r = result.by_action["deterministic"]
+            print(
+                f"| {size} | {cutoff} | {plan['planner'].graph.num_edges} | {plan['planner'].mean_waypoints:.1f} | "
+                f"{r['success_planned']:.2f} | {r['success_direct']:.2f} | {graph_s:.1f} |",
+                flush=True,
+            )
+    algo.stop()
+    ray.shutdown()
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="part", required=True)
@@ -154,11 +219,19 @@ def main(argv: list[str] | None = None) -> None:
     s = sub.add_parser("speed", help="learner updates/s: SAC vs HER vs SoRB")
     s.add_argument("--updates", type=int, default=512)
     s.add_argument("--repeats", type=int, default=5)
+    c = sub.add_parser("search", help="SoRB's search on a trained checkpoint, for several graphs")
+    c.add_argument("--checkpoint", required=True)
+    c.add_argument("--graph-sizes", type=int, nargs="+", default=[500])
+    c.add_argument("--cutoffs", type=int, nargs="+", default=[25, 50, 100])
+    c.add_argument("--waypoint-steps", type=int, default=100)
+    c.add_argument("--tasks", type=int, default=100)
     args = parser.parse_args(argv)
     if args.part == "demo":
         demo(args.seeds)
-    else:
+    elif args.part == "speed":
         speed(args.updates, args.repeats)
+    else:
+        search(args.checkpoint, args.graph_sizes, args.cutoffs, args.waypoint_steps, args.tasks)
 
 
 if __name__ == "__main__":
