@@ -179,7 +179,10 @@ def search(
     print(
         f"{checkpoint}: {len(algo.agent_updater.buffer)} transitions, {n} test tasks, tau_max {config.tau_max}"
     )
-    print("| graph size | max edge steps | edges | waypoints | success with search | agent alone | graph s |")
+    print(
+        "| graph size | max edge steps | edges | waypoints | success with search (reached) "
+        "| agent alone (reached) | graph s |"
+    )
     print("|---|---|---|---|---|---|---|")
     for size in graph_sizes:
         for cutoff in cutoffs:
@@ -204,7 +207,8 @@ def search(
             r = result.by_action["deterministic"]
             print(
                 f"| {size} | {cutoff} | {plan['planner'].graph.num_edges} | {plan['planner'].mean_waypoints:.1f} | "
-                f"{r['success_planned']:.2f} | {r['success_direct']:.2f} | {graph_s:.1f} |",
+                f"{r['success_planned']:.2f} ({r['reached_planned']:.2f}) | "
+                f"{r['success_direct']:.2f} ({r['reached_direct']:.2f}) | {graph_s:.1f} |",
                 flush=True,
             )
     algo.stop()
