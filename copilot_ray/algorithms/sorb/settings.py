@@ -23,7 +23,14 @@ SEARCH = [
         "env steps of goal-conditioned SAC before the first search (and evaluation): SoRB starts later",
         0,
     ),
-    int_setting("sorb.graph_size", "sorb", 500, "replayed states in the search graph (its nodes)", 2),
+    int_setting(
+        "sorb.graph_size",
+        "sorb",
+        1000,
+        "replayed states in the search graph (its nodes; SoRB's 1000): on four-rooms a HER agent after "
+        "113k env steps succeeded on 0.29 of the test tasks with 1000, 0.19 with 500 (0.16 alone)",
+        2,
+    ),
     int_setting(
         "sorb.max_edge_steps",
         "sorb",
