@@ -8,6 +8,8 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
 
 * driver: SIGKILL the sweep driver and every process it started (Ray's too) once the first trial has 3
   results, then `python -m copilot_ray.sweep SPEC --resume` to the end.
+* driver_her: the driver drill on the HER baseline (seeds 0 and 1 of the smoke sweep's env): the trials
+  resume with their relabelling replay buffers.
 * driver_optuna: the same with an Optuna searcher (3 samples of tree depth 1 or 2); also checks that the
   study holds 3 COMPLETE trials and no other.
 * trial: SIGKILL the first trial's worker process (the pid in its results) once it has 3 results; Tune
@@ -45,9 +47,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def write_spec(directory: Path, name: str, iterations: int, **changes) -> Path:
+    """The smoke sweep with `changes` (a value None removes its key)."""
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
     data.update(name=name, tracking={"storage": str(directory / "results")}, stop={"iterations": iterations})
     data.update(changes)
+    data = {k: v for k, v in data.items() if v is not None}
     path = directory / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
@@ -202,6 +206,27 @@ def drill_driver(directory: Path, iterations: int) -> dict[str, int]:
     return audit(spec, iterations)
 
 
+def drill_driver_her(directory: Path, iterations: int) -> dict[str, int]:
+    """The driver drill on the HER baseline, seeds 0 and 1: its relabelling buffer is in the checkpoint."""
+    spec = write_spec(
+        directory,
+        "drill_her",
+        iterations,
+        algorithm="her",
+        config={
+            "tau_max": 50,
+            "task_batch_size": 4,
+            "eval_interval": 1,
+            "eval_num_tasks": 10,
+            "num_steps_sampled_before_learning_starts": 256,
+        },
+        search=None,
+        seeds=[0, 1],
+    )
+    kill_driver_then_resume(spec, directory / "results" / "drill_her" / "tune")
+    return audit(spec, iterations)
+
+
 def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
     import optuna
 
@@ -301,6 +326,7 @@ def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
 
 DRILLS = {
     "driver": drill_driver,
+    "driver_her": drill_driver_her,
     "driver_optuna": drill_driver_optuna,
     "trial": drill_trial,
     "runner": drill_runner,
