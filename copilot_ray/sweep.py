@@ -49,6 +49,7 @@ from copilot_ray.keys import (
     ENV_STEPS,
     ENV_TAG,
     EVAL_FRESH,
+    EVAL_SUCCESS,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
     PATHS_PREFIX,
@@ -127,8 +128,10 @@ class SweepOutcome:
     wall_s: float = 0.0
 
 
-# The summary's columns, where any trial logged them: CO-PILOT's headline, the planners' (Fig. 4b/4c).
+# The summary's columns, where any trial logged them: every agent's headline, CO-PILOT's pair, the
+# planners' (Fig. 4b/4c).
 SUMMARY_METRICS = {
+    EVAL_SUCCESS: "success",
     SUCCESS_PLANNED: "success_planned",
     SUCCESS_DIRECT: "success_direct",
     PATH_SUCCESS: "path success",
@@ -199,7 +202,9 @@ def summary_table(rows: Sequence[TrialRow]) -> str:
     groups: dict[str, list[TrialRow]] = {}
     for row in rows:
         groups.setdefault(row.config_key, []).append(row)
-    shown = [key for key in SUMMARY_METRICS if any(not math.isnan(r.figures[key]) for r in rows)] or [
+    shown = [
+        key for key in SUMMARY_METRICS if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
+    ] or [
         SUCCESS_PLANNED,
         SUCCESS_DIRECT,
     ]
@@ -212,7 +217,7 @@ def summary_table(rows: Sequence[TrialRow]) -> str:
             [
                 key,
                 ",".join(str(r.seed) for r in group),
-                *(_mean_std([r.figures[key] for r in group]) for key in shown),
+                *(_mean_std([r.figures.get(key, math.nan) for r in group]) for key in shown),
                 f"{sum(r.env_steps for r in group) / len(group):,.0f}",
                 f"{sum(r.wall_s for r in group) / len(group):.0f}",
                 "/".join(statuses),
