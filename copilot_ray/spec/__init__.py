@@ -4,7 +4,7 @@
     experiment: copilot-depth-k         # MLflow experiment (default: name)
     description: Fig. 2b, K = 1..6
     env: {id: maze-point, config: {layout: four-rooms}}
-    algorithm: copilot                  # a key of copilot_ray.algorithms.registry.ALGORITHMS
+    algorithm: copilot                  # copilot | sac | her | sorb | ppo | rrt_star | sgt_pg (the registry)
     config:                             # fixed settings: flat, dotted keys (the algorithm's SETTINGS)
       repetitions: 5
       planner.std: 0.05
