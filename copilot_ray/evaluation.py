@@ -35,15 +35,20 @@ Policy = Callable[[np.ndarray], np.ndarray]
 
 
 class ModulePolicy:
-    """Actions of a SAC RLModule: the tanh-squashed mean of its Gaussian, or (`sampled=True`) a sample.
+    """Actions of an RLModule's Gaussian: its mean, or (`sampled=True`) a sample, squashed to [-1, 1]
+    by tanh (SAC's squashed Gaussian, `squash="tanh"`) or clipped (`squash="clip"`: PPO's plain
+    Gaussian, whose actions the env clips).
 
     Not `dist.to_deterministic()`: for RLlib's TorchSquashedGaussian that returns the *unsquashed*
     mean, which clipped to [-1, 1] turns every confident action into a full-speed one.
     """
 
-    def __init__(self, module, sampled: bool = False, seed: int = 0):
+    def __init__(self, module, sampled: bool = False, seed: int = 0, squash: str = "tanh"):
+        if squash not in ("tanh", "clip"):
+            raise ValueError(f"squash={squash!r} is invalid: use 'tanh' or 'clip'")
         self.module = module
         self.sampled = sampled
+        self.squash = squash
         self.generator = torch.Generator().manual_seed(seed)
 
     @torch.no_grad()
@@ -53,7 +58,7 @@ class ModulePolicy:
         if self.sampled:
             noise = torch.randn(mean.shape, generator=self.generator)
             mean = mean + noise * torch.exp(log_std)
-        return torch.tanh(mean).numpy()
+        return (torch.tanh(mean) if self.squash == "tanh" else torch.clamp(mean, -1.0, 1.0)).numpy()
 
 
 @dataclass

@@ -17,7 +17,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import torch
 from ray.rllib.algorithms.ppo import PPO, PPOConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.utils.annotations import override
@@ -29,7 +28,7 @@ from copilot_ray.algorithms.ppo import settings as ppo_settings
 from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation
-from copilot_ray.evaluation import evaluate_copilot
+from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
 
 GOAL_TASK_ENV_ID = "copilot-goal-task"
 DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
@@ -141,24 +140,6 @@ class GoalPPOConfig(PPOConfig):
         super().validate()
 
 
-class PPOModulePolicy:
-    """Actions of a PPO RLModule: its Gaussian's mean, or (`sampled=True`) a sample, clipped to [-1, 1]
-    as the env clips them."""
-
-    def __init__(self, module, sampled: bool = False, seed: int = 0):
-        self.module = module
-        self.sampled = sampled
-        self.generator = torch.Generator().manual_seed(seed)
-
-    @torch.no_grad()
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        out = self.module.forward_inference({"obs": torch.as_tensor(obs, dtype=torch.float32)})
-        mean, log_std = out["action_dist_inputs"].chunk(2, dim=-1)
-        if self.sampled:
-            mean = mean + torch.randn(mean.shape, generator=self.generator) * torch.exp(log_std)
-        return torch.clamp(mean, -1.0, 1.0).numpy()
-
-
 class GoalPPO(PPO):
     """RLlib's PPO plus the common evaluation (module docstring)."""
 
@@ -186,7 +167,11 @@ class GoalPPO(PPO):
         n = min(cfg.eval_num_tasks, len(self.test_starts))
         module = self.get_module(DEFAULT_MODULE_ID)
         seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
-        policies = {DETERMINISTIC: PPOModulePolicy(module), SAMPLED: PPOModulePolicy(module, True, seed)}
+        # PPO's Gaussian is not squashed: its actions are clipped, as GoalTaskEnv clips them.
+        policies = {
+            DETERMINISTIC: ModulePolicy(module, squash="clip"),
+            SAMPLED: ModulePolicy(module, sampled=True, seed=seed, squash="clip"),
+        }
         policies = {cfg.eval_action: policies[cfg.eval_action], **policies}
         result = evaluate_copilot(
             goal_env_id=cfg.goal_env,

@@ -9,7 +9,7 @@ step budget as SAC, HER, SoRB and CO-PILOT, with the Gaussian's mean (clipped) o
 
 from __future__ import annotations
 
-from copilot_ray import keys
+from copilot_ray.algorithms.sac import settings as sac_settings
 from copilot_ray.algorithms.sac.settings import AGENT
 from copilot_ray.settings import float_setting, int_setting
 
@@ -33,12 +33,7 @@ TRAINING = [
     int_setting("num_epochs", "training", 30, "passes over each batch", 1),
 ]
 SETTINGS = {s.key: s for s in (*TASK, *TRAINING)}
-METRICS: tuple[str, ...] = (
-    keys.EVAL_SUCCESS,
-    keys.SUCCESS_DIRECT,
-    keys.ENV_STEPS,
-    "env_runners/episode_return_mean",  # RLlib's
-)
+METRICS = sac_settings.METRICS  # the same figures as the SAC baseline's
 
 
 def combination_problems(values):
