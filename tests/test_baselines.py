@@ -43,6 +43,7 @@ def test_her_learns_the_open_maze_and_resumes_with_its_replay(ray_session, tmp_p
         assert keys.result_value(last, keys.EVAL_SUCCESS) >= 0.5
         # no plan: the common figure, success_planned and success_direct are one rollout
         assert keys.result_value(last, keys.EVAL_SUCCESS) == keys.result_value(last, keys.SUCCESS_DIRECT)
+        assert keys.result_value(last, keys.PATH_SUCCESS) is None  # [s0, g] is no path to score
         buffer = algo.agent_updater.buffer
         assert type(buffer).__name__ == "HindsightReplayBuffer" and buffer.n_sampled_goal == 4
         path = algo.save_to_path(str(tmp_path / "ckpt"))
@@ -83,6 +84,7 @@ def test_sorb_starts_later_then_searches_its_replay_graph(ray_session):
         assert keys.result_value(last, keys.SORB_GRAPH_EDGES) > 0
         assert keys.result_value(last, keys.SORB_WAYPOINTS) >= 2
         assert keys.result_value(last, keys.EVAL_SUCCESS) == keys.result_value(last, keys.SUCCESS_PLANNED)
+        assert 0.0 <= keys.result_value(last, keys.PATH_SUCCESS) <= 1.0  # its waypoints, scored as a path
         assert keys.result_value(last, keys.EVAL_SUCCESS) >= 0.5
         # the edge weights: steps from Q grow with the distance to the goal (on average)
         rng = np.random.default_rng(0)

@@ -793,14 +793,15 @@ class CoPilot(SAC):
         self.metrics.log_value(
             keys.metric_path(keys.PLANNED_COLLISION_FREE), result.plan_collision_free, window=1
         )
-        if cfg.eval_rrt_reference_s > 0 and self._rrt_reference is None:
-            seed = 0 if cfg.seed is None else int(cfg.seed)
-            self._rrt_reference = rrt_reference(
-                cfg.goal_env, cfg.goal_env_config, n, cfg.eval_rrt_reference_s, seed
-            )
-        figures = path_metrics(result.plan_scores, self._planner_checks.count, self._rrt_reference)
-        for key, value in figures.items():
-            self.metrics.log_value(keys.metric_path(key), value, window=1)
+        if plan["planner"] is not None:  # without a plan, [s0, g] is not a path worth scoring
+            if cfg.eval_rrt_reference_s > 0 and self._rrt_reference is None:
+                seed = 0 if cfg.seed is None else int(cfg.seed)
+                self._rrt_reference = rrt_reference(
+                    cfg.goal_env, cfg.goal_env_config, n, cfg.eval_rrt_reference_s, seed
+                )
+            figures = path_metrics(result.plan_scores, self._planner_checks.count, self._rrt_reference)
+            for key, value in figures.items():
+                self.metrics.log_value(keys.metric_path(key), value, window=1)
         if result.trees is not None:
             lifetime = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
             self._save_tree_artifact(result, lifetime)
