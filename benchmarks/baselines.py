@@ -181,9 +181,9 @@ def search(
     )
     print(
         "| graph size | max edge steps | edges | waypoints | success with search (reached) "
-        "| agent alone (reached) | graph s |"
+        "| agent alone (reached) | paths touching no wall | graph s |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for size in graph_sizes:
         for cutoff in cutoffs:
             # The built config is frozen; its search settings are a dict read at each evaluation.
@@ -208,7 +208,8 @@ def search(
             print(
                 f"| {size} | {cutoff} | {plan['planner'].graph.num_edges} | {plan['planner'].mean_waypoints:.1f} | "
                 f"{r['success_planned']:.2f} ({r['reached_planned']:.2f}) | "
-                f"{r['success_direct']:.2f} ({r['reached_direct']:.2f}) | {graph_s:.1f} |",
+                f"{r['success_direct']:.2f} ({r['reached_direct']:.2f}) | {result.plan_collision_free:.2f} | "
+                f"{graph_s:.1f} |",
                 flush=True,
             )
     algo.stop()
