@@ -330,8 +330,10 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "config_key": config_key(flat),
         "algorithm": spec.algorithm,
         "env": flat.get(ENV_PARAM, spec.env.ids[0]),
-        "K": getattr(algo_config, "tree_depth", None),
-        "b": getattr(algo_config, "repetitions", None),
+        # Tree depth and repetitions where the algorithm has them as settings (not the agent-only
+        # baselines, which run CO-PILOT's config at depth 0): the report labels configurations by them.
+        "K": getattr(algo_config, "tree_depth", None) if "tree_depth" in settings else None,
+        "b": getattr(algo_config, "repetitions", None) if "repetitions" in settings else None,
         "alpha_schedule": alpha_schedule_label(
             merged, settings["alpha_schedule"].default if "alpha_schedule" in settings else ""
         ),
@@ -508,8 +510,7 @@ class TrialRuns:
             CONFIG_KEY_TAG: info["config_key"],
             ALGORITHM_TAG: info["algorithm"],
             ENV_TAG: info["env"],
-            K_TAG: str(info["K"]),
-            B_TAG: str(info["b"]),
+            **{tag: str(info[key]) for tag, key in ((K_TAG, "K"), (B_TAG, "b")) if info[key] is not None},
             ALPHA_SCHEDULE_TAG: info["alpha_schedule"],
             PRESET_TAG: info["preset"],
             VARIANT_TAG: info["variant"],
