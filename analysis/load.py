@@ -162,6 +162,11 @@ def _all_runs(client, experiment_id: str, filter_string: str = "") -> list:
 # ---------------------------------------------------------------------------------------------- sweep
 
 
+def _trial_order(t: Trial):
+    """Trials of several sweeps (or stores) in one comparison: by algorithm, configuration, seed."""
+    return (t.tags.get(ALGORITHM_TAG, ""), t.config_key, natural_key(t.seed), t.run_id)
+
+
 def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
     """Adds every trial run of the same experiment in another store (runs that ran apart, e.g. two
     sweeps side by side with their own SQLite files); returns how many. Run ids must not repeat."""
@@ -173,9 +178,7 @@ def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
             f"runs {twice[:3]} are in {tracking_uri} and in {sweep.tracking_uri}: give each store once"
         )
     sweep.trials.extend(other.trials)
-    sweep.trials.sort(
-        key=lambda t: (t.tags.get(ALGORITHM_TAG, ""), t.config_key, natural_key(t.seed), t.run_id)
-    )
+    sweep.trials.sort(key=_trial_order)
     sweep.sweep_name += " + " + other.sweep_name
     return len(other.trials)
 
@@ -206,9 +209,7 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         if not children:
             raise AnalysisError(f"experiment {experiment!r} has no child (trial) runs at {tracking_uri}")
         trials = [_trial(client, r) for r in children]
-        trials.sort(
-            key=lambda t: (t.tags.get(ALGORITHM_TAG, ""), t.config_key, natural_key(t.seed), t.run_id)
-        )
+        trials.sort(key=_trial_order)
         names = sorted({p.data.tags.get(SWEEP_TAG, p.info.run_id) for p in parents})
         return Sweep(
             tracking_uri=tracking_uri,

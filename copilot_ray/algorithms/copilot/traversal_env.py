@@ -38,7 +38,7 @@ import numpy as np
 
 from copilot_ray.algorithms.copilot.settings import SETTINGS
 from copilot_ray.envs import make
-from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
 from copilot_ray.planning.subgoal_tree import path_indices
 
 TRAVERSAL_ENV_ID = "copilot-traversal"
@@ -132,18 +132,8 @@ class TraversalEnv(gym.Env):
         self.inner = self.goal_env.unwrapped
         self.rules = TraversalRules.from_config(config)
         self.tau_max = self.rules.tau_max
-        obs_space = self.goal_env.observation_space["observation"]
-        goal_space = self.inner.goal_space
-        low, high = [obs_space.low, goal_space.low], [obs_space.high, goal_space.high]
         self._with_delta = self.rules.agent_input == "state_goal_delta"
-        if self._with_delta:
-            low.append(goal_space.low - goal_space.high)
-            high.append(goal_space.high - goal_space.low)
-        self.observation_space = gym.spaces.Box(
-            low=np.concatenate(low).astype(np.float32),
-            high=np.concatenate(high).astype(np.float32),
-            dtype=np.float32,
-        )
+        self.observation_space = flat_observation_space(self.goal_env, self._with_delta)
         self.action_space = self.goal_env.action_space
         self._queue: deque[SubTask] = deque()
         self._current: SubTask | None = None

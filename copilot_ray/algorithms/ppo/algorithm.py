@@ -27,7 +27,7 @@ from copilot_ray.algorithms.copilot.traversal_env import TraversalRules
 from copilot_ray.algorithms.ppo import settings as ppo_settings
 from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
-from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
 from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
 
 GOAL_TASK_ENV_ID = "copilot-goal-task"
@@ -47,15 +47,7 @@ class GoalTaskEnv(gym.Env):
         self.goal_env = make(config["goal_env"], **dict(config.get("goal_env_config") or {}))
         self.rules = TraversalRules.from_config(config)
         self._with_delta = self.rules.agent_input == "state_goal_delta"
-        obs_space = self.goal_env.observation_space["observation"]
-        goal_space = self.goal_env.unwrapped.goal_space
-        low, high = [obs_space.low, goal_space.low], [obs_space.high, goal_space.high]
-        if self._with_delta:
-            low.append(goal_space.low - goal_space.high)
-            high.append(goal_space.high - goal_space.low)
-        self.observation_space = gym.spaces.Box(
-            np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32), dtype=np.float32
-        )
+        self.observation_space = flat_observation_space(self.goal_env, self._with_delta)
         self.action_space = self.goal_env.action_space
         self._steps = 0
 

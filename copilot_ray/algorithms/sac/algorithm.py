@@ -90,7 +90,7 @@ class GoalSACConfig(CoPilotConfig):
                     raise ValueError(
                         f"{type(self).__name__}: {s.key}={self.her.get(s.field)!r} is invalid: {why}"
                     )
-        if (n or self.uses_hindsight_buffer()) and not self.fast_learner:
+        if self.uses_hindsight_buffer() and not self.fast_learner:
             raise ValueError(
                 f"{type(self).__name__}: fast_learner=False is invalid with hindsight relabelling: "
                 "the relabelling buffer feeds the fast learner"
