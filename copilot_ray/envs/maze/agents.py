@@ -92,12 +92,15 @@ class PointMass(AgentGeometry):
     config_dim = 2
     action_dim = 2
 
-    def __init__(self, speed: float):
+    def __init__(self, speed: float, bounds: tuple[np.ndarray, np.ndarray] | None = None):
         self.speed = self._checked_speed(speed)
+        # The unit square of the 1 x 1 mazes unless a larger plane is given (the Ant maze's, in metres).
+        low, high = bounds if bounds is not None else (np.zeros(2), np.ones(2))
+        self._bounds = (np.asarray(low, np.float64).copy(), np.asarray(high, np.float64).copy())
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros(2), np.ones(2)
+        return self._bounds[0].copy(), self._bounds[1].copy()
 
     @property
     def nominal_step_distance(self) -> float:

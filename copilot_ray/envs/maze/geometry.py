@@ -1,7 +1,8 @@
 """Obstacle geometry of a maze: merged rectangles, exact batched segment collision, shortest paths.
 
-Everything lives in the unit square [0, 1]^2, whose border is a wall. Obstacles are closed boxes, so a
-segment that merely touches a box (a corner, an edge) collides; so does one that touches the border.
+Everything lives in a rectangular region (the unit square [0, 1]^2 for the 1 x 1 mazes; the Ant maze
+passes its own, in metres) whose border is a wall. Obstacles are closed boxes, so a segment that merely
+touches a box (a corner, an edge) collides; so does one that touches the border.
 """
 
 from __future__ import annotations
@@ -61,11 +62,20 @@ def _clipped_fraction(
 
 
 class Obstacles:
-    """The obstacles of one layout as axis-aligned boxes `lo[i] <= p <= hi[i]` (float64)."""
+    """The obstacles of one layout as axis-aligned boxes `lo[i] <= p <= hi[i]` (float64), inside the
+    region `region_lo < p < region_hi` (default the unit square)."""
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray):
+    def __init__(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        region: tuple[np.ndarray, np.ndarray] = (np.zeros(2), np.ones(2)),
+    ):
         self.lo = np.asarray(lo, dtype=np.float64).reshape(-1, 2)
         self.hi = np.asarray(hi, dtype=np.float64).reshape(-1, 2)
+        self.region_lo, self.region_hi = (np.asarray(r, dtype=np.float64).reshape(2) for r in region)
+        if not (self.region_lo < self.region_hi).all():
+            raise ValueError(f"empty region: low {self.region_lo.tolist()}, high {self.region_hi.tolist()}")
 
     @classmethod
     def from_layout(cls, layout: Layout) -> Obstacles:
@@ -91,8 +101,9 @@ class Obstacles:
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
         if a.shape != b.shape:
             raise ValueError(f"segment endpoints differ in shape: {a.shape} vs {b.shape}")
-        # The square is convex: a segment stays strictly inside iff both endpoints do.
-        out = ((a <= 0.0) | (a >= 1.0) | (b <= 0.0) | (b >= 1.0)).any(axis=1)
+        # The region is convex: a segment stays strictly inside iff both endpoints do.
+        rlo, rhi = self.region_lo, self.region_hi
+        out = ((a <= rlo) | (a >= rhi) | (b <= rlo) | (b >= rhi)).any(axis=1)
         if len(self.lo) == 0:
             return out
         x0, y0 = self.lo[:, 0], self.lo[:, 1]
@@ -112,7 +123,7 @@ class Obstacles:
         return out
 
     def collision_lengths(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """float [N]: length of the segment a[i] -> b[i] inside obstacles or outside the unit square.
+        """float [N]: length of the segment a[i] -> b[i] inside obstacles or outside the region.
 
         A graded version of `segments_collide` for planning costs (SGT-PG's reference planner charges
         length in collision): a sub-goal deep inside a wall costs more than one at its edge, so the
@@ -126,9 +137,9 @@ class Obstacles:
         if a.shape != b.shape:
             raise ValueError(f"segment endpoints differ in shape: {a.shape} vs {b.shape}")
         length = np.linalg.norm(b - a, axis=1)
-        unit = (np.zeros((1, 2)), np.ones((1, 2)))
-        # The border is a wall: free space is the open square, so a run along the border is in collision.
-        outside = length * (1.0 - _clipped_fraction(a, b, *unit, open_box=True).sum(axis=1))
+        region = (self.region_lo[None], self.region_hi[None])
+        # The border is a wall: free space is the open region, so a run along the border is in collision.
+        outside = length * (1.0 - _clipped_fraction(a, b, *region, open_box=True).sum(axis=1))
         inside = np.zeros(len(a))
         if len(self.lo):
             for s in range(0, len(a), _CHUNK):
@@ -139,7 +150,7 @@ class Obstacles:
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """float [N]: Euclidean distance from each point to the nearest obstacle or the border (0 inside)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        border = np.minimum(p, 1.0 - p).min(axis=1).clip(min=0.0)
+        border = np.minimum(p - self.region_lo, self.region_hi - p).min(axis=1).clip(min=0.0)
         if len(self.lo) == 0:
             return border
         return np.minimum(border, self.box_distances(p).min(axis=1))
