@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from copilot_ray.envs import make
+from copilot_ray.envs.continuation import reset_toward
 from copilot_ray.envs.goal_observation import flat_observation
 from copilot_ray.keys import (
     REACHED_DIRECT,
@@ -82,7 +83,7 @@ def follow_waypoints(
     """Each env starts at waypoints[i, 0] and heads for waypoints[i, 1], [i, 2], ... in turn.
 
     A sub-task ends when its waypoint is reached or after tau_max steps; the next one starts from
-    wherever the agent stopped. `with_delta`: the policy also sees waypoint - position
+    wherever the agent stopped (`reset_toward`: an Ant keeps its motion). `with_delta`: the policy also sees waypoint - position
     (agent_input="state_goal_delta"). `max_total_steps`: a budget for the whole path (the rollout
     stops there, the rest of its waypoints unreached).
     """
@@ -110,17 +111,18 @@ def follow_waypoints(
             collided[i] |= bool(info.get("collision", False))
             steps_in[i] += 1
             total[i] += 1
-            out_of_budget = max_total_steps is not None and total[i] >= max_total_steps
-            if reached or steps_in[i] >= tau_max or out_of_budget:
+            # Out of budget, or a failure the agent cannot undo (a flipped Ant): the rollout ends.
+            over = (max_total_steps is not None and total[i] >= max_total_steps) or info.get("failed", False)
+            if reached or steps_in[i] >= tau_max or over:
                 t = target[i] - 1
                 sub_steps[i, t], sub_reached[i, t] = steps_in[i], bool(reached)
                 steps_in[i] = 0
                 target[i] += 1
-                if target[i] >= p or out_of_budget:
+                if target[i] >= p or over:
                     active[i] = False
                 else:
-                    o, _ = envs[i].reset(options={"start": pos[i], "goal": waypoints[i, target[i]]})
-                    obs[i] = o["observation"]
+                    o, _ = reset_toward(envs[i], pos[i], waypoints[i, target[i]])
+                    obs[i], pos[i] = o["observation"], o["achieved_goal"]
     reached_final = sub_reached[:, -1]
     return WaypointRollout(reached_final & ~collided, reached_final, collided, total, sub_steps, sub_reached)
 

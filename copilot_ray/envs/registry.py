@@ -16,6 +16,7 @@ ENV_FACTORIES: dict[str, str] = {
     "maze-point": "copilot_ray.envs.maze.env:make_maze_point",
     "maze-rigid": "copilot_ray.envs.maze.env:make_maze_rigid",
     "maze-snake": "copilot_ray.envs.maze.env:make_maze_snake",
+    "ant-maze": "copilot_ray.envs.ant_maze:make_ant_maze",
 }
 
 

@@ -38,6 +38,7 @@ import numpy as np
 
 from copilot_ray.algorithms.copilot.settings import SETTINGS
 from copilot_ray.envs import make
+from copilot_ray.envs.continuation import reset_toward
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
 from copilot_ray.planning.subgoal_tree import path_indices
 
@@ -161,7 +162,9 @@ class TraversalEnv(gym.Env):
         super().reset(seed=seed)
         if self._queue:
             self._current = self._queue.popleft()
-            start = self._current.start if self._current.start is not None else self._continue_from()
+            start, carry_on = self._current.start, False
+            if start is None:
+                start, carry_on = self._continue_from()
             goal = self._current.goal
             self._limit = self.rules.step_limit_of(self._current.layer, self._depth)
             self._idle_goal = None
@@ -170,11 +173,15 @@ class TraversalEnv(gym.Env):
             # loaded): a harmless placeholder episode that the driver recognises and drops.
             self._current = None
             tasks = self.inner.tasks("train")
-            start = self._position if self._position is not None else tasks[0][0]
+            carry_on = self._position is not None
+            start = self._position if carry_on else tasks[0][0]
             goal = tasks[1][0]
             self._limit = self.tau_max
             self._idle_goal = goal
-        obs, info = self.goal_env.reset(options={"start": np.asarray(start), "goal": np.asarray(goal)})
+        if carry_on:  # from where the agent stands (an Ant keeps its motion)
+            obs, info = reset_toward(self.goal_env, start, goal)
+        else:
+            obs, info = self.goal_env.reset(options={"start": np.asarray(start), "goal": np.asarray(goal)})
         self._position = obs["achieved_goal"].copy()
         self._start = self._position.copy()
         self._steps = 0
@@ -184,12 +191,13 @@ class TraversalEnv(gym.Env):
         achieved = obs["achieved_goal"] if self._with_delta else None
         return flat_observation(obs["observation"], obs["desired_goal"], achieved)
 
-    def _continue_from(self) -> np.ndarray:
-        """Where a sub-task that is not the first of its layer starts (see `after_failure`)."""
+    def _continue_from(self) -> tuple[np.ndarray, bool]:
+        """Where a sub-task that is not the first of its layer starts (see `after_failure`), and whether
+        that is carrying on from where the agent stands."""
         missed, self._missed = self._missed, None
         if missed is not None and self.rules.after_failure == "restart" and self._is_free(missed):
-            return missed
-        return self._position
+            return missed, False
+        return self._position, True
 
     def _is_free(self, config: np.ndarray) -> bool:
         clearance = getattr(self.inner, "is_free", None)
@@ -211,7 +219,9 @@ class TraversalEnv(gym.Env):
         # Sub-task reward (paper Eq. 6: R / 2^k, so every layer's traversal is worth R in total).
         reward, terminated = self.rules.reward(reward, reached, collision, layer)
         reward, terminated = float(reward), bool(terminated)
-        truncated = (not terminated) and self._steps >= self._limit
+        # A failure the agent cannot undo (the Ant flipped over) ends the sub-task early.
+        failed = bool(info.get("failed", False))
+        truncated = (not terminated) and (self._steps >= self._limit or failed)
         # The achieved goal of every step: what hindsight relabelling (HER, SoRB) takes goals from.
         out_info = {"collision": collision, "achieved_goal": self._position}
         if terminated or truncated:
