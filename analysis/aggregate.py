@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from copilot_ray.keys import ALGORITHM_TAG, SUCCESS_METRICS
+from copilot_ray.keys import ALGORITHM_TAG, CURVE_METRICS
 
 from . import stats
 from .load import CONFIG_KEY_AXIS, Sweep, Trial, natural_key
@@ -124,9 +124,7 @@ def summarise(
                 missing.running.append(t)
 
     included = [t for t in sweep.trials if t.usable and t.has_eval]
-    grids = {
-        m: stats.common_grid([t.curves[m][0] for t in included if m in t.curves]) for m in SUCCESS_METRICS
-    }
+    grids = {m: stats.common_grid([t.curves[m][0] for t in included if m in t.curves]) for m in CURVE_METRICS}
     all_seeds = sorted({t.seed for t in sweep.trials}, key=natural_key)
 
     configs = []
@@ -138,7 +136,7 @@ def summarise(
         if lacking:
             missing.short_configs.append((label, lacking))
         metrics = {}
-        for m in SUCCESS_METRICS:
+        for m in CURVE_METRICS:
             ms = _metric_summary([t for t in use if m in t.curves], m, grids[m], reps, seed)
             if ms is not None:
                 metrics[m] = ms

@@ -19,6 +19,7 @@ from copilot_ray.keys import (  # noqa: E402
     DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
     DIAG_SUCCESS_AFTER_FAILED,
     DIAG_SUCCESS_AFTER_REACHED,
+    EVAL_RETURN,
     EVAL_SUCCESS,
     PLANNED_COLLISION_FREE,
     REACHED_PLANNED,
@@ -34,10 +35,15 @@ TITLES = {
     EVAL_SUCCESS: "each method's headline (CO-PILOT, SoRB: along their plans; SAC, HER, PPO: agent alone)",
     SUCCESS_PLANNED: "agent following the planner's finest path",
     SUCCESS_DIRECT: "agent alone (no planner)",
+    EVAL_RETURN: "task reward R for reaching the goal, same rollouts as success",
 }
+# The y axis of a metric other than a success rate: (label, limits or None for automatic).
+Y_AXES = {EVAL_RETURN: ("average return on held-out tasks", None)}
+SUCCESS_AXIS = ("success rate on held-out tasks", (-0.02, 1.02))
 MAX_CURVES = 12  # more lines than this are unreadable; the best ones by final success are kept
 PLANNED_AND_DIRECT = (SUCCESS_PLANNED, SUCCESS_DIRECT)
 BY_METHOD = (EVAL_SUCCESS,)  # the paper's Fig. 2a / 4a: one figure every algorithm reports
+RETURN = (EVAL_RETURN,)  # the paper's Fig. 2d (Ant maze)
 DPI = 120
 
 
@@ -97,10 +103,12 @@ def success_curves(
             ax.plot(cv.grid, np.where(full, cv.iqm, np.nan), color=color, linewidth=2, label=label)
         ax.set_title(f"{metric.split('/')[-1]}: {TITLES[metric]}", fontsize=10)
         ax.set_xlabel("environment steps")
-        ax.set_ylim(-0.02, 1.02)
+        ylabel, ylim = Y_AXES.get(metric, SUCCESS_AXIS)
+        if ylim is not None:
+            ax.set_ylim(*ylim)
         ax.grid(alpha=0.3)
         ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
-    axes[0].set_ylabel("success rate on held-out tasks")
+    axes[0].set_ylabel(Y_AXES.get(metrics[0], SUCCESS_AXIS)[0])
     handles, labels = axes[0].get_legend_handles_labels()
     if not handles:
         handles, labels = axes[1].get_legend_handles_labels()
@@ -111,7 +119,8 @@ def success_curves(
     note = "IQM over seeds, shaded: 95% stratified bootstrap CI; dashed: not all seeds have reached this step"
     if dropped:
         note += f"; {dropped} more configurations not drawn"
-    fig.suptitle(f"Success against environment steps, by {axis_name}\n{note}", fontsize=10)
+    what = "Return" if metrics == RETURN else "Success"
+    fig.suptitle(f"{what} against environment steps, by {axis_name}\n{note}", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.83 if handles else 1, 1))
     fig.savefig(path, dpi=DPI, bbox_inches="tight")  # long legend labels sit right of the axes
     plt.close(fig)
@@ -220,8 +229,11 @@ def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str,
                 ax_h.set_title(f"iter {snap.iteration}\n{snap.env_steps:,} env steps", fontsize=8)
             ax_m = fig.add_subplot(gs[2 * r + 1, c])
             pts = snap.layer_path(task, k)
-            img = render_maze(layout, paths=[pts], agent=pts[0], goal=pts[-1], size=240)
-            ax_m.imshow(img, extent=(0, 1, 0, 1), interpolation="nearest")
+            if snap.region is not None:  # the walls the planner saw, in the env's own units
+                _draw_walls_and_path(ax_m, snap, pts)
+            else:  # older snapshots: the 1 x 1 maze by its layout name
+                img = render_maze(layout, paths=[pts], agent=pts[0], goal=pts[-1], size=240)
+                ax_m.imshow(img, extent=(0, 1, 0, 1), interpolation="nearest")
             ax_m.set_xticks([])
             ax_m.set_yticks([])
             if c == 0:
@@ -234,6 +246,22 @@ def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str,
     fig.savefig(path, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return path
+
+
+def _draw_walls_and_path(ax, snap: TreeSnapshot, pts: np.ndarray) -> None:
+    """The obstacle boxes (grey) over the region, the path (orange, its x-y plane), start red, goal blue."""
+    from matplotlib.patches import Rectangle
+
+    (x0, y0), (x1, y1) = snap.region
+    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor="white", edgecolor="black", linewidth=1))
+    for lo, hi in zip(snap.walls_lo, snap.walls_hi, strict=True):
+        ax.add_patch(Rectangle(tuple(lo), *(hi - lo), facecolor="0.35", edgecolor="none"))
+    ax.plot(pts[:, 0], pts[:, 1], "-o", color="tab:orange", markersize=2, linewidth=1.2)
+    ax.plot(*pts[0, :2], "o", color="red", markersize=5)
+    ax.plot(*pts[-1, :2], "o", color="blue", markersize=5)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
 
 
 # ---------------------------------------------------------------------------------------------- diagnostics

@@ -22,6 +22,7 @@ from copilot_ray.keys import (
     ALGORITHM_TAG,
     AXIS_TAGS,
     CONFIG_KEY_TAG,
+    CURVE_METRICS,
     DIAG_PREFIX,
     EVAL_PREFIX,
     PARENT_TAG,
@@ -267,7 +268,7 @@ def _trial(client, run) -> Trial:
         tags=tags,
         tracking_uri=str(client.tracking_uri),
     )
-    wanted = set(SUCCESS_METRICS) | {
+    wanted = set(CURVE_METRICS) | {
         k for k in run.data.metrics if k.startswith((*DIAGNOSTIC_PREFIXES, PATHS_PREFIX))
     }
     for key in sorted(wanted):
@@ -308,6 +309,10 @@ class TreeSnapshot:
     subtask_steps: np.ndarray  # [n_tasks, K + 1, 2^K], -1 beyond 2^k entries
     subtask_reached: np.ndarray  # bool, same shape
     layout: str
+    # The planner's obstacles (absent in older snapshots): boxes [n, 2] low / high and the region [2, 2]
+    walls_lo: np.ndarray | None = None
+    walls_hi: np.ndarray | None = None
+    region: np.ndarray | None = None
     # tau_hat profile (absent in older snapshots): mean segment length and mean tau_hat per probe length
     tau_hat_length: np.ndarray | None = None
     tau_hat: np.ndarray | None = None
@@ -334,6 +339,7 @@ def load_tree_snapshots(tracking_uri: str, run_id: str, paths: list[str]) -> lis
                         subtask_steps=np.asarray(z["subtask_steps"]),
                         subtask_reached=np.asarray(z["subtask_reached"], dtype=bool),
                         layout=str(z["layout"]) if "layout" in z.files else "",
+                        **{k: np.asarray(z[k]) for k in ("walls_lo", "walls_hi", "region") if k in z.files},
                         tau_hat_length=np.asarray(z["tau_hat_length"])
                         if "tau_hat_length" in z.files
                         else None,

@@ -6,6 +6,8 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
   success_by_method.png, final_success_by_method.png
                              when the runs hold several algorithms: copilot/eval/success (each
                              method's headline) against env steps and at the end (paper Fig. 4a, 2a)
+  return_vs_env_steps.png    copilot/eval/return (R for reaching a test goal, averaged) against env
+                             steps (paper Fig. 2d, the Ant maze)
   subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
   summary.csv, summary.md    per-configuration table
   planners_paths.png, planners.csv, planners.md
@@ -130,6 +132,19 @@ def main(argv: list[str] | None = None) -> int:
                 (
                     "Final success by method (paper Fig. 2a)",
                     figures.final_success(configs, "method", out / "final_success_by_method.png", by),
+                )
+            )
+        if any(figures.EVAL_RETURN in c.metrics for c in configs):
+            several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
+            figs.append(
+                (
+                    "Return against environment steps (paper Fig. 2d)",
+                    figures.success_curves(
+                        configs,
+                        "method" if several else axis_name,
+                        out / "return_vs_env_steps.png",
+                        figures.RETURN,
+                    ),
                 )
             )
     else:

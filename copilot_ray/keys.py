@@ -39,6 +39,11 @@ SUCCESS_DIRECT = "copilot/eval/success_direct"
 # agent-only baselines' (SAC, HER, PPO) success_direct, SoRB's success along its graph's waypoints.
 EVAL_SUCCESS = "copilot/eval/success"
 SUCCESS_METRICS = (EVAL_SUCCESS, SUCCESS_PLANNED, SUCCESS_DIRECT)
+# The paper's Fig. 2d (Ant maze): the average return on the test tasks of the same rollout as
+# EVAL_SUCCESS, with the task reward R (reward_scale x the goal env's goal_reward) for reaching the goal.
+EVAL_RETURN = "copilot/eval/return"
+# What the analysis draws against env steps.
+CURVE_METRICS = (*SUCCESS_METRICS, EVAL_RETURN)
 REACHED_PLANNED = "copilot/eval/reached_planned"
 REACHED_DIRECT = "copilot/eval/reached_direct"
 SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"

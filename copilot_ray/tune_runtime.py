@@ -23,6 +23,7 @@ from copilot_ray.keys import (
     ENV_STEPS,
     EVAL_FRESH,
     EVAL_PREFIX,
+    EVAL_RETURN,
     NODE_ID,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
@@ -64,7 +65,7 @@ class SpecTrial:
     evaluated now).
     """
 
-    eval_metrics: tuple[str, ...] = SUCCESS_METRICS
+    eval_metrics: tuple[str, ...] = (*SUCCESS_METRICS, EVAL_RETURN)
 
     def __init__(self, config=None, **kwargs):
         if isinstance(config, dict) and SPEC_PATH_KEY in config:

@@ -100,6 +100,18 @@ _COPILOT_ARGS = (
 )
 
 
+def _obstacle_arrays(env) -> dict[str, np.ndarray]:
+    """The env's obstacle boxes and region for the tree artifact (empty for an env without `obstacles`)."""
+    obstacles = getattr(env, "obstacles", None)
+    if obstacles is None:
+        return {}
+    return {
+        "walls_lo": obstacles.lo,
+        "walls_hi": obstacles.hi,
+        "region": np.stack([obstacles.region_lo, obstacles.region_hi]),
+    }
+
+
 class CoPilotConfig(SACConfig):
     """RLlib's `SACConfig` plus CO-PILOT's settings, set with `.copilot(...)` (see `settings.SETTINGS`)."""
 
@@ -752,6 +764,10 @@ class CoPilot(SAC):
             "planned_total_steps": None,
         }
 
+    def _task_reward(self) -> float:
+        """R: what reaching a whole task's goal is worth (the goal env's reward x reward_scale)."""
+        return float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * self.rules.reward_scale
+
     def _evaluate(self) -> None:
         cfg = self.config
         n = min(cfg.eval_num_tasks, len(self.test_starts))
@@ -785,6 +801,8 @@ class CoPilot(SAC):
         self.metrics.log_value(
             keys.metric_path(keys.EVAL_SUCCESS), headline[keys.eval_leaf(keys.SUCCESS_PLANNED)], window=1
         )
+        reached = headline[keys.eval_leaf(keys.REACHED_PLANNED)]
+        self.metrics.log_value(keys.metric_path(keys.EVAL_RETURN), self._task_reward() * reached, window=1)
         for action, values in result.by_action.items():
             for key, value in values.items():
                 self.metrics.log_value(
@@ -829,6 +847,8 @@ class CoPilot(SAC):
             subtask_steps=result.tree_subtask_steps,
             subtask_reached=result.tree_subtask_reached,
             layout=np.array(str(self.config.goal_env_config.get("layout", ""))),
+            # The obstacles the planner sees, so the figure draws any env's trees over its walls.
+            **_obstacle_arrays(env),
             tau_hat_length=profile[0],
             tau_hat=profile[1],
         )

@@ -144,8 +144,8 @@ class GoalPPO(PPO):
     def setup(self, config) -> None:
         register_goal_task_env()
         super().setup(config)
-        env = make(self.config.goal_env, **self.config.goal_env_config).unwrapped
-        self.test_starts, self.test_goals = env.tasks("test")
+        self.goal_env = make(self.config.goal_env, **self.config.goal_env_config)
+        self.test_starts, self.test_goals = self.goal_env.unwrapped.tasks("test")
 
     @override(PPO)
     def training_step(self) -> None:
@@ -183,5 +183,11 @@ class GoalPPO(PPO):
                 self.metrics.log_value(keys.metric_path(keys.eval_by_action(key, action)), value, window=1)
                 if action == cfg.eval_action:
                     self.metrics.log_value(keys.metric_path(key), value, window=1)
-        headline = result.by_action[cfg.eval_action][keys.eval_leaf(keys.SUCCESS_DIRECT)]
-        self.metrics.log_value(keys.metric_path(keys.EVAL_SUCCESS), headline, window=1)
+        headline = result.by_action[cfg.eval_action]
+        self.metrics.log_value(
+            keys.metric_path(keys.EVAL_SUCCESS), headline[keys.eval_leaf(keys.SUCCESS_DIRECT)], window=1
+        )
+        # R x reached (keys.EVAL_RETURN), R = the goal env's reward x reward_scale
+        reward = float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * cfg.reward_scale
+        reached = headline[keys.eval_leaf(keys.REACHED_DIRECT)]
+        self.metrics.log_value(keys.metric_path(keys.EVAL_RETURN), reward * reached, window=1)

@@ -8,4 +8,4 @@ from copilot_ray.tune_runtime import SpecTrial
 class GoalPPOTrial(SpecTrial, GoalPPO):
     """GoalPPO as a sweep trial (see SpecTrial); it has no plan, so no success_planned."""
 
-    eval_metrics = (keys.EVAL_SUCCESS, keys.SUCCESS_DIRECT)
+    eval_metrics = (keys.EVAL_SUCCESS, keys.SUCCESS_DIRECT, keys.EVAL_RETURN)
