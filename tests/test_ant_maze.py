@@ -167,3 +167,52 @@ def test_rgb_frame_from_above_with_sub_goal_markers():
     shape, dtype, changed = done.stdout.split(")")[0] + ")", *done.stdout.split(")")[1].split()
     assert shape == "(64, 64, 3)" and dtype == "uint8"
     assert int(changed) > 0  # the markers show
+
+
+@pytest.mark.ray
+def test_copilot_and_sac_train_and_evaluate_on_the_ant_maze(ray_session):
+    """One short iteration each: the planner plans in metres among the walls, the traversal runs on
+    MuJoCo, and the evaluation reports success and the return R x reached."""
+    from copilot_ray import keys
+    from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
+    from copilot_ray.algorithms.sac.algorithm import GoalSACConfig
+
+    common = {"tau_max": 10, "task_batch_size": 1, "reward_scale": 1000.0, "eval_num_tasks": 2}
+    copilot = (
+        CoPilotConfig()
+        .environment("ant-maze", env_config={"num_train_tasks": 8})
+        .copilot(
+            tree_depth=1,
+            repetitions=1,
+            planner_task_batch_size=4,
+            planner_warm_start=2,
+            eval_interval=1,
+            eval_tree_tasks=1,
+            **common,
+        )
+        .debugging(seed=0)
+        .build_algo()
+    )
+    try:
+        result = copilot.train()
+        # b = 1, K = 1: 3 sub-tasks of <= 10 steps (fewer when the Ant flips)
+        assert 0 < keys.result_value(result, keys.ENV_STEPS) <= 30
+        assert 0.0 <= keys.result_value(result, keys.EVAL_SUCCESS) <= 1.0
+        assert keys.result_value(result, keys.EVAL_RETURN) in (0.0, 500.0, 1000.0)  # 2 tasks, R = 1000
+        trees = copilot.planner.sample(*copilot.goal_env.unwrapped.tasks("test"), deterministic=True)
+        assert np.abs(trees).max() <= 10.0  # inside the 20 m x 20 m maze
+    finally:
+        copilot.stop()
+    sac = (
+        GoalSACConfig()
+        .environment("ant-maze", env_config={"num_train_tasks": 8})
+        .copilot(eval_interval=1, **common)
+        .debugging(seed=0)
+        .build_algo()
+    )
+    try:
+        result = sac.train()
+        assert 0 < keys.result_value(result, keys.ENV_STEPS) <= 10
+        assert keys.result_value(result, keys.EVAL_RETURN) in (0.0, 500.0, 1000.0)
+    finally:
+        sac.stop()
