@@ -66,6 +66,12 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.sgt_pg.config:SGTPGConfig",
         "copilot_ray.algorithms.sgt_pg.trial:SGTPGTrial",
     ),
+    # HIRO-style two-level hierarchy (the paper's "hierarchical RL"): a Tune Trainable with its own env loop.
+    "hrl": (
+        "copilot_ray.algorithms.hrl.settings",
+        "copilot_ray.algorithms.hrl.config:HRLConfig",
+        "copilot_ray.algorithms.hrl.trial:HRLTrial",
+    ),
 }
 
 

@@ -1,0 +1,246 @@
+"""`HRL`: the two-level hierarchy's training loop, evaluation and state, without Tune (trial.py wraps it).
+
+One `train()` is one iteration: batches of `task_batch_size` training episodes (random training tasks,
+run side by side) until `env_steps_per_iteration` env steps, each batch followed by the low level's
+`updates_per_env_step` x new env steps and the high level's `updates_per_transition` x new high-level
+transitions SAC gradient steps; then, every `eval_interval` iterations, an evaluation on the first
+`eval_num_tasks` test tasks with `tau_max` steps each, deterministic and sampled actions (both levels).
+Before `num_steps_sampled_before_learning_starts` env steps both levels act uniformly at random.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from copilot_ray import keys
+from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, GradientStepSchedule, update_from_buffer
+from copilot_ray.algorithms.hrl import settings as S
+from copilot_ray.algorithms.hrl.buffer import SegmentReplayBuffer
+from copilot_ray.algorithms.hrl.config import HRLConfig
+from copilot_ray.algorithms.hrl.hierarchy import SubgoalBox, choose_candidates, correction_candidates
+from copilot_ray.algorithms.hrl.levels import Actor, build_learner_group, learner_stats
+from copilot_ray.algorithms.hrl.rollout import Episode, run_episodes
+from copilot_ray.algorithms.hrl.transitions import high_level_rows, low_level_rows, subgoals_reached
+from copilot_ray.envs import make
+from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
+
+DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
+# The evaluation's figures: the common ones, and the same per action mode.
+_EVAL_KEYS = (keys.SUCCESS_DIRECT, keys.REACHED_DIRECT, keys.EVAL_RETURN)
+
+
+class HRL:
+    """HIRO-style two-level goal-conditioned SAC (see the package docstring)."""
+
+    def __init__(self, cfg: HRLConfig):
+        self.cfg = cfg
+        self.envs = [make(cfg.env_id, **dict(cfg.env_config)) for _ in range(cfg.task_batch_size)]
+        goal_env = self.envs[0]
+        maze = goal_env.unwrapped
+        self.compute_reward, self.compute_terminated = maze.compute_reward, maze.compute_terminated
+        self.box = SubgoalBox.from_goal_space(
+            maze.goal_space.low, maze.goal_space.high, cfg.hrl_subgoal_range
+        )
+        self.with_delta = cfg.agent_input == "state_goal_delta"
+        flat_space = flat_observation_space(goal_env, self.with_delta)
+        self.action_dim = int(goal_env.action_space.shape[0])
+        self.goal_dim = int(maze.goal_space.shape[0])
+        high_space = gym.spaces.Box(-1.0, 1.0, (self.goal_dim,), np.float32)
+        self.low_group = build_learner_group(cfg, "low", flat_space, goal_env.action_space)
+        self.high_group = build_learner_group(cfg, "high", flat_space, high_space)
+        torch.manual_seed(cfg.seed)  # the learners' own sampling, after RLlib seeded their nets
+        self.generator = torch.Generator().manual_seed(cfg.seed)  # exploration while training
+        self.low, self.high = Actor(self.low_group), Actor(self.high_group)
+        self.rng = np.random.default_rng([cfg.seed, 0])  # training tasks, random warm-up actions
+        self.low_rng = np.random.default_rng([cfg.seed, 1])  # low-level replay sampling
+        self.high_rng = np.random.default_rng([cfg.seed, 2])  # high-level replay sampling + candidates
+        self.low_buffer = FlatTransitionBuffer(cfg.replay_capacity)
+        corrector = self.correct if cfg.hrl_off_policy_correction else None
+        self.high_buffer = SegmentReplayBuffer(max(1, cfg.replay_capacity // cfg.hrl_c), corrector)
+        self.low_schedule = GradientStepSchedule(
+            cfg.low["updates_per_env_step"], cfg.num_steps_sampled_before_learning_starts
+        )
+        self.high_schedule = GradientStepSchedule(cfg.high["updates_per_transition"])
+        self.train_starts, self.train_goals = maze.tasks("train")
+        starts, goals = maze.tasks("test")
+        self.test_starts, self.test_goals = starts[: cfg.eval_num_tasks], goals[: cfg.eval_num_tasks]
+        self.eval_envs: list | None = None
+        self.env_steps = 0
+        self.iteration = 0
+        self.last_eval: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ the pieces
+    def compose(self, observation: np.ndarray, goal: np.ndarray, achieved: np.ndarray) -> np.ndarray:
+        """A level's flat input: concat(observation, goal[, goal - achieved]) (`agent_input`)."""
+        return flat_observation(observation, goal, achieved if self.with_delta else None)
+
+    def correct(
+        self, batch: dict[str, np.ndarray], rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """HIRO's off-policy correction of sampled high-level actions (SegmentReplayBuffer's corrector)."""
+        stored = self.box.offset(batch["actions"])
+        cands = correction_candidates(
+            stored, batch["start"], batch["end"], self.box, self.cfg.hrl_num_candidates, rng
+        )
+        best = choose_candidates(
+            cands,
+            batch["start"],
+            batch["seg_obs"],
+            batch["seg_achieved"],
+            batch["seg_actions"],
+            batch["seg_mask"],
+            self.low.log_prob,
+            self.compose,
+        )
+        kept = best == 0
+        relabelled = self.box.action(cands[np.arange(len(best)), best])
+        return np.where(kept[:, None], batch["actions"], relabelled), kept
+
+    def _random(self, dim: int):
+        return lambda x: self.rng.uniform(-1.0, 1.0, (len(x), dim)).astype(np.float32)
+
+    def _episodes(self, envs, starts, goals, high, low) -> list[Episode]:
+        cfg = self.cfg
+        return run_episodes(envs, starts, goals, high, low, self.box, cfg.hrl_c, cfg.tau_max, self.compose)
+
+    # ------------------------------------------------------------------ training
+    def train(self) -> dict[str, float]:
+        """One iteration; returns flat metrics (the last evaluation's figures when this one has none)."""
+        cfg = self.cfg
+        start_steps, returns, reached, stats = self.env_steps, [], [], {}
+        kept_before, corrected_before = self.high_buffer.num_kept, self.high_buffer.num_corrected
+        while self.env_steps - start_steps < cfg.env_steps_per_iteration:
+            idx = self.rng.integers(len(self.train_starts), size=cfg.task_batch_size)
+            if self.env_steps < cfg.num_steps_sampled_before_learning_starts:
+                high, low = self._random(self.goal_dim), self._random(self.action_dim)
+            else:
+                high = lambda x: self.high.act(x, self.generator)  # noqa: E731
+                low = lambda x: self.low.act(x, self.generator)  # noqa: E731
+            episodes = self._episodes(self.envs, self.train_starts[idx], self.train_goals[idx], high, low)
+            rows = low_level_rows(
+                episodes,
+                cfg.hrl_c,
+                self.compose,
+                cfg.hrl_low_reward,
+                self.compute_reward,
+                self.compute_terminated,
+            )
+            self.low_buffer.add(rows)
+            added = self.high_buffer.add(high_level_rows(episodes, cfg.hrl_c, self.compose, cfg.reward_scale))
+            n = sum(len(ep) for ep in episodes)
+            self.env_steps += n
+            returns += [cfg.reward_scale * float(ep.rewards.sum()) for ep in episodes]
+            reached.append(subgoals_reached(episodes, cfg.hrl_c, self.compute_terminated))
+            learning = self.env_steps >= cfg.num_steps_sampled_before_learning_starts
+            for level, group, buffer, rng, steps in (
+                ("low", self.low_group, self.low_buffer, self.low_rng, self.low_schedule.on_env_steps(n)),
+                (
+                    "high",
+                    self.high_group,
+                    self.high_buffer,
+                    self.high_rng,
+                    self.high_schedule.on_env_steps(added if learning else 0),
+                ),
+            ):
+                settings = getattr(cfg, level)
+                results = update_from_buffer(
+                    group, buffer, steps, settings["train_batch_size_per_learner"], rng, self.env_steps
+                )
+                stats.update({f"hrl/{level}/{k}": v for k, v in learner_stats(results).items()})
+        self.iteration += 1
+        corrected = self.high_buffer.num_corrected - corrected_before
+        metrics = {
+            keys.ENV_STEPS: self.env_steps,
+            S.EPISODE_RETURN_MEAN: float(np.mean(returns)),
+            S.SUBGOAL_REACHED: float(np.concatenate(reached).mean()),
+            **stats,
+        }
+        if corrected:
+            metrics[S.CORRECTION_KEPT] = (self.high_buffer.num_kept - kept_before) / corrected
+        fresh = bool(cfg.eval_interval) and self.iteration % cfg.eval_interval == 0
+        if fresh:
+            self.last_eval = self.evaluate()
+        metrics.update(self.last_eval or dict.fromkeys(self._eval_names(), float("nan")))
+        metrics[keys.EVAL_FRESH] = 1.0 if fresh else 0.0
+        return metrics
+
+    # ------------------------------------------------------------------ evaluation
+    def _eval_names(self) -> list[str]:
+        per_action = [keys.eval_by_action(k, a) for k in _EVAL_KEYS for a in keys.EVAL_ACTIONS]
+        return [keys.EVAL_SUCCESS, *_EVAL_KEYS, *per_action]
+
+    def evaluate(self) -> dict[str, float]:
+        """Both levels on the test tasks, lockstep: deterministic (tanh of the means) and sampled
+        actions; the headline figures are `eval_action`'s. Success: the goal reached with no collision."""
+        cfg = self.cfg
+        if self.eval_envs is None:
+            self.eval_envs = [make(cfg.env_id, **dict(cfg.env_config)) for _ in range(len(self.test_starts))]
+        out: dict[str, float] = {}
+        for action in keys.EVAL_ACTIONS:
+            # Its own stream per evaluation: sampled evaluations do not move training's randomness.
+            gen = (
+                torch.Generator().manual_seed(cfg.seed * 1_000_003 + self.iteration)
+                if action == SAMPLED
+                else None
+            )
+            episodes = self._episodes(
+                self.eval_envs,
+                self.test_starts,
+                self.test_goals,
+                lambda x, g=gen: self.high.act(x, g),
+                lambda x, g=gen: self.low.act(x, g),
+            )
+            figures = {
+                keys.SUCCESS_DIRECT: np.mean([ep.success for ep in episodes]),
+                keys.REACHED_DIRECT: np.mean([ep.terminated for ep in episodes]),
+                keys.EVAL_RETURN: np.mean([cfg.reward_scale * float(ep.rewards.sum()) for ep in episodes]),
+            }
+            for key, value in figures.items():
+                out[keys.eval_by_action(key, action)] = float(value)
+                if action == cfg.eval_action:
+                    out[key] = float(value)
+        out[keys.EVAL_SUCCESS] = out[keys.SUCCESS_DIRECT]
+        return out
+
+    # ------------------------------------------------------------------ state
+    def get_state(self) -> dict[str, Any]:
+        """Everything `set_state` needs to continue exactly: both learners (nets, optimizers, alpha),
+        both replays, the update schedules, every random stream and the counters."""
+        return {
+            "low_group": self.low_group.get_state(),
+            "high_group": self.high_group.get_state(),
+            "low_buffer": self.low_buffer.get_state(),
+            "high_buffer": self.high_buffer.get_state(),
+            "low_schedule": self.low_schedule.get_state(),
+            "high_schedule": self.high_schedule.get_state(),
+            "rngs": [r.bit_generator.state for r in (self.rng, self.low_rng, self.high_rng)],
+            "generator": self.generator.get_state(),
+            "torch_rng": torch.get_rng_state(),
+            "env_steps": self.env_steps,
+            "iteration": self.iteration,
+            "last_eval": dict(self.last_eval),
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.low_group.set_state(state["low_group"])
+        self.high_group.set_state(state["high_group"])
+        self.low_buffer.set_state(state["low_buffer"])
+        self.high_buffer.set_state(state["high_buffer"])
+        self.low_schedule.set_state(state["low_schedule"])
+        self.high_schedule.set_state(state["high_schedule"])
+        for r, s in zip((self.rng, self.low_rng, self.high_rng), state["rngs"], strict=True):
+            r.bit_generator.state = s
+        self.generator.set_state(state["generator"])
+        torch.set_rng_state(state["torch_rng"])
+        self.env_steps, self.iteration = int(state["env_steps"]), int(state["iteration"])
+        self.last_eval = dict(state["last_eval"])
+
+    def stop(self) -> None:
+        for env in self.envs + (self.eval_envs or []):
+            env.close()
+        for group in (self.low_group, self.high_group):
+            group.shutdown()
