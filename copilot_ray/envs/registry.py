@@ -17,6 +17,7 @@ ENV_FACTORIES: dict[str, str] = {
     "maze-rigid": "copilot_ray.envs.maze.env:make_maze_rigid",
     "maze-snake": "copilot_ray.envs.maze.env:make_maze_snake",
     "ant-maze": "copilot_ray.envs.ant_maze:make_ant_maze",
+    "walker-stumps": "copilot_ray.envs.stump_tracks:make_walker_stumps",
 }
 
 
