@@ -19,6 +19,7 @@ from copilot_ray.keys import (  # noqa: E402
     DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
     DIAG_SUCCESS_AFTER_FAILED,
     DIAG_SUCCESS_AFTER_REACHED,
+    EVAL_MASTERED,
     EVAL_RETURN,
     EVAL_SUCCESS,
     PLANNED_COLLISION_FREE,
@@ -36,14 +37,19 @@ TITLES = {
     SUCCESS_PLANNED: "agent following the planner's finest path",
     SUCCESS_DIRECT: "agent alone (no planner)",
     EVAL_RETURN: "task reward R for reaching the goal, same rollouts as success",
+    EVAL_MASTERED: "track distributions whose mean walker return exceeds 230",
 }
 # The y axis of a metric other than a success rate: (label, limits or None for automatic).
-Y_AXES = {EVAL_RETURN: ("average return on held-out tasks", None)}
+Y_AXES = {
+    EVAL_RETURN: ("average return on held-out tasks", None),
+    EVAL_MASTERED: ("share of evaluation distributions mastered", (-0.02, 1.02)),
+}
 SUCCESS_AXIS = ("success rate on held-out tasks", (-0.02, 1.02))
 MAX_CURVES = 12  # more lines than this are unreadable; the best ones by final success are kept
 PLANNED_AND_DIRECT = (SUCCESS_PLANNED, SUCCESS_DIRECT)
 BY_METHOD = (EVAL_SUCCESS,)  # the paper's Fig. 2a / 4a: one figure every algorithm reports
 RETURN = (EVAL_RETURN,)  # the paper's Fig. 2d (Ant maze)
+MASTERED = (EVAL_MASTERED,)  # the paper's Fig. 3 (stump-track walker)
 DPI = 120
 
 
@@ -119,7 +125,7 @@ def success_curves(
     note = "IQM over seeds, shaded: 95% stratified bootstrap CI; dashed: not all seeds have reached this step"
     if dropped:
         note += f"; {dropped} more configurations not drawn"
-    what = "Return" if metrics == RETURN else "Success"
+    what = {RETURN: "Return", MASTERED: "Mastered track distributions"}.get(metrics, "Success")
     fig.suptitle(f"{what} against environment steps, by {axis_name}\n{note}", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.83 if handles else 1, 1))
     fig.savefig(path, dpi=DPI, bbox_inches="tight")  # long legend labels sit right of the axes

@@ -8,6 +8,8 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
                              method's headline) against env steps and at the end (paper Fig. 4a, 2a)
   return_vs_env_steps.png    copilot/eval/return (R for reaching a test goal, averaged) against env
                              steps (paper Fig. 2d, the Ant maze)
+  mastered_vs_env_steps.png  copilot/eval/mastered (share of the walker's evaluation track
+                             distributions mastered) against env steps (paper Fig. 3)
   subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
   summary.csv, summary.md    per-configuration table
   planners_paths.png, planners.csv, planners.md
@@ -134,19 +136,14 @@ def main(argv: list[str] | None = None) -> int:
                     figures.final_success(configs, "method", out / "final_success_by_method.png", by),
                 )
             )
-        if any(figures.EVAL_RETURN in c.metrics for c in configs):
-            several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
-            figs.append(
-                (
-                    "Return against environment steps (paper Fig. 2d)",
-                    figures.success_curves(
-                        configs,
-                        "method" if several else axis_name,
-                        out / "return_vs_env_steps.png",
-                        figures.RETURN,
-                    ),
-                )
-            )
+        several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
+        for metric, title, name in (
+            (figures.EVAL_RETURN, "Return against environment steps (paper Fig. 2d)", "return_vs_env_steps"),
+            (figures.EVAL_MASTERED, "Mastered track distributions (paper Fig. 3)", "mastered_vs_env_steps"),
+        ):
+            if any(metric in c.metrics for c in configs):
+                by = "method" if several else axis_name
+                figs.append((title, figures.success_curves(configs, by, out / f"{name}.png", (metric,))))
     else:
         notes.append("No run has evaluation metrics yet: no success figures.")
     planner_figs, planner_table, planner_frame = _planner_section(sweep, out)
@@ -235,6 +232,11 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
             )
             if snaps[0].depth == 0:
                 notes.append(f"{c.label} has tree depth 0 (no planner, plain SAC): no sub-goal tree to draw.")
+                continue
+            if snaps[0].trees.shape[-1] < 2:
+                notes.append(
+                    f"{c.label} plans in a 1-d goal space (the walker's x): no map to draw its trees on."
+                )
                 continue
             n_tasks = snaps[0].trees.shape[0]
             if not 0 <= args.task < n_tasks:

@@ -42,8 +42,12 @@ SUCCESS_METRICS = (EVAL_SUCCESS, SUCCESS_PLANNED, SUCCESS_DIRECT)
 # The paper's Fig. 2d (Ant maze): the average return on the test tasks of the same rollout as
 # EVAL_SUCCESS, with the task reward R (reward_scale x the goal env's goal_reward) for reaching the goal.
 EVAL_RETURN = "copilot/eval/return"
+# The paper's Fig. 3 (stump-track walker; envs whose goal env has `mastery`): the share of evaluation
+# track distributions mastered (mean walker return over their tracks > 230), and that mean return.
+EVAL_MASTERED = "copilot/eval/mastered"
+EVAL_ENV_RETURN = "copilot/eval/env_return"
 # What the analysis draws against env steps.
-CURVE_METRICS = (*SUCCESS_METRICS, EVAL_RETURN)
+CURVE_METRICS = (*SUCCESS_METRICS, EVAL_RETURN, EVAL_MASTERED)
 REACHED_PLANNED = "copilot/eval/reached_planned"
 REACHED_DIRECT = "copilot/eval/reached_direct"
 SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"

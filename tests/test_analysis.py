@@ -272,6 +272,8 @@ def test_pngs_exist_and_are_not_blank(store):
     pngs = sorted(store["out"].glob("*.png"))
     names = {p.name for p in pngs}
     assert {"success_vs_env_steps.png", "final_success.png", "subgoal_tree_K_3.png"} <= names
+    # these runs logged no return and no mastered share: no figure pretends they did
+    assert not names & {"return_vs_env_steps.png", "mastered_vs_env_steps.png"}
     for p in pngs:
         img = mpimg.imread(p)
         assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100
@@ -523,7 +525,7 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
     import mlflow
     from mlflow.entities import Metric
 
-    from copilot_ray.keys import EVAL_SUCCESS
+    from copilot_ray.keys import EVAL_MASTERED, EVAL_RETURN, EVAL_SUCCESS
 
     now = int(time.time() * 1000)
     finals = {"copilot": {"0": 0.8, "1": 0.9}, "ppo": {"0": 0.1, "1": 0.3}}
@@ -547,10 +549,12 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
             values = [final / 2, final]
             metrics = [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
             metrics += [Metric(SUCCESS_DIRECT, v / 2, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
+            metrics += [Metric(EVAL_RETURN, 1000 * v, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
             if algorithm == "copilot":
                 metrics += [
                     Metric(SUCCESS_PLANNED, v, now, s) for s, v in zip(STEPS[:2], values, strict=True)
                 ]
+                metrics += [Metric(EVAL_MASTERED, v, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
             client.log_batch(rid, metrics=metrics)
             client.set_terminated(rid, "FINISHED")
     out = tmp_path / "report"
@@ -560,7 +564,9 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
     assert frame.loc["algorithm=ppo", "success_final_iqm"] == pytest.approx(0.2)
     assert frame.loc["algorithm=copilot", "success_final_iqm"] == pytest.approx(0.85)
     assert np.isnan(frame.loc["algorithm=ppo", "planned_final_iqm"])  # PPO has no plan
-    for name in ("success_by_method.png", "final_success_by_method.png"):
+    # the Ant maze's return (Fig. 2d) from both, the walker's mastered share (Fig. 3) where logged
+    names = ("success_by_method.png", "final_success_by_method.png", "return_vs_env_steps.png")
+    for name in (*names, "mastered_vs_env_steps.png"):
         assert (out / name).stat().st_size > 10_000
         assert name in (out / "report.md").read_text()
     assert main([*argv, "--also-from", uris["copilot"]]) == 2  # the same runs twice

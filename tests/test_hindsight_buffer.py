@@ -122,3 +122,28 @@ def test_bad_arguments_are_named():
         )
     with pytest.raises(ValueError, match="empty"):
         buf.sample(1, np.random.default_rng(0))
+
+
+def test_a_goal_independent_dense_reward_is_kept_in_relabelled_rewards():
+    """The walker's own reward (info["dense_reward"]) does not depend on the goal: a relabelled
+    transition gets the recomputed goal reward plus the stored dense one."""
+    buf = make(n_sampled_goal=4)
+    steps = 6
+    pos = np.stack([np.arange(steps + 1), np.zeros(steps + 1)], axis=1).astype(np.float32)
+    dense = np.arange(steps, dtype=np.float32) / 10  # 0.0, 0.1, ... by the step's x
+    buf.add_episode(
+        pos,
+        pos,
+        np.array([9.0, 9.0], np.float32),
+        np.ones((steps, 1)),
+        dense,
+        False,
+        np.zeros(steps, bool),
+        dense,
+    )
+    batch = buf.sample(2000, np.random.default_rng(2))
+    obs, goal = LAYOUT.split(batch[OBS])
+    next_obs, _ = LAYOUT.split(batch[NEXT_OBS])
+    relabelled = goal[:, 1] != 9.0
+    reached = np.linalg.norm(next_obs - goal, axis=1) <= RADIUS
+    np.testing.assert_allclose(batch[REWARDS], reached * relabelled + obs[:, 0] / 10, rtol=1e-6)

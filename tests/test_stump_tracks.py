@@ -219,3 +219,81 @@ def test_mastery_evaluation_of_a_trivial_policy():
     assert {shape[0] for shape in calls} <= {1, 2, 3, 4}
     again = evaluate_mastery(still, {"num_eval_distributions": 3}, tracks_per_distribution=2, batch_size=6)
     assert np.array_equal(again.returns, result.returns)  # seeded by the tracks, any batch size
+
+
+def test_walker_reward_weight_reports_the_walkers_reward_as_the_dense_one():
+    env = make("walker-stumps", walker_reward_weight=2.0)
+    env.reset(seed=0)
+    _, reward, _, _, info = env.step(np.ones(4))
+    assert info["dense_reward"] == pytest.approx(2.0 * info["walker_reward"]) and info["walker_reward"] != 0
+    assert reward == 0.0  # the step's own reward stays the sparse goal reward (HER recomputes it)
+    env.close()
+    with pytest.raises(ValueError, match="'walker_reward_weight'"):
+        make("walker-stumps", walker_reward_weight=-1.0)
+
+
+@pytest.mark.parametrize("env_id, legs", [("walker-stumps-short", "short"), ("walker-stumps-long", "long")])
+def test_each_leg_setting_has_an_env_id(env_id, legs):
+    env = make(env_id)
+    assert env.config["legs"] == legs
+    env.close()
+
+
+def test_mastery_follows_the_plan_by_the_hulls_position():
+    """With a plan the agent is conditioned on the first waypoint more than success_radius ahead of
+    the hull (the last one at the end), as a traversal of the track's sub-goals would."""
+    env = make("walker-stumps", num_eval_distributions=1, tracks_per_distribution=1)
+    seen = []
+
+    def still(flat):
+        seen.append(flat[:, 25:].copy())  # goal, then goal - achieved
+        return np.zeros((len(flat), 4))
+
+    path = np.array([[START_X], [10.0], [30.0], [FAR_END]])
+    env.mastery(still, path, with_delta=True)
+    goal, delta = seen[0][:, 0], seen[0][:, 1]
+    assert goal[0] == pytest.approx(10.0) and delta[0] == pytest.approx(10.0 - START_X, abs=0.1)
+    assert all(g[0, 0] == pytest.approx(10.0) for g in seen)  # a still walker never gets past it
+    env.mastery(still, None)
+    assert seen[-1].shape == (1, 1) and seen[-1][0, 0] == pytest.approx(FAR_END)  # alone: the far end
+    env.close()
+
+
+@pytest.mark.ray
+def test_copilot_and_sac_report_the_mastered_share_on_the_walker(ray_session):
+    """One short iteration each on the short-legged walker: the planner plans along the track (1-d),
+    the traversal runs on Box2D with the walker's reward added, and the evaluation walks the evaluation
+    tracks and logs the mastered share and the walker's mean return."""
+    from copilot_ray import keys
+    from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
+    from copilot_ray.algorithms.sac.algorithm import GoalSACConfig
+
+    env_config = {"num_eval_distributions": 2, "tracks_per_distribution": 1, "walker_reward_weight": 1.0}
+    common = {
+        "tau_max": 20,
+        "task_batch_size": 1,
+        "reward_scale": 200.0,
+        "eval_interval": 1,
+        "eval_num_tasks": 1,
+    }
+    copilot = dict(
+        tree_depth=2, repetitions=1, planner_task_batch_size=2, planner_warm_start=2, eval_tree_tasks=1
+    )
+    for cls, extra in ((CoPilotConfig, copilot), (GoalSACConfig, {})):
+        algo = (
+            cls()
+            .environment("walker-stumps-short", env_config=env_config)
+            .copilot(**common, **extra)
+            .debugging(seed=0)
+            .build_algo()
+        )
+        try:
+            result = algo.train()
+            assert keys.result_value(result, keys.ENV_STEPS) > 0
+            assert keys.result_value(result, keys.EVAL_MASTERED) == 0.0  # an untrained walker masters nothing
+            assert keys.result_value(result, keys.EVAL_ENV_RETURN) < 0  # it falls: -100
+            if cls is CoPilotConfig:
+                tree = algo.planner.sample(algo.test_starts[:1], algo.test_goals[:1], deterministic=True)
+                assert tree.shape == (1, 5, 1)
+        finally:
+            algo.stop()

@@ -258,3 +258,22 @@ def test_state_goal_delta_input_appends_subgoal_minus_position():
     assert env.observation_space.contains(obs)
     plain = make_ruled_env()
     assert plain.observation_space.shape == (4,)
+
+
+def test_a_dense_env_reward_is_added_unscaled_to_the_sub_task_reward():
+    """R / 2^k scales the goal reward only; the env's goal-independent reward (the walker's own) is
+    added as it is, and the traversal env passes it on in its info."""
+    rules = TraversalRules(subtask_reward="halving", reward_scale=200.0)
+    reward, terminated = rules.reward(
+        np.array([1.0, 0.0]), np.array([True, False]), np.zeros(2), 3, np.array([0.5, -2.0])
+    )
+    np.testing.assert_allclose(reward, [200.0 / 8 + 0.5, -2.0])
+    np.testing.assert_array_equal(terminated, [True, False])
+    env = TraversalEnv(
+        {"goal_env": "walker-stumps", "goal_env_config": {"walker_reward_weight": 2.0}, "tau_max": 5}
+    )
+    tree = np.array([[[4.67], [80.0]]], np.float32)
+    env.load_plan(tree, depth=0, task_ids=np.array([0]))
+    env.reset()
+    _, reward, _, _, info = env.step(np.zeros(4))
+    assert info["dense_reward"] == pytest.approx(reward) and reward != 0.0  # no goal reward, walker's x 2

@@ -18,6 +18,8 @@ ENV_FACTORIES: dict[str, str] = {
     "maze-snake": "copilot_ray.envs.maze.env:make_maze_snake",
     "ant-maze": "copilot_ray.envs.ant_maze:make_ant_maze",
     "walker-stumps": "copilot_ray.envs.stump_tracks:make_walker_stumps",
+    "walker-stumps-short": "copilot_ray.envs.stump_tracks:make_walker_stumps_short",
+    "walker-stumps-long": "copilot_ray.envs.stump_tracks:make_walker_stumps_long",
 }
 
 

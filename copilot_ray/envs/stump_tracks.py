@@ -136,6 +136,10 @@ DEFAULTS: dict[str, Any] = {
     "max_episode_steps": 2000,
     "success_radius": 0.5,  # world units: about one stump plus its width; ~10 steps of a walker's pace
     "goal_reward": 1.0,
+    # The walker's own Box2D reward (forward progress, torque and head-angle penalties, -100 on a fall)
+    # times this, reported per step as info["dense_reward"]: the agents add it to their sparse
+    # (sub-)goal reward. 0: goal rewards only (the paper's R / 2^k reading of Eq. 6 taken alone).
+    "walker_reward_weight": 0.0,
     "task_seed": 0,
     "task_split": "train",
     "num_eval_distributions": 50,
@@ -185,6 +189,8 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
         raise bad("success_radius", f"a number in (0, {FAR_END / 4:.3g}) (world units)")
     if not _number(cfg["goal_reward"]):
         raise bad("goal_reward", "a finite number")
+    if not (_number(cfg["walker_reward_weight"]) and cfg["walker_reward_weight"] >= 0):
+        raise bad("walker_reward_weight", "a number >= 0")
     for key in (
         "max_episode_steps",
         "num_eval_distributions",
@@ -364,6 +370,28 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
             raise ValueError(f"{key} = {arr.tolist()}: outside the goal space [0, {FAR_END:.4g}]")
         return float(arr[0])
 
+    def mastery(
+        self, policy: Policy, path: np.ndarray | None = None, with_delta: bool = False, **counts: Any
+    ) -> MasteryResult:
+        """`evaluate_mastery` on this env's config, the agent conditioned as in training: on the far end
+        (`path` None: the agent alone), or on the first sub-goal of `path` ([P, 1], the planned
+        waypoints along the track) more than `success_radius` ahead of the hull (the plan followed by
+        position, since every track shares the one task). `with_delta`: the policy also sees
+        goal - achieved (agent_input="state_goal_delta"). `counts`: num_distributions,
+        tracks_per_distribution (default: the env_config's)."""
+        ahead = None if path is None else np.sort(np.asarray(path, np.float32).reshape(-1)[1:])
+
+        def observe(obs: dict[str, np.ndarray]) -> np.ndarray:
+            achieved = obs["achieved_goal"]
+            if ahead is None:
+                goal = obs["desired_goal"]
+            else:
+                index = np.searchsorted(ahead, achieved[:, 0] + self.success_radius, side="right")
+                goal = ahead[np.minimum(index, len(ahead) - 1)][:, None]
+            return flat_observation(obs["observation"], goal, achieved if with_delta else None)
+
+        return evaluate_mastery(policy, self.config, observe=observe, **counts)
+
     def set_render_path(self, points: Any) -> None:
         """Sub-goals [P, 1] drawn as markers on the track by `render()`; None clears."""
         self._render_path = None if points is None else np.asarray(points, np.float64).reshape(-1)
@@ -502,6 +530,7 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
         distance = abs(float(self.hull.position.x) - self._goal)
         return {
             "walker_reward": walker_reward,
+            "dense_reward": self.config["walker_reward_weight"] * walker_reward,
             "fallen": fallen,
             "failed": fallen,  # what evaluation.py and TraversalEnv read as "cannot go on"
             "collision": fallen,
@@ -528,6 +557,15 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
 
 def make_walker_stumps(**env_config: Any) -> GoalStumpTracksEnv:
     return GoalStumpTracksEnv(env_config)
+
+
+def make_walker_stumps_short(**env_config: Any) -> GoalStumpTracksEnv:
+    """The short-legged walker as an env id of its own (a sweep's `env.id` list is a grid axis)."""
+    return GoalStumpTracksEnv({"legs": "short", **env_config})
+
+
+def make_walker_stumps_long(**env_config: Any) -> GoalStumpTracksEnv:
+    return GoalStumpTracksEnv({"legs": "long", **env_config})
 
 
 # --- the paper's evaluation: mastered track distributions ------------------------------------------

@@ -764,6 +764,20 @@ class CoPilot(SAC):
             "planned_total_steps": None,
         }
 
+    def _evaluate_mastery(self, policy, planner) -> None:
+        """On an env with its own episode-level measure (the walker's mastered track distributions,
+        `mastery`): the agent following the plan of the first test task (all share one task there), or
+        alone without a planner."""
+        mastery = getattr(self.goal_env.unwrapped, "mastery", None)
+        if mastery is None:
+            return
+        path = None
+        if planner is not None:
+            path = planner.sample(self.test_starts[:1], self.test_goals[:1], deterministic=True)[0]
+        result = mastery(policy, path, with_delta=self.rules.agent_input == "state_goal_delta")
+        self.metrics.log_value(keys.metric_path(keys.EVAL_MASTERED), result.mastered_fraction, window=1)
+        self.metrics.log_value(keys.metric_path(keys.EVAL_ENV_RETURN), float(result.returns.mean()), window=1)
+
     def _task_reward(self) -> float:
         """R: what reaching a whole task's goal is worth (the goal env's reward x reward_scale)."""
         return float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * self.rules.reward_scale
@@ -803,6 +817,7 @@ class CoPilot(SAC):
         )
         reached = headline[keys.eval_leaf(keys.REACHED_PLANNED)]
         self.metrics.log_value(keys.metric_path(keys.EVAL_RETURN), self._task_reward() * reached, window=1)
+        self._evaluate_mastery(policies[cfg.eval_action], plan["planner"])
         for action, values in result.by_action.items():
             for key, value in values.items():
                 self.metrics.log_value(

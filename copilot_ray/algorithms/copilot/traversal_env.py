@@ -86,12 +86,21 @@ class TraversalRules:
         return self.reward_scale
 
     def reward(
-        self, env_reward: np.ndarray, reached: np.ndarray, collision: np.ndarray, layer: int = 0
+        self,
+        env_reward: np.ndarray,
+        reached: np.ndarray,
+        collision: np.ndarray,
+        layer: int = 0,
+        dense: np.ndarray | float = 0.0,
     ) -> tuple[np.ndarray, np.ndarray]:
         """(reward, terminated) of transitions, batched: the goal env's reward times `reward_factor`,
-        minus the collision penalty; terminated on reaching the sub-goal (or colliding, with
-        agent_collision="terminate"). TraversalEnv.step and HER's relabelled rewards both use it."""
-        reward = np.asarray(env_reward, np.float64) * self.reward_factor(layer)
+        minus the collision penalty, plus the env's goal-independent `dense` reward as it is
+        (info["dense_reward"]: the walker's own reward; 0 elsewhere); terminated on reaching the
+        sub-goal (or colliding, with agent_collision="terminate"). TraversalEnv.step and HER's
+        relabelled rewards both use it."""
+        reward = np.asarray(env_reward, np.float64) * self.reward_factor(layer) + np.asarray(
+            dense, np.float64
+        )
         terminated = np.asarray(reached, bool)
         if self.agent_collision != "none":
             collision = np.asarray(collision, bool)
@@ -217,13 +226,14 @@ class TraversalEnv(gym.Env):
         layer = self._current.layer if self._current is not None else 0
         collision = bool(info.get("collision", False))
         # Sub-task reward (paper Eq. 6: R / 2^k, so every layer's traversal is worth R in total).
-        reward, terminated = self.rules.reward(reward, reached, collision, layer)
+        dense = float(info.get("dense_reward", 0.0))
+        reward, terminated = self.rules.reward(reward, reached, collision, layer, dense)
         reward, terminated = float(reward), bool(terminated)
         # A failure the agent cannot undo (the Ant flipped over) ends the sub-task early.
         failed = bool(info.get("failed", False))
         truncated = (not terminated) and (self._steps >= self._limit or failed)
         # The achieved goal of every step: what hindsight relabelling (HER, SoRB) takes goals from.
-        out_info = {"collision": collision, "achieved_goal": self._position}
+        out_info = {"collision": collision, "achieved_goal": self._position, "dense_reward": dense}
         if terminated or truncated:
             out_info.update(
                 subtask_idle=self._current is None,

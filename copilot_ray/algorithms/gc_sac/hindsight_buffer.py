@@ -71,6 +71,9 @@ _STORED = {  # column -> (width: "obs" | "goal" | "action" | None for scalars, d
     REWARDS: (None, np.float32),
     TERMINATEDS: (None, bool),
     "collision": (None, bool),
+    # The goal env's goal-independent per-step reward (info["dense_reward"], e.g. the walker's own),
+    # part of the stored reward and added back to a relabelled one.
+    "dense": (None, np.float32),
     "episode_start": (None, np.int64),  # lifetime index of the episode's first transition
     "episode_length": (None, np.int64),
     "step": (None, np.int64),  # position in the episode, 0-based
@@ -143,10 +146,11 @@ class HindsightReplayBuffer:
         rewards: np.ndarray,
         terminated: bool,
         collisions: np.ndarray,
+        dense: np.ndarray | None = None,
     ) -> int:
         """One episode (or its first T steps): T + 1 raw observations and achieved goals, its goal,
-        T actions, rewards and collision flags; `terminated`: whether its last step ended it.
-        Returns T."""
+        T actions, rewards and collision flags (and goal-independent dense rewards, default 0);
+        `terminated`: whether its last step ended it. Returns T."""
         t = len(actions)
         if t == 0:
             return 0
@@ -171,6 +175,7 @@ class HindsightReplayBuffer:
             REWARDS: rewards,
             TERMINATEDS: term,
             "collision": collisions,
+            "dense": np.zeros(t, np.float32) if dense is None else dense,
             "episode_start": np.full(t, self._num_added, np.int64),
             "episode_length": np.full(t, t, np.int64),
             "step": np.arange(t),
@@ -207,6 +212,7 @@ class HindsightReplayBuffer:
                 np.asarray(ep.get_rewards(), np.float32),
                 bool(ep.is_terminated),
                 np.array([bool(info.get("collision", False)) for info in infos[1:]]),
+                np.array([float(info.get("dense_reward", 0.0)) for info in infos[1:]], np.float32),
             )
         return added
 
@@ -239,7 +245,7 @@ class HindsightReplayBuffer:
             her = rows[:n_her]
             goals[:n_her] = self._hindsight_goals(her, rng)
             r, t = self.reward_fn(d["next_achieved"][her], goals[:n_her], d["collision"][her])
-            rewards[:n_her], terminateds[:n_her] = r, t
+            rewards[:n_her], terminateds[:n_her] = r + d["dense"][her], t
         out = {
             OBS: self.layout.compose(d["observation"][rows], goals, d["achieved"][rows]),
             NEXT_OBS: self.layout.compose(d["next_observation"][rows], goals, d["next_achieved"][rows]),

@@ -64,7 +64,9 @@ class GoalTaskEnv(gym.Env):
     def step(self, action):
         obs, reward, reached, _, info = self.goal_env.step(np.clip(action, -1.0, 1.0))
         self._steps += 1
-        reward, terminated = self.rules.reward(reward, reached, bool(info.get("collision", False)))
+        reward, terminated = self.rules.reward(
+            reward, reached, bool(info.get("collision", False)), dense=float(info.get("dense_reward", 0.0))
+        )
         truncated = not terminated and self._steps >= self.rules.tau_max
         return self._flat(obs), float(reward), bool(terminated), bool(truncated), info
 
