@@ -99,8 +99,8 @@ def config_label(trial: Trial, axes: list[str]) -> str:
         return trial.config_key
     if axes == [CONFIG_KEY_AXIS]:
         return trial.config_key
-    # An axis the trial's algorithm does not have (K of a baseline; "None" in older runs) is left out.
-    parts = [f"{a}={trial.tags[a]}" for a in axes if trial.tags.get(a, "None") != "None"]
+    # An axis the trial's algorithm does not have (K of a baseline; "None" or empty) is left out.
+    parts = [f"{a}={trial.tags[a]}" for a in axes if trial.tags.get(a, "None") not in ("None", "")]
     return ", ".join(parts) or trial.config_key
 
 

@@ -570,3 +570,18 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
         assert (out / name).stat().st_size > 10_000
         assert name in (out / "report.md").read_text()
     assert main([*argv, "--also-from", uris["copilot"]]) == 2  # the same runs twice
+
+
+def test_a_label_leaves_out_axes_the_trials_algorithm_lacks():
+    """A baseline has no K and no alpha schedule: its tags are empty or "None", and its label says
+    only what it has."""
+    from analysis.aggregate import config_label
+    from analysis.load import Trial
+
+    axes = ["algorithm", "K", "alpha_schedule"]
+    sac = Trial("r1", "sac", "FINISHED", "k", "0", {"algorithm": "sac", "K": "None", "alpha_schedule": ""})
+    copilot = Trial(
+        "r2", "cp", "FINISHED", "k", "0", {"algorithm": "copilot", "K": "3", "alpha_schedule": "p"}
+    )
+    assert config_label(sac, axes) == "algorithm=sac"
+    assert config_label(copilot, axes) == "algorithm=copilot, K=3, alpha_schedule=p"
