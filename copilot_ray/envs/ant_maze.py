@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import numbers
 from collections.abc import Mapping
 from typing import Any
 
@@ -35,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
 from copilot_ray.envs.maze.agents import PointMass
 from copilot_ray.envs.maze.geometry import Obstacles, merge_cells
 from copilot_ray.envs.maze.tasks import SPLITS, sample_task_pairs, split_rng
@@ -75,41 +75,30 @@ DEFAULTS: dict[str, Any] = {
 
 def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
     """Merge over DEFAULTS; reject unknown keys and bad values, naming the key and the value."""
-    unknown = [k for k in config if k not in DEFAULTS]
-    if unknown:
-        raise ValueError(
-            f"unknown ant-maze env_config key {unknown[0]!r}; valid keys: {', '.join(sorted(DEFAULTS))}"
-        )
-    cfg = {**DEFAULTS, **config}
+    cfg = merged_config("ant-maze", config, DEFAULTS)
 
     def bad(key: str, need: str) -> ValueError:
-        return ValueError(f"env_config[{key!r}] = {cfg[key]!r}: must be {need}")
-
-    def number(v: Any) -> bool:
-        return isinstance(v, numbers.Real) and not isinstance(v, bool) and bool(np.isfinite(v))
-
-    def integer(v: Any) -> bool:
-        return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+        return bad_value(cfg, key, need)
 
     if cfg["map"] not in MAPS:
         raise bad("map", f"one of {', '.join(MAPS)}")
     for key in ("success_radius", "min_task_distance"):
-        if not (number(cfg[key]) and cfg[key] > 0):
+        if not (is_number(cfg[key]) and cfg[key] > 0):
             raise bad(key, "a positive number (metres)")
-    if not (number(cfg["wall_margin"]) and 0 <= cfg["wall_margin"] < CELL_SIZE / 2):
+    if not (is_number(cfg["wall_margin"]) and 0 <= cfg["wall_margin"] < CELL_SIZE / 2):
         raise bad("wall_margin", f"a number in [0, {CELL_SIZE / 2:g}) (metres)")
-    if not number(cfg["goal_reward"]):
+    if not is_number(cfg["goal_reward"]):
         raise bad("goal_reward", "a finite number")
     for key in ("max_episode_steps", "num_train_tasks", "num_test_tasks"):
-        if not (integer(cfg[key]) and cfg[key] > 0):
+        if not (is_integer(cfg[key]) and cfg[key] > 0):
             raise bad(key, "a positive integer")
-    if not (integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
+    if not (is_integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
         raise bad("task_seed", "a non-negative integer")
     if cfg["task_split"] not in SPLITS:
         raise bad("task_split", f"one of {', '.join(SPLITS)}")
     if cfg["render_mode"] not in (None, "rgb_array"):
         raise bad("render_mode", "None or 'rgb_array'")
-    if not (integer(cfg["render_size"]) and cfg["render_size"] >= 16):
+    if not (is_integer(cfg["render_size"]) and cfg["render_size"] >= 16):
         raise bad("render_size", "an integer >= 16")
     return cfg
 

@@ -52,7 +52,6 @@ Goal-conditioned interface (the one every env in `copilot_ray.envs` offers; see 
 from __future__ import annotations
 
 import contextlib
-import numbers
 import os
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
@@ -63,6 +62,7 @@ from gymnasium import spaces
 from gymnasium.envs.box2d import bipedal_walker as bw
 from gymnasium.utils import EzPickle
 
+from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
 from copilot_ray.envs.goal_observation import flat_observation
 
 # --- geometry of Gymnasium's track (world units: pixels / SCALE) -----------------------------------
@@ -149,34 +149,21 @@ DEFAULTS: dict[str, Any] = {
 }
 
 
-def _number(v: Any) -> bool:
-    return isinstance(v, numbers.Real) and not isinstance(v, bool) and bool(np.isfinite(v))
-
-
-def _integer(v: Any) -> bool:
-    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
-
-
 def check_track_params(stump_height: Any, spacing: Any, key: str = "track") -> tuple[float, float]:
     """(stump_height, spacing) as floats, or a ValueError naming `key` and the value out of range."""
     for name, value in (("stump_height", stump_height), ("spacing", spacing)):
         low, high = PARAM_RANGES[name]
-        if not (_number(value) and low <= value <= high):
+        if not (is_number(value) and low <= value <= high):
             raise ValueError(f"{key} {name} = {value!r}: must be a number in [{low:g}, {high:g}]")
     return float(stump_height), float(spacing)
 
 
 def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
     """Merge over DEFAULTS; reject unknown keys and bad values, naming the key and the value."""
-    unknown = [k for k in config if k not in DEFAULTS]
-    if unknown:
-        raise ValueError(
-            f"unknown walker-stumps env_config key {unknown[0]!r}; valid keys: {', '.join(sorted(DEFAULTS))}"
-        )
-    cfg = {**DEFAULTS, **config}
+    cfg = merged_config("walker-stumps", config, DEFAULTS)
 
     def bad(key: str, need: str) -> ValueError:
-        return ValueError(f"env_config[{key!r}] = {cfg[key]!r}: must be {need}")
+        return bad_value(cfg, key, need)
 
     if cfg["legs"] not in LEG_HEIGHTS:
         raise bad("legs", f"one of {', '.join(LEG_HEIGHTS)}")
@@ -185,11 +172,11 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
         if isinstance(track, str | bytes) or not hasattr(track, "__len__") or len(track) != 2:
             raise bad("track", "None or a pair (stump_height, spacing)")
         cfg["track"] = check_track_params(track[0], track[1], key="env_config['track']")
-    if not (_number(cfg["success_radius"]) and 0 < cfg["success_radius"] < FAR_END / 4):
+    if not (is_number(cfg["success_radius"]) and 0 < cfg["success_radius"] < FAR_END / 4):
         raise bad("success_radius", f"a number in (0, {FAR_END / 4:.3g}) (world units)")
-    if not _number(cfg["goal_reward"]):
+    if not is_number(cfg["goal_reward"]):
         raise bad("goal_reward", "a finite number")
-    if not (_number(cfg["walker_reward_weight"]) and cfg["walker_reward_weight"] >= 0):
+    if not (is_number(cfg["walker_reward_weight"]) and cfg["walker_reward_weight"] >= 0):
         raise bad("walker_reward_weight", "a number >= 0")
     for key in (
         "max_episode_steps",
@@ -197,9 +184,9 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
         "tracks_per_distribution",
         "train_tracks_per_distribution",
     ):
-        if not (_integer(cfg[key]) and cfg[key] > 0):
+        if not (is_integer(cfg[key]) and cfg[key] > 0):
             raise bad(key, "a positive integer")
-    if not (_integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
+    if not (is_integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
         raise bad("task_seed", "a non-negative integer")
     if cfg["task_split"] not in SPLITS:
         raise bad("task_split", f"one of {', '.join(SPLITS)}")
@@ -358,7 +345,7 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
         if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != 3:
             raise ValueError(f"reset option 'track' = {value!r}: must be (stump_height, spacing, seed)")
         h, s = check_track_params(value[0], value[1], key="reset option 'track'")
-        if not (_integer(value[2]) and value[2] >= 0):
+        if not (is_integer(value[2]) and value[2] >= 0):
             raise ValueError(f"reset option 'track' seed = {value[2]!r}: must be a non-negative integer")
         return Track(h, s, int(value[2]))
 

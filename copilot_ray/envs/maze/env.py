@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -10,6 +9,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+
+from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
 
 from .agents import AgentGeometry, PointMass
 from .geometry import Obstacles
@@ -45,21 +46,10 @@ DEFAULTS: dict[str, Any] = {
 
 def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
     """Merge over DEFAULTS; reject unknown keys and bad values, naming the key and the value."""
-    unknown = [k for k in config if k not in DEFAULTS]
-    if unknown:
-        raise ValueError(
-            f"unknown maze env_config key {unknown[0]!r}; valid keys: {', '.join(sorted(DEFAULTS))}"
-        )
-    cfg = {**DEFAULTS, **{k: config[k] for k in config}}
+    cfg = merged_config("maze", config, DEFAULTS)
 
     def bad(key: str, need: str) -> ValueError:
-        return ValueError(f"env_config[{key!r}] = {cfg[key]!r}: must be {need}")
-
-    def is_number(v: Any) -> bool:
-        return isinstance(v, numbers.Real) and not isinstance(v, bool) and np.isfinite(v)
-
-    def is_int(v: Any) -> bool:
-        return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+        return bad_value(cfg, key, need)
 
     if not isinstance(cfg["layout"], str | Path | Layout):
         raise bad("layout", "a built-in layout name or a path to a layout file")
@@ -69,15 +59,15 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
     if not is_number(cfg["goal_reward"]):
         raise bad("goal_reward", "a finite number")
     for key in ("max_episode_steps", "num_train_tasks", "num_test_tasks"):
-        if not (is_int(cfg[key]) and cfg[key] > 0):
+        if not (is_integer(cfg[key]) and cfg[key] > 0):
             raise bad(key, "a positive integer")
-    if not (is_int(cfg["task_seed"]) and cfg["task_seed"] >= 0):
+    if not (is_integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
         raise bad("task_seed", "a non-negative integer")
     if cfg["task_split"] not in SPLITS:
         raise bad("task_split", f"one of {', '.join(SPLITS)}")
     if cfg["render_mode"] not in GoalMazeEnv.metadata["render_modes"] + [None]:
         raise bad("render_mode", f"None or one of {GoalMazeEnv.metadata['render_modes']}")
-    if not (is_int(cfg["render_size"]) and cfg["render_size"] >= 16):
+    if not (is_integer(cfg["render_size"]) and cfg["render_size"] >= 16):
         raise bad("render_size", "an integer >= 16")
     return cfg
 
