@@ -227,6 +227,29 @@ def drill_driver_her(directory: Path, iterations: int) -> dict[str, int]:
     return audit(spec, iterations)
 
 
+def drill_driver_hrl(directory: Path, iterations: int) -> dict[str, int]:
+    """The driver drill on the HIRO-style hierarchy (a plain Tune Trainable with its own env loop),
+    seeds 0 and 1: both levels' learners and replays are in its checkpoint."""
+    spec = write_spec(
+        directory,
+        "drill_hrl",
+        iterations,
+        algorithm="hrl",
+        config={
+            "tau_max": 50,
+            "task_batch_size": 4,
+            "env_steps_per_iteration": 200,
+            "eval_interval": 1,
+            "eval_num_tasks": 10,
+            "num_steps_sampled_before_learning_starts": 200,
+        },
+        search=None,
+        seeds=[0, 1],
+    )
+    kill_driver_then_resume(spec, directory / "results" / "drill_hrl" / "tune")
+    return audit(spec, iterations)
+
+
 def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
     import optuna
 
@@ -327,6 +350,7 @@ def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
 DRILLS = {
     "driver": drill_driver,
     "driver_her": drill_driver_her,
+    "driver_hrl": drill_driver_hrl,
     "driver_optuna": drill_driver_optuna,
     "trial": drill_trial,
     "runner": drill_runner,
