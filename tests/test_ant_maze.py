@@ -216,3 +216,51 @@ def test_copilot_and_sac_train_and_evaluate_on_the_ant_maze(ray_session):
         assert keys.result_value(result, keys.EVAL_RETURN) in (0.0, 500.0, 1000.0)
     finally:
         sac.stop()
+
+
+@pytest.mark.ray
+def test_sorb_and_hrl_run_on_the_ant_maze(ray_session):
+    """The other two baselines of the paper's Fig. 2d through the same registry: SoRB searches its
+    replay graph in metres once pre-trained; HRL proposes sub-goals within its range of the maze."""
+    from copilot_ray import keys
+    from copilot_ray.algorithms.hrl.algorithm import HRL
+    from copilot_ray.algorithms.hrl.config import HRLConfig
+    from copilot_ray.algorithms.registry import RunContext
+    from copilot_ray.algorithms.sorb.algorithm import SoRBConfig
+
+    sorb = (
+        SoRBConfig()
+        .environment("ant-maze", env_config={"num_train_tasks": 8})
+        .copilot(tau_max=50, task_batch_size=2, reward_scale=1000.0, eval_interval=1, eval_num_tasks=2)
+        .training(num_steps_sampled_before_learning_starts=50)
+        .search(pretrain_env_steps=50, graph_size=40, max_edge_steps=100, waypoint_steps=25)
+        .debugging(seed=0)
+        .build_algo()
+    )
+    try:
+        sorb.train()
+        result = sorb.train()  # past pre-training: the graph is built at this evaluation
+        # (a young critic may keep no edge under the cutoff: then the route is [s0, g])
+        assert keys.result_value(result, keys.SORB_GRAPH_S) >= 0
+        assert keys.result_value(result, keys.SORB_WAYPOINTS) >= 2
+        assert keys.result_value(result, keys.EVAL_RETURN) in (0.0, 500.0, 1000.0)
+    finally:
+        sorb.stop()
+    values = {
+        "tau_max": 50,
+        "task_batch_size": 2,
+        "env_steps_per_iteration": 50,
+        "reward_scale": 1000.0,
+        "eval_num_tasks": 2,
+        "num_steps_sampled_before_learning_starts": 50,
+        "low.hidden": [32, 32],
+        "high.hidden": [32, 32],
+    }
+    hrl = HRL(HRLConfig.from_settings(values, RunContext(env_id="ant-maze", env_config={}, seed=0)))
+    try:
+        metrics = hrl.train()
+        assert 50 <= metrics[keys.ENV_STEPS] <= 100
+        assert metrics[keys.EVAL_RETURN] in (0.0, 500.0, 1000.0)
+        np.testing.assert_allclose(hrl.box.bound, 0.1 * 20.0)  # 0.1 of the 20 m maze per dimension
+    finally:
+        hrl.stop()
