@@ -83,9 +83,10 @@ def follow_waypoints(
     """Each env starts at waypoints[i, 0] and heads for waypoints[i, 1], [i, 2], ... in turn.
 
     A sub-task ends when its waypoint is reached or after tau_max steps; the next one starts from
-    wherever the agent stopped (`reset_toward`: an Ant keeps its motion). `with_delta`: the policy also sees waypoint - position
-    (agent_input="state_goal_delta"). `max_total_steps`: a budget for the whole path (the rollout
-    stops there, the rest of its waypoints unreached).
+    wherever the agent stopped (`reset_toward`: an Ant keeps its motion). `with_delta`: the policy
+    also sees waypoint - position (agent_input="state_goal_delta"). `max_total_steps`: a budget for
+    the whole path (the rollout stops there, the rest of its waypoints unreached); so does a failure
+    the agent cannot undo (`info["failed"]`: a flipped Ant, a fallen walker).
     """
     n, p, _ = waypoints.shape
     obs = np.zeros((n, envs[0].observation_space["observation"].shape[0]), np.float32)
