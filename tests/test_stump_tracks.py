@@ -297,3 +297,31 @@ def test_copilot_and_sac_report_the_mastered_share_on_the_walker(ray_session):
                 assert tree.shape == (1, 5, 1)
         finally:
             algo.stop()
+
+
+@pytest.mark.ray
+def test_sorb_runs_on_the_walker_and_reports_the_mastered_share(ray_session):
+    """The third method of the paper's Fig. 3 through the same registry: once pre-trained, SoRB searches
+    its replay graph along the track (1-d waypoints in hull x) and its evaluation walks the evaluation
+    tracks like the others'."""
+    from copilot_ray import keys
+    from copilot_ray.algorithms.sorb.algorithm import SoRBConfig
+
+    sorb = (
+        SoRBConfig()
+        .environment("walker-stumps", env_config={"num_eval_distributions": 2, "tracks_per_distribution": 1})
+        .copilot(tau_max=30, task_batch_size=1, reward_scale=200.0, eval_interval=1, eval_num_tasks=1)
+        .training(num_steps_sampled_before_learning_starts=30)
+        .search(pretrain_env_steps=30, graph_size=20, max_edge_steps=50, waypoint_steps=15)
+        .debugging(seed=0)
+        .build_algo()
+    )
+    try:
+        sorb.train()
+        result = sorb.train()  # past pre-training: the graph is built at this evaluation
+        assert keys.result_value(result, keys.SORB_GRAPH_S) >= 0
+        assert keys.result_value(result, keys.SORB_WAYPOINTS) >= 2  # at least [s0, g]
+        assert keys.result_value(result, keys.EVAL_MASTERED) == 0.0  # an untrained walker masters nothing
+        assert keys.result_value(result, keys.EVAL_ENV_RETURN) < 0  # it falls
+    finally:
+        sorb.stop()
