@@ -22,6 +22,19 @@ TRAINING_ITERATION = "training_iteration"
 TIME_TOTAL_S = "time_total_s"
 NODE_ID = "node_id"  # the Ray node a sweep trial's result came from (a string; Tune's result.json)
 
+# The result namespaces a trial's MLflow run keeps (flattened with "/"): every algorithm's own
+# diagnostics must sit under one of them, or they never reach MLflow.
+HRL_PREFIX = "hrl/"  # copilot_ray.algorithms.hrl's own diagnostics (its settings module names them)
+TRACKED_PREFIXES = (
+    "copilot/",
+    "sorb/",  # SoRB's graph (the names below)
+    HRL_PREFIX,
+    "paths/",
+    "env_runners/",
+    "learners/default_policy/",
+    "timers/",
+)
+
 # CO-PILOT's own metrics (copilot_ray.algorithms.copilot), all under "copilot/".
 COPILOT_PREFIX = "copilot/"
 ALPHA = "copilot/alpha"

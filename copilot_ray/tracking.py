@@ -44,6 +44,7 @@ from copilot_ray.keys import (
     SUMMARY_ARTIFACT,
     SWEEP_TAG,
     TIME_TOTAL_S,
+    TRACKED_PREFIXES,
     TRAINING_ITERATION,
     TREES_DIR,
     TRIAL_ID_TAG,
@@ -75,10 +76,9 @@ def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str,
 def metrics_from_result(result: Mapping[str, Any]) -> dict[str, float]:
     """The numeric metrics worth tracking from an RLlib result dict (flattened with '/')."""
     flat = flatten(result)
-    keep = ("copilot/", "paths/", "env_runners/", "learners/default_policy/", "timers/")
     out = {}
     for key, value in flat.items():
-        if not key.startswith(keep):
+        if not key.startswith(TRACKED_PREFIXES):
             continue
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue

@@ -214,3 +214,5 @@ def test_a_baselines_spec_file_runs_every_algorithm_into_one_experiment(ray_sess
         history = client.get_metric_history(run.info.run_id, keys.EVAL_SUCCESS)
         assert len(history) == 2 and all(0.0 <= m.value <= 1.0 for m in history)
         assert history[1].step > history[0].step > 0  # MLflow steps are env steps
+        if run.data.tags[ALGORITHM_TAG] == "sorb":  # its graph's figures reach MLflow too
+            assert len(client.get_metric_history(run.info.run_id, keys.SORB_WAYPOINTS)) == 2

@@ -8,6 +8,7 @@ import pytest
 import yaml
 
 from copilot_ray import keys
+from copilot_ray.algorithms.hrl import settings as S
 from copilot_ray.algorithms.hrl.hierarchy import (
     SubgoalBox,
     choose_candidates,
@@ -334,3 +335,6 @@ def test_a_sweep_runs_it_through_tune_into_mlflow(ray_session, tmp_path, capsys)
         history = client.get_metric_history(runs[0].info.run_id, key)
         assert len(history) == 2 and all(0.0 <= m.value <= 1.0 for m in history)
         assert history[1].step > history[0].step >= 200  # MLflow steps are env steps
+    # Its own diagnostics reach MLflow too (they were once dropped by the tracked-namespace filter).
+    assert len(client.get_metric_history(runs[0].info.run_id, S.SUBGOAL_REACHED)) == 2
+    assert client.get_metric_history(runs[0].info.run_id, S.LOW_QF_LOSS)  # once learning has started

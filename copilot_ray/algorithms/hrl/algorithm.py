@@ -150,7 +150,7 @@ class HRL:
                 results = update_from_buffer(
                     group, buffer, steps, settings["train_batch_size_per_learner"], rng, self.env_steps
                 )
-                stats.update({f"hrl/{level}/{k}": v for k, v in learner_stats(results).items()})
+                stats.update({f"{keys.HRL_PREFIX}{level}/{k}": v for k, v in learner_stats(results).items()})
         self.iteration += 1
         corrected = self.high_buffer.num_corrected - corrected_before
         metrics = {

@@ -122,11 +122,12 @@ HIGH = _level("high", "updates_per_transition", "high-level SAC gradient steps p
 
 SETTINGS: dict[str, Setting] = {s.key: s for s in (*TASK, *HIERARCHY, *LOW, *HIGH)}
 
-# Diagnostics only this algorithm logs.
-SUBGOAL_REACHED = "hrl/train/subgoal_reached"  # share of this iteration's segments ending at their sub-goal
-CORRECTION_KEPT = "hrl/correction/original_kept"  # share of corrected samples that kept the stored offset
-LOW_QF_LOSS, HIGH_QF_LOSS = "hrl/low/qf_loss", "hrl/high/qf_loss"
-LOW_ALPHA, HIGH_ALPHA = "hrl/low/alpha", "hrl/high/alpha"
+# Diagnostics only this algorithm logs, under keys.HRL_PREFIX (which MLflow tracking keeps).
+_P = keys.HRL_PREFIX
+SUBGOAL_REACHED = f"{_P}train/subgoal_reached"  # share of this iteration's segments ending at their sub-goal
+CORRECTION_KEPT = f"{_P}correction/original_kept"  # share of corrected samples that kept the stored offset
+LOW_QF_LOSS, HIGH_QF_LOSS = f"{_P}low/qf_loss", f"{_P}high/qf_loss"
+LOW_ALPHA, HIGH_ALPHA = f"{_P}low/alpha", f"{_P}high/alpha"
 EPISODE_RETURN_MEAN = "env_runners/episode_return_mean"  # RLlib's name: training episodes' mean return
 
 METRICS: tuple[str, ...] = (
