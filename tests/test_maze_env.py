@@ -182,7 +182,7 @@ def test_env_config_errors_name_the_key():
     with pytest.raises(ValueError, match=r"'success_radius'.*-1"):
         make("maze-point", success_radius=-1)
     with pytest.raises(ValueError, match=r"'task_split'"):
-        make("maze-point", task_split="validation")
+        make("maze-point", task_split="valdiation")
     with pytest.raises(ValueError, match=r"'max_episode_steps'"):
         make("maze-point", max_episode_steps=0)
 

@@ -7,7 +7,8 @@ from every goal env here (the 1 x 1 maze's interface):
 * goal = the torso's (x, y) in the maze plane (metres); `observation` = the Ant's full state, torso
   (x, y) included (29 numbers: positions then velocities, no contact forces), so the goal-conditioned
   agent knows where it is without the goal delta;
-* fixed, seeded task sets (`num_train_tasks` 50 / `num_test_tasks` 10, the paper's) of (s0, g) pairs in
+* fixed, seeded task sets (`num_train_tasks` 50 / `num_test_tasks` 10, the paper's; `num_validation_tasks`
+  10 for tuning) of (s0, g) pairs in
   free space, connected, at least `min_task_distance` apart;
 * the planner's model of the Ant is a point in the plane among the walls grown by `wall_margin`
   (`segments_collide` / `collision_lengths` are exact against those boxes, as the point maze's are);
@@ -38,6 +39,7 @@ from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged
 from copilot_ray.envs.maze.agents import PointMass
 from copilot_ray.envs.maze.geometry import Obstacles, merge_cells
 from copilot_ray.envs.maze.tasks import SPLITS, sample_task_pairs, split_rng
+from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, draw_task_sets
 
 # The package prints a notice about its unrelated Adroit envs to stderr on import.
 with contextlib.redirect_stderr(io.StringIO()):
@@ -65,6 +67,7 @@ DEFAULTS: dict[str, Any] = {
     "min_task_distance": CELL_SIZE,  # s0 and g at least one cell apart
     "max_episode_steps": 1000,
     "num_train_tasks": 50,
+    "num_validation_tasks": 10,
     "num_test_tasks": 10,
     "task_seed": 0,
     "task_split": "train",
@@ -89,7 +92,7 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
         raise bad("wall_margin", f"a number in [0, {CELL_SIZE / 2:g}) (metres)")
     if not is_number(cfg["goal_reward"]):
         raise bad("goal_reward", "a finite number")
-    for key in ("max_episode_steps", "num_train_tasks", "num_test_tasks"):
+    for key in ("max_episode_steps", "num_train_tasks", "num_validation_tasks", "num_test_tasks"):
         if not (is_integer(cfg[key]) and cfg[key] > 0):
             raise bad(key, "a positive integer")
     if not (is_integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
@@ -221,12 +224,11 @@ class GoalAntMazeEnv(gym.Env):
         )
 
     def tasks(self, split: str) -> tuple[np.ndarray, np.ndarray]:
-        """The fixed task sets: `train` (num_train_tasks) and `test` (num_test_tasks)."""
-        if split not in ("train", "test"):
-            raise ValueError(f"no fixed task set {split!r}; valid: train, test")
+        """The fixed task sets: `train`, `validation` and `test` (num_<split>_tasks each), disjoint."""
+        check_task_set(split)
         if not self._fixed:
-            for name in ("train", "test"):
-                self._fixed[name] = self.sample_tasks(self.config[f"num_{name}_tasks"], name)
+            sizes = {name: self.config[f"num_{name}_tasks"] for name in TASK_SETS}
+            self._fixed = draw_task_sets(self.sample_tasks, sizes)
         starts, goals = self._fixed[split]
         return starts.copy(), goals.copy()
 

@@ -42,8 +42,10 @@ Goal-conditioned interface (the one every env in `copilot_ray.envs` offers; see 
   draws a track from `task_split`'s set, start START_X, goal FAR_END.
 * Track sets: `num_eval_distributions` (50) track distributions (stump_height, spacing) drawn uniformly
   from the parameter ranges (seeded by `task_seed`), or the single fixed `track` distribution; "test"
-  has `tracks_per_distribution` (10) tracks of each, "train" `train_tracks_per_distribution` (20) other
-  tracks of the same distributions, "uniform" a fresh distribution and track at every reset.
+  has `tracks_per_distribution` (10) tracks of each, "validation" as many other tracks of each (for
+  tuning), "train" `train_tracks_per_distribution` (20) other tracks of the same distributions,
+  "uniform" a fresh distribution and track at every reset. The sets' tracks come from separate seed
+  streams (`task_sets.SPLIT_STREAMS`).
 * `evaluate_mastery`: the paper's measure. A batched policy walks every evaluation track in lockstep
   for full episodes (up to 2000 steps, a fall or the far end); a distribution is *mastered* when the
   MEAN of its tracks' walker returns exceeds 230 (Portelas et al.'s threshold).
@@ -64,6 +66,7 @@ from gymnasium.utils import EzPickle
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
 from copilot_ray.envs.goal_observation import flat_observation
+from copilot_ray.envs.task_sets import SPLIT_STREAMS, check_task_set
 
 # --- geometry of Gymnasium's track (world units: pixels / SCALE) -----------------------------------
 TERRAIN_STEP = bw.TERRAIN_STEP  # 14 / 30
@@ -128,7 +131,7 @@ class Track(NamedTuple):
     seed: int
 
 
-SPLITS = {"train": 0, "test": 1, "uniform": 2}
+SPLITS = SPLIT_STREAMS
 
 DEFAULTS: dict[str, Any] = {
     "legs": "default",
@@ -309,12 +312,11 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
         return evaluation_distributions(self.config["num_eval_distributions"], self.config["task_seed"])
 
     def tracks(self, split: str) -> list[Track]:
-        """The tracks of `split` ("train" / "test"), distribution by distribution."""
-        if split not in ("train", "test"):
-            raise ValueError(f"no fixed track set {split!r}; valid: train, test")
+        """The tracks of `split` ("train", "validation" or "test"), distribution by distribution."""
+        check_task_set(split)
         if split not in self._tracks:
             per = self.config[
-                "tracks_per_distribution" if split == "test" else "train_tracks_per_distribution"
+                "train_tracks_per_distribution" if split == "train" else "tracks_per_distribution"
             ]
             seed = self.config["task_seed"]
             self._tracks[split] = [
@@ -358,14 +360,19 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
         return float(arr[0])
 
     def mastery(
-        self, policy: Policy, path: np.ndarray | None = None, with_delta: bool = False, **counts: Any
+        self,
+        policy: Policy,
+        path: np.ndarray | None = None,
+        with_delta: bool = False,
+        split: str = "test",
+        **counts: Any,
     ) -> MasteryResult:
         """`evaluate_mastery` on this env's config, the agent conditioned as in training: on the far end
         (`path` None: the agent alone), or on the first sub-goal of `path` ([P, 1], the planned
         waypoints along the track) more than `success_radius` ahead of the hull (the plan followed by
         position, since every track shares the one task). `with_delta`: the policy also sees
-        goal - achieved (agent_input="state_goal_delta"). `counts`: num_distributions,
-        tracks_per_distribution (default: the env_config's)."""
+        goal - achieved (agent_input="state_goal_delta"). `split`: the track set walked ("test" or
+        "validation"). `counts`: num_distributions, tracks_per_distribution (default: the env_config's)."""
         ahead = None if path is None else np.sort(np.asarray(path, np.float32).reshape(-1)[1:])
 
         def observe(obs: dict[str, np.ndarray]) -> np.ndarray:
@@ -377,7 +384,7 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
                 goal = ahead[np.minimum(index, len(ahead) - 1)][:, None]
             return flat_observation(obs["observation"], goal, achieved if with_delta else None)
 
-        return evaluate_mastery(policy, self.config, observe=observe, **counts)
+        return evaluate_mastery(policy, self.config, observe=observe, split=split, **counts)
 
     def set_render_path(self, points: Any) -> None:
         """Sub-goals [P, 1] drawn as markers on the track by `render()`; None clears."""
@@ -587,17 +594,19 @@ def evaluate_mastery(
     threshold: float = MASTERED_RETURN,
     observe: Callable[[dict[str, np.ndarray]], np.ndarray] = _goal_observation,
     batch_size: int = 100,
+    split: str = "test",
 ) -> MasteryResult:
     """Which evaluation track distributions `policy` masters, by the walker's own reward.
 
-    Every test track (the first `num_distributions` distributions of the env's evaluation set, the
+    Every track of `split` ("test", or "validation" for tuning) (the first `num_distributions` distributions of the env's evaluation set, the
     first `tracks_per_distribution` tracks of each; default: the env_config's counts) is walked for a
     full episode: until a fall, the far end or `max_episode_steps`, the goal being the far end (the goal
     reward and goal termination are ignored). `batch_size` envs run in lockstep, one batched
     `policy(observe(obs))` call per step: `observe` defaults to concat(observation, goal) (what CO-PILOT's
     agent sees); pass `lambda o: o["observation"]` for a policy without goals. A distribution is mastered
     when the mean return of its tracks exceeds `threshold` (230)."""
-    cfg = {**dict(env_config or {}), "task_split": "test", "max_episode_steps": max_episode_steps}
+    check_task_set(split)
+    cfg = {**dict(env_config or {}), "task_split": split, "max_episode_steps": max_episode_steps}
     cfg.pop("render_mode", None)
     probe = GoalStumpTracksEnv(cfg)
     dists = probe.distributions()
@@ -606,7 +615,7 @@ def evaluate_mastery(
     n_track = per_dist if tracks_per_distribution is None else min(int(tracks_per_distribution), per_dist)
     if n_dist < 1 or n_track < 1:
         raise ValueError(f"nothing to evaluate: {n_dist} distributions x {n_track} tracks")
-    all_tracks = probe.tracks("test")
+    all_tracks = probe.tracks(split)
     tracks = [all_tracks[d * per_dist + t] for d in range(n_dist) for t in range(n_track)]
     probe.close()
     returns = np.zeros(len(tracks))

@@ -53,6 +53,10 @@ class AgentGeometry(ABC):
     def step(self, config: np.ndarray, action: np.ndarray) -> np.ndarray:
         """The configuration the action would reach if nothing were in the way."""
 
+    def step_batch(self, configs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """`step` of N configurations at once: [N, d], [N, a] -> [N, d] (evaluation's lockstep rollouts)."""
+        return np.stack([self.step(c, a) for c, a in zip(configs, actions, strict=True)])
+
     @abstractmethod
     def motions_collide(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """bool [N]: does moving straight (in configuration space) from a[i] to b[i] hit anything?"""
@@ -110,6 +114,11 @@ class PointMass(AgentGeometry):
         action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
         norm = float(np.linalg.norm(action))
         return np.asarray(config, dtype=np.float64) + self.speed * action / max(1.0, norm)
+
+    def step_batch(self, configs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        norms = np.sqrt(actions[:, 0] * actions[:, 0] + actions[:, 1] * actions[:, 1])
+        return np.asarray(configs, dtype=np.float64) + self.speed * actions / np.maximum(1.0, norms)[:, None]
 
     def motions_collide(self, obstacles: Obstacles, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return obstacles.segments_collide(a, b)

@@ -11,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
+from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, draw_task_sets
 
 from .agents import AgentGeometry, PointMass
 from .geometry import Obstacles
@@ -36,6 +37,7 @@ DEFAULTS: dict[str, Any] = {
     "goal_reward": 1.0,
     "max_episode_steps": 1000,
     "num_train_tasks": 300,
+    "num_validation_tasks": 100,
     "num_test_tasks": 100,
     "task_seed": 0,
     "task_split": "train",
@@ -58,7 +60,7 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
             raise bad(key, "a number in (0, 0.5)")
     if not is_number(cfg["goal_reward"]):
         raise bad("goal_reward", "a finite number")
-    for key in ("max_episode_steps", "num_train_tasks", "num_test_tasks"):
+    for key in ("max_episode_steps", "num_train_tasks", "num_validation_tasks", "num_test_tasks"):
         if not (is_integer(cfg[key]) and cfg[key] > 0):
             raise bad(key, "a positive integer")
     if not (is_integer(cfg["task_seed"]) and cfg["task_seed"] >= 0):
@@ -166,15 +168,12 @@ class GoalMazeEnv(gym.Env):
         return self._sample(n, split_rng(split, seed))
 
     def tasks(self, split: str) -> tuple[np.ndarray, np.ndarray]:
-        """The fixed task sets: `train` (num_train_tasks) and `test` (num_test_tasks), disjoint."""
-        if split not in ("train", "test"):
-            raise ValueError(f"no fixed task set {split!r}; valid: train, test")
+        """The fixed task sets (`task_sets.TASK_SETS`): `train`, `validation` and `test`
+        (num_<split>_tasks each), pairwise disjoint."""
+        check_task_set(split)
         if not self._fixed:
-            for name in ("train", "test"):
-                self._fixed[name] = self.sample_tasks(self.config[f"num_{name}_tasks"], name)
-            train = {tuple(r) for r in np.concatenate(self._fixed["train"], axis=1).tolist()}
-            test = {tuple(r) for r in np.concatenate(self._fixed["test"], axis=1).tolist()}
-            assert not train & test, "train and test tasks overlap"
+            sizes = {name: self.config[f"num_{name}_tasks"] for name in TASK_SETS}
+            self._fixed = draw_task_sets(self.sample_tasks, sizes)
         starts, goals = self._fixed[split]
         return starts.copy(), goals.copy()
 
@@ -256,6 +255,17 @@ class GoalMazeEnv(gym.Env):
         terminated = self.compute_terminated(obs["achieved_goal"], obs["desired_goal"], info)
         truncated = not terminated and self._steps >= self.max_episode_steps
         return obs, reward, terminated, truncated, info
+
+    def batch_step(self, configs: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`step`'s motion for N agents at once, without touching this env's own state:
+        configurations [N, d] (float32-exact), actions [N, a] -> (next configurations, collided [N]).
+        A blocked move leaves the agent where it was, as `step` does. The maze's whole state is the
+        configuration (observation = achieved goal), so lockstep evaluation rollouts keep arrays instead
+        of N envs."""
+        configs = np.asarray(configs, np.float64)
+        proposed = self.agent_geometry.step_batch(configs, actions).astype(np.float32).astype(np.float64)
+        collided = np.asarray(self.segments_collide(configs, proposed), bool)
+        return np.where(collided[:, None], configs, proposed), collided
 
     def _obs(self) -> dict[str, np.ndarray]:
         pos = self._config_now.astype(np.float32)

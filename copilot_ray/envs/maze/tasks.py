@@ -4,18 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from copilot_ray.envs.task_sets import SPLIT_STREAMS as SPLITS
+from copilot_ray.envs.task_sets import split_rng
+
 from .agents import AgentGeometry
 from .geometry import Obstacles
 from .layouts import BodyDoesNotFitError
 
-# Each split draws from its own seed stream, so train and test never share a pair for the same seed.
-SPLITS = {"train": 0, "test": 1, "uniform": 2}
-
-
-def split_rng(split: str, seed: int) -> np.random.Generator:
-    if split not in SPLITS:
-        raise ValueError(f"unknown task split {split!r}; valid: {', '.join(SPLITS)}")
-    return np.random.default_rng(np.random.SeedSequence([int(seed), SPLITS[split]]))
+__all__ = ["SPLITS", "check_body_fits", "sample_task_pairs", "split_rng"]
 
 
 FIT_SAMPLES = 50_000  # configurations tried before a body is declared not to fit a layout
