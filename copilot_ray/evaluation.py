@@ -33,6 +33,65 @@ from copilot_ray.planning.path_metrics import PathScores, score_paths
 from copilot_ray.planning.subgoal_tree import path_indices
 
 Policy = Callable[[np.ndarray], np.ndarray]
+# The task sets every evaluation runs on: validation (what searchers and probes read, under
+# copilot/validation/) and test (what reports show, under copilot/eval/).
+EVAL_SPLITS = ("validation", "test")
+
+
+class EvaluationSchedule:
+    """When an algorithm evaluates: every `every_iterations` iterations, or, with `every_env_steps` > 0,
+    at the end of each iteration that passes another multiple of that many env steps (one cadence for
+    methods whose iterations differ in size). Checkpointed with `get_state` / `set_state`."""
+
+    def __init__(self, every_iterations: int, every_env_steps: int = 0):
+        self.every_iterations = int(every_iterations)
+        self.every_env_steps = int(every_env_steps)
+        self._last_bucket = 0  # env steps // every_env_steps at the last evaluation
+
+    def due(self, iteration: int, env_steps: int) -> bool:
+        """Whether to evaluate after iteration `iteration` (1-based) ending at `env_steps`."""
+        if self.every_env_steps > 0:
+            bucket = int(env_steps) // self.every_env_steps
+            if bucket > self._last_bucket:
+                self._last_bucket = bucket
+                return True
+            return False
+        return bool(self.every_iterations) and iteration % self.every_iterations == 0
+
+    def get_state(self) -> dict[str, int]:
+        return {"last_bucket": self._last_bucket}
+
+    def set_state(self, state: dict[str, int]) -> None:
+        self._last_bucket = int(state.get("last_bucket", 0))
+
+
+class SuccessCurve:
+    """One split's success at each evaluation so far, and the area under that curve normalised by its
+    env-step span (trapezoid; with one evaluation, its value): `keys.EVAL_SUCCESS_AUC`."""
+
+    def __init__(self):
+        self.steps: list[float] = []
+        self.values: list[float] = []
+
+    def add(self, env_steps: int, value: float) -> float:
+        """Records an evaluation and returns the normalised area so far."""
+        self.steps.append(float(env_steps))
+        self.values.append(float(value))
+        return self.auc()
+
+    def auc(self) -> float:
+        if not self.values:
+            return float("nan")
+        span = self.steps[-1] - self.steps[0]
+        if span <= 0:
+            return float(np.mean(self.values))
+        return float(np.trapezoid(self.values, self.steps) / span)
+
+    def get_state(self) -> dict[str, list[float]]:
+        return {"steps": list(self.steps), "values": list(self.values)}
+
+    def set_state(self, state: dict[str, list[float]]) -> None:
+        self.steps, self.values = list(state.get("steps", [])), list(state.get("values", []))
 
 
 class ModulePolicy:
@@ -72,23 +131,91 @@ class WaypointRollout:
     subtask_reached: np.ndarray  # [N, P-1]
 
 
+class _EnvRollouts:
+    """N copies of any goal env, stepped one after another (one batched policy call per step)."""
+
+    def __init__(self, envs: list):
+        self.envs = envs
+
+    def reset(self, i: int, start: np.ndarray, goal: np.ndarray) -> dict[str, np.ndarray]:
+        return self.envs[i].reset(options={"start": start, "goal": goal})[0]
+
+    def retarget(self, i: int, position: np.ndarray, goal: np.ndarray) -> dict[str, np.ndarray]:
+        return reset_toward(self.envs[i], position, goal)[0]
+
+    def step(self, ids: np.ndarray, actions: np.ndarray, goals: np.ndarray):
+        """(observations, achieved goals, reached, collided, failed) of envs `ids` after `actions`."""
+        obs, achieved = [], []
+        n = len(ids)
+        reached, collided, failed = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+        for j, i in enumerate(ids):
+            o, _, done, _, info = self.envs[i].step(actions[j])
+            obs.append(o["observation"])
+            achieved.append(o["achieved_goal"])
+            reached[j] = bool(done)
+            collided[j] = bool(info.get("collision", False))
+            failed[j] = bool(info.get("failed", False))
+        return np.stack(obs), np.stack(achieved), reached, collided, failed
+
+
+class _BatchRollouts:
+    """N agents of one goal env whose whole state is its configuration (the maze: `batch_step`),
+    stepped as arrays: one call per step for all of them, no env objects per task."""
+
+    def __init__(self, env, n: int):
+        self.env = env
+        self.position = np.zeros((n, env.goal_dim))
+
+    def reset(self, i: int, start: np.ndarray, goal: np.ndarray) -> dict[str, np.ndarray]:
+        self.position[i] = np.asarray(start, np.float32)
+        return self._obs(i)
+
+    def retarget(self, i: int, position: np.ndarray, goal: np.ndarray) -> dict[str, np.ndarray]:
+        return self._obs(i)  # the agent stays where it is: the same as a reset there
+
+    def _obs(self, i: int) -> dict[str, np.ndarray]:
+        pos = self.position[i].astype(np.float32)
+        return {"observation": pos, "achieved_goal": pos}
+
+    def step(self, ids: np.ndarray, actions: np.ndarray, goals: np.ndarray):
+        moved, collided = self.env.batch_step(self.position[ids], actions)
+        self.position[ids] = moved
+        achieved = moved.astype(np.float32)
+        reached = np.asarray(self.env.compute_terminated(achieved, goals.astype(np.float32)), bool)
+        return achieved, achieved, reached, collided, np.zeros(len(ids), bool)
+
+
+def rollouts_for(envs: list):
+    """Lockstep rollouts over `envs` (copies of one goal env): as arrays where the env offers
+    `batch_step`, else env by env."""
+    inner = envs[0].unwrapped
+    if hasattr(inner, "batch_step"):
+        return _BatchRollouts(inner, len(envs))
+    return _EnvRollouts(envs)
+
+
 def follow_waypoints(
     envs: list,
     policy: Policy,
     waypoints: np.ndarray,
-    tau_max: int,
+    tau_max: int | np.ndarray,
     with_delta: bool = False,
     max_total_steps: int | None = None,
 ) -> WaypointRollout:
     """Each env starts at waypoints[i, 0] and heads for waypoints[i, 1], [i, 2], ... in turn.
 
-    A sub-task ends when its waypoint is reached or after tau_max steps; the next one starts from
-    wherever the agent stopped (`reset_toward`: an Ant keeps its motion). `with_delta`: the policy
-    also sees waypoint - position (agent_input="state_goal_delta"). `max_total_steps`: a budget for
-    the whole path (the rollout stops there, the rest of its waypoints unreached); so does a failure
-    the agent cannot undo (`info["failed"]`: a flipped Ant, a fallen walker).
+    A sub-task ends when its waypoint is reached or after `tau_max` steps (an int, or per task and
+    waypoint: broadcastable to [N, P - 1]); the next one starts from wherever the agent stopped
+    (`reset_toward`: an Ant keeps its motion). `with_delta`: the policy also sees waypoint - position
+    (agent_input="state_goal_delta"). `max_total_steps`: a budget for the whole path (the rollout stops
+    there, the rest of its waypoints unreached); so does a failure the agent cannot undo
+    (`info["failed"]`: a flipped Ant, a fallen walker). Success needs the last waypoint reached with no
+    collision on the way: a collision on an early sub-goal fails the rollout.
     """
     n, p, _ = waypoints.shape
+    limits = np.broadcast_to(np.asarray(tau_max, np.int64), (n, p - 1))
+    budget = np.iinfo(np.int64).max if max_total_steps is None else int(max_total_steps)
+    rollouts = rollouts_for(envs)
     obs = np.zeros((n, envs[0].observation_space["observation"].shape[0]), np.float32)
     pos = waypoints[:, 0].copy()
     target = np.ones(n, np.int64)
@@ -97,33 +224,32 @@ def follow_waypoints(
     sub_reached = np.zeros((n, p - 1), bool)
     collided = np.zeros(n, bool)
     total = np.zeros(n, np.int64)
-    for i, env in enumerate(envs):
-        o, _ = env.reset(options={"start": waypoints[i, 0], "goal": waypoints[i, 1]})
-        obs[i] = o["observation"]
-        pos[i] = o["achieved_goal"]
+    for i in range(n):
+        o = rollouts.reset(i, waypoints[i, 0], waypoints[i, 1])
+        obs[i], pos[i] = o["observation"], o["achieved_goal"]
     active = np.ones(n, bool)
     while active.any():
         ids = np.flatnonzero(active)
         goals = waypoints[ids, target[ids]]
         actions = policy(flat_observation(obs[ids], goals, pos[ids] if with_delta else None))
-        for j, i in enumerate(ids):
-            o, _, reached, _, info = envs[i].step(actions[j])
-            obs[i], pos[i] = o["observation"], o["achieved_goal"]
-            collided[i] |= bool(info.get("collision", False))
-            steps_in[i] += 1
-            total[i] += 1
-            # Out of budget, or a failure the agent cannot undo (a flipped Ant): the rollout ends.
-            over = (max_total_steps is not None and total[i] >= max_total_steps) or info.get("failed", False)
-            if reached or steps_in[i] >= tau_max or over:
-                t = target[i] - 1
-                sub_steps[i, t], sub_reached[i, t] = steps_in[i], bool(reached)
-                steps_in[i] = 0
-                target[i] += 1
-                if target[i] >= p or over:
-                    active[i] = False
-                else:
-                    o, _ = reset_toward(envs[i], pos[i], waypoints[i, target[i]])
-                    obs[i], pos[i] = o["observation"], o["achieved_goal"]
+        obs[ids], pos[ids], reached, hit, failed = rollouts.step(ids, actions, goals)
+        collided[ids] |= hit
+        steps_in[ids] += 1
+        total[ids] += 1
+        # Out of budget, or a failure the agent cannot undo (a flipped Ant): the rollout ends.
+        over = (total[ids] >= budget) | failed
+        ended = reached | (steps_in[ids] >= limits[ids, target[ids] - 1]) | over
+        for j in np.flatnonzero(ended):
+            i = ids[j]
+            t = target[i] - 1
+            sub_steps[i, t], sub_reached[i, t] = steps_in[i], reached[j]
+            steps_in[i] = 0
+            target[i] += 1
+            if target[i] >= p or over[j]:
+                active[i] = False
+            else:
+                o = rollouts.retarget(i, pos[i], waypoints[i, target[i]])
+                obs[i], pos[i] = o["observation"], o["achieved_goal"]
     reached_final = sub_reached[:, -1]
     return WaypointRollout(reached_final & ~collided, reached_final, collided, total, sub_steps, sub_reached)
 
@@ -158,6 +284,7 @@ def evaluate_copilot(
     step_limit_of: Callable[[int], int] | None = None,
     with_delta: bool = False,
     planned_total_steps: int | None = None,
+    hop_limits: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> CopilotEvaluation:
     """Success of each policy in `policies` (e.g. deterministic and sampled actions) on the tasks.
 
@@ -166,27 +293,32 @@ def evaluate_copilot(
     tau_max * 2^K. The trees of the first `tree_tasks` tasks are traversed layer by layer with
     `policies[tree_policy]` (default: the first policy) for the sub-goal tree figure.
     `planner`: anything with `sample(starts, goals, deterministic=True) -> [N, P, d]` waypoints (a
-    SoRB graph too); `planned_total_steps` caps a planned rollout's steps in all. Without a planner
-    the planned rollout is the direct one when their budgets agree (run once).
+    SoRB graph too); `hop_limits(waypoints)` -> [N, P - 1] replaces `step_limit_of(K)` per task and hop
+    where given (SoRB: a task its graph cannot route gets the whole budget for its one hop). A planned
+    rollout never takes more steps than the task's budget, tau_max * 2^K (the direct one's), nor more
+    than `planned_total_steps` when that is smaller. Without a planner the planned rollout is the direct
+    one when their budgets agree (run once).
     """
 
     step_limit_of = step_limit_of or (lambda k: tau_max)
+    direct_budget = tau_max * 2**depth  # the agent alone gets the finest plan's whole budget
+    planned_cap = direct_budget if planned_total_steps is None else min(planned_total_steps, direct_budget)
     n = len(starts)
-    envs = [make(goal_env_id, **dict(goal_env_config)) for _ in range(n)]
+    first = make(goal_env_id, **dict(goal_env_config))
+    # An env that steps many agents as arrays (batch_step) needs one instance, not one per task.
+    shared = hasattr(first.unwrapped, "batch_step")
+    envs = [first] * n if shared else [first] + [make(goal_env_id, **dict(goal_env_config)) for _ in range(n - 1)]
     # depth 0: no planner, the "plan" is the task itself.
     trees = (
         np.stack([starts, goals], axis=1)
         if planner is None
         else planner.sample(starts, goals, deterministic=True)
     )
+    limits = step_limit_of(depth) if hop_limits is None else hop_limits(trees)
     by_action = {}
     for name, policy in policies.items():
-        planned = follow_waypoints(
-            envs, policy, trees, step_limit_of(depth), with_delta, max_total_steps=planned_total_steps
-        )
-        # The agent alone gets the same step budget as the finest plan.
-        direct_budget = tau_max * 2**depth
-        if planner is None and step_limit_of(depth) == direct_budget and planned_total_steps is None:
+        planned = follow_waypoints(envs, policy, trees, limits, with_delta, max_total_steps=planned_cap)
+        if planner is None and np.all(np.asarray(limits) == direct_budget):
             direct = planned  # the same rollout
         else:
             direct = follow_waypoints(
@@ -217,7 +349,7 @@ def evaluate_copilot(
             r = follow_waypoints(envs[:tree_tasks], policy, path, step_limit_of(k), with_delta)
             tree_steps[:, k, : 2**k] = r.subtask_steps
             tree_reached[:, k, : 2**k] = r.subtask_reached
-    for env in envs:
+    for env in {id(e): e for e in envs}.values():
         env.close()
     return CopilotEvaluation(
         by_action=by_action,

@@ -43,9 +43,11 @@ COST_MODEL_LOSS = "copilot/cost_model/loss"
 TIME_PREFIX = "copilot/time/"  # wall seconds per phase of an iteration
 PLANNING_SHARE = "copilot/time/planning_share"
 
-# Evaluation on the held-out test tasks: the headline action's figures, and per action mode
-# (`eval_by_action`: copilot/eval/<action>/<name>).
+# Evaluation on the held-out TEST tasks (what reports show): the headline action's figures, and per
+# action mode (`eval_by_action`: copilot/eval/<action>/<name>). The same figures on the VALIDATION tasks
+# (what searchers, schedulers and probes read) are under copilot/validation/ (`validation_key`).
 EVAL_PREFIX = "copilot/eval/"
+VALIDATION_PREFIX = "copilot/validation/"
 SUCCESS_PLANNED = "copilot/eval/success_planned"
 SUCCESS_DIRECT = "copilot/eval/success_direct"
 # The one figure every algorithm reports (Fig. 2a / 4a compare it): CO-PILOT's success_planned, the
@@ -72,7 +74,19 @@ SORB_GRAPH_S = "sorb/graph_s"
 # Set by the sweep's trial on every result: 1 when this iteration evaluated, 0 when the success
 # metrics repeat the last evaluation.
 EVAL_FRESH = "copilot/eval/fresh"
+# Area under the success curve so far, normalised by its env-step span (trapezoid over the evaluations):
+# one number that rewards learning early and ending high (a searcher's objective on validation tasks).
+EVAL_SUCCESS_AUC = "copilot/eval/success_auc"
 EVAL_ACTIONS = ("deterministic", "sampled")
+
+# What a method uses that its baselines may not (copilot_ray.privileges), counted since the run began:
+# ground-truth collision checks, resets of the agent to a state other than a task's start, and
+# questions to the map whether a state is free. Every algorithm logs all three (0 where it has none).
+PRIVILEGE_PREFIX = "copilot/privileges/"
+PRIVILEGE_COLLISION_CHECKS = "copilot/privileges/collision_checks"
+PRIVILEGE_RESETS = "copilot/privileges/resets"
+PRIVILEGE_MAP_QUERIES = "copilot/privileges/map_queries"
+PRIVILEGE_COUNTS = (PRIVILEGE_COLLISION_CHECKS, PRIVILEGE_RESETS, PRIVILEGE_MAP_QUERIES)
 
 # The planner (PPO over sub-goal trees).
 PLANNER_PREFIX = "copilot/planner/"
@@ -145,6 +159,7 @@ B_TAG = "b"
 ALPHA_SCHEDULE_TAG = "alpha_schedule"
 PRESET_TAG = "preset"
 VARIANT_TAG = "variant"
+PRIVILEGES_TAG = "copilot.privileges"  # comma-separated privilege names (copilot_ray.privileges), or "none"
 AXIS_TAGS = (ALGORITHM_TAG, ENV_TAG, VARIANT_TAG, PRESET_TAG, K_TAG, B_TAG, ALPHA_SCHEDULE_TAG)  # label order
 
 # Artifacts. TREES_DIR is also the folder the algorithm writes under its logdir.
@@ -176,6 +191,24 @@ def eval_leaf(key: str) -> str:
     if not key.startswith(EVAL_PREFIX):
         raise ValueError(f"{key!r} is not an evaluation metric ({EVAL_PREFIX}...)")
     return key[len(EVAL_PREFIX) :]
+
+
+def validation_key(key: str) -> str:
+    """A test-set evaluation key's validation-set twin: ``copilot/eval/success`` ->
+    ``copilot/validation/success``."""
+    if not key.startswith(EVAL_PREFIX):
+        raise ValueError(f"{key!r} is not an evaluation metric ({EVAL_PREFIX}...)")
+    return VALIDATION_PREFIX + key[len(EVAL_PREFIX) :]
+
+
+def validation_metrics(*test_keys: str) -> tuple[str, ...]:
+    """The validation twins of `test_keys` (what an algorithm's METRICS offers searchers)."""
+    return tuple(validation_key(k) for k in test_keys)
+
+
+def is_test_metric(key: str) -> bool:
+    """Whether `key` is a figure of the test tasks (evaluation or path metrics): never a searcher's."""
+    return key.startswith((EVAL_PREFIX, PATHS_PREFIX))
 
 
 def eval_by_action(key: str, action: str) -> str:

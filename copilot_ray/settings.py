@@ -45,6 +45,8 @@ class Setting:
     choices: tuple[Any, ...] = ()  # kind "str": the allowed values
     why: str = ""  # why this default, when it departs from or decides a reading of the paper
     on_cli: bool = True  # offered as a `python -m copilot_ray.train` flag
+    # The privileges (copilot_ray.privileges) a value of this setting grants its method: value -> names.
+    grants: Callable[[Any], tuple[str, ...]] | None = field(default=None, repr=False, compare=False)
 
     @property
     def field(self) -> str:

@@ -35,6 +35,7 @@ from copilot_ray.keys import (
     K_TAG,
     PARENT_TAG,
     PRESET_TAG,
+    PRIVILEGES_TAG,
     ROLE_SWEEP,
     ROLE_TAG,
     ROLE_TRIAL,
@@ -52,6 +53,7 @@ from copilot_ray.keys import (
     VARIANT_TAG,
     result_value,
 )
+from copilot_ray.privileges import tag_value
 from copilot_ray.spec import build_algorithm_config, load_spec
 
 MLFLOW_PARAM_LIMIT = 500  # MLflow rejects longer param values
@@ -156,7 +158,8 @@ class MlflowRun:
 #                                artifacts  spec.yaml (as given), spec.resolved.yaml (what ran), summary.md
 #   child run (one per trial)    tags  mlflow.parentRunId, copilot.role=trial, copilot.sweep,
 #                                      copilot.trial_id, copilot.config_key, algorithm, env, K, b,
-#                                      alpha_schedule, preset, variant, seed, git_commit
+#                                      alpha_schedule, preset, variant, copilot.privileges, seed,
+#                                      git_commit
 #                                params  every setting of the algorithm at its effective value, seed, env.*
 #                                metrics  metrics_from_result + time_total_s + training_iteration,
 #                                         step = env steps (keys.ENV_STEPS)
@@ -318,11 +321,13 @@ def alpha_schedule_label(merged: Mapping[str, Any], default: str = "") -> str:
 def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
     """Everything the progress lines and the MLflow tags say about one trial (built on the driver)."""
     spec = load_spec_cached(str(config[SPEC_PATH_KEY]))
-    settings = get_algorithm(spec.algorithm).settings
+    entry = get_algorithm(spec.algorithm)
+    settings = entry.settings
     flat = trial_flat(config)
     algo_config = build_algorithm_config(flat, spec)
     merged = spec.merged(flat)
     seed = flat.get(SEED_PARAM, spec.seeds[0])
+    effective = effective_settings(algo_config, settings)
     return {
         "spec": spec,
         "flat": flat,
@@ -340,7 +345,9 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
         "preset": getattr(algo_config, "preset", None) or "default",
         "variant": flat.get(VARIANT_PARAM, ""),
         "seed": seed,
-        "settings": effective_settings(algo_config, settings),
+        "settings": effective,
+        # What it uses that an agent learning from its own episodes does not (copilot_ray.privileges).
+        "privileges": entry.privileges(effective),
     }
 
 
@@ -514,6 +521,7 @@ class TrialRuns:
             ALPHA_SCHEDULE_TAG: info["alpha_schedule"],
             PRESET_TAG: info["preset"],
             VARIANT_TAG: info["variant"],
+            PRIVILEGES_TAG: tag_value(info["privileges"]),
             SEED_TAG: str(info["seed"]),
             GIT_COMMIT_TAG: self._commit,
         }

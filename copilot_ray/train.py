@@ -137,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import ray
 
+    from copilot_ray.privileges import tag_value
     from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
 
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
@@ -158,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
                 keys.B_TAG: str(config.repetitions),
                 keys.ALPHA_SCHEDULE_TAG: str(setting_values(args).get("alpha_schedule", "paper_per_task")),
                 keys.PRESET_TAG: config.preset or "default",
+                keys.PRIVILEGES_TAG: tag_value(get_algorithm(ALGORITHM).privileges(config.setting_values())),
                 keys.SEED_TAG: str(args.seed),
                 keys.GIT_COMMIT_TAG: git_commit(),
             },

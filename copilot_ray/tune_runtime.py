@@ -22,19 +22,19 @@ from copilot_ray.algorithms.registry import get_algorithm
 from copilot_ray.keys import (
     ENV_STEPS,
     EVAL_FRESH,
-    EVAL_PREFIX,
     EVAL_RETURN,
+    EVAL_SUCCESS_AUC,
     NODE_ID,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
+    PRIVILEGE_COUNTS,
     SEED_PARAM,
     SPEC_PATH_KEY,
     SUCCESS_METRICS,
     TIME_TOTAL_S,
     TRAINING_ITERATION,
-    eval_leaf,
-    metric_path,
     result_value,
+    validation_metrics,
 )
 from copilot_ray.spec import (
     build_algorithm_config,
@@ -59,10 +59,11 @@ class SpecTrial:
     group fits the env runners and RLlib's checkpointing is untouched.
 
     Every result carries the trial's ``eval_metrics`` (``copilot/eval/success`` and
-    ``success_planned`` / ``success_direct`` where the algorithm has them; Tune's strict metric check
-    and Optuna need the searched metric in every result): iterations without an evaluation repeat the
-    last evaluated value (NaN before the first one) and set ``copilot/eval/fresh`` to 0 (1 when
-    evaluated now).
+    ``success_planned`` / ``success_direct`` where the algorithm has them), their area under the curve
+    and the validation twins of all of them (Tune's strict metric check and Optuna need the searched
+    metric in every result): iterations without an evaluation repeat the last evaluated value (NaN before
+    the first one) and set ``copilot/eval/fresh`` to 0 (1 when evaluated now). The analysis reads fresh
+    evaluations only. The privilege counts (``keys.PRIVILEGE_COUNTS``) are 0 where an algorithm logs none.
     """
 
     eval_metrics: tuple[str, ...] = (*SUCCESS_METRICS, EVAL_RETURN)
@@ -81,18 +82,20 @@ class SpecTrial:
 
     def step(self):
         result = super().step()
-        ev = result
-        for part in metric_path(EVAL_PREFIX.rstrip("/")):
-            ev = ev.setdefault(part, {})
-        names = [eval_leaf(key) for key in self.eval_metrics]
+        tested = (*self.eval_metrics, EVAL_SUCCESS_AUC)
+        carried = (*tested, *validation_metrics(*tested))
         # RLlib reports a window-1 stat logged in an earlier iteration as NaN: not an evaluation.
-        fresh = all(_is_number(ev.get(name)) for name in names)
-        for name in names:
-            if fresh:
-                self._last_eval[name] = float(ev[name])
+        fresh = all(_is_number(result_value(result, key)) for key in self.eval_metrics)
+        for key in carried:
+            value = result_value(result, key)
+            if fresh and _is_number(value):
+                self._last_eval[key] = float(value)
             else:
-                ev[name] = self._last_eval.get(name, float("nan"))
-        ev[eval_leaf(EVAL_FRESH)] = 1.0 if fresh else 0.0
+                _set_nested(result, key, self._last_eval.get(key, float("nan")))
+        _set_nested(result, EVAL_FRESH, 1.0 if fresh else 0.0)
+        for key in PRIVILEGE_COUNTS:
+            if not _is_number(result_value(result, key)):
+                _set_nested(result, key, 0.0)
         result[NODE_ID] = ray.get_runtime_context().get_node_id()
         return result
 
@@ -118,6 +121,15 @@ def trainable(spec) -> type:
 def _algorithm_config(config: Mapping[str, Any]):
     spec = load_spec_cached(str(config[SPEC_PATH_KEY]))
     return build_algorithm_config(trial_flat(config), spec)
+
+
+def _set_nested(result: dict, key: str, value: Any) -> None:
+    """``result[a][b][c] = value`` for key ``a/b/c`` (the shape RLlib's results have)."""
+    *parents, leaf = key.split("/")
+    node = result
+    for part in parents:
+        node = node.setdefault(part, {})
+    node[leaf] = value
 
 
 def _is_number(v: Any) -> bool:

@@ -53,7 +53,7 @@ def test_the_toy_algorithms_own_rules_and_metrics_apply(toy):
         parse_spec(toy_spec(config={"num_epochs": 0}))
     with pytest.raises(SpecError, match=r"config\.tree_depth: unknown key"):
         parse_spec(toy_spec(config={"tree_depth": 3}))  # CO-PILOT's settings are not the toy's
-    bad_metric = {"type": "grid", "metric": "copilot/eval/success_planned", "mode": "max"}
+    bad_metric = {"type": "grid", "metric": "copilot/validation/success_planned", "mode": "max"}
     with pytest.raises(SpecError, match=r"toy-ppo does not log this metric"):
         parse_spec(toy_spec(searcher=bad_metric))
 

@@ -124,7 +124,10 @@ def test_presets_name_only_settings_and_paper_literal_differs_where_the_readme_s
                 assert SETTINGS[key].problem(value) is None, (name, key)
     paper = config_with("preset", "paper_literal")
     assert paper.after_failure == "continue" and paper.subtask_reward == "halving"
-    assert paper.planner["std_final"] is None and paper.initial_alpha == 1.0
+    assert paper.planner["std_final"] is None
+    # paper_literal isolates CO-PILOT's readings: the agent's SAC settings stay the baselines'.
+    assert paper.initial_alpha == CoPilotConfig().initial_alpha == 0.02
+    assert paper.agent_input == CoPilotConfig().agent_input == "state_goal_delta"
     assert config_with("preset", "plain_sac").tree_depth == 0
 
 

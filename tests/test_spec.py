@@ -200,8 +200,8 @@ def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
             "search.tree_depth: tree_depth is also fixed in config",
         ),
         (
-            {"searcher": {"type": "grid", "metric": "copilot/eval/sucess_planned", "mode": "max"}},
-            "searcher.metric: 'copilot/eval/sucess_planned' is invalid: copilot does not log this metric; did you mean 'copilot/eval/success_planned'?",
+            {"searcher": {"type": "grid", "metric": "copilot/validation/sucess_planned", "mode": "max"}},
+            "searcher.metric: 'copilot/validation/sucess_planned' is invalid: copilot does not log this metric; did you mean 'copilot/validation/success_planned'?",
         ),
         ({"searcher": {"type": "bayes"}}, "searcher.type: 'bayes' is invalid"),
     ],
@@ -234,7 +234,7 @@ def test_range_rejections(domain, expected):
 
 
 def _optuna(**kw):
-    return {"type": "optuna", "metric": "copilot/eval/success_planned", "mode": "max", "num_samples": 4, **kw}
+    return {"type": "optuna", "metric": "copilot/validation/success_planned", "mode": "max", "num_samples": 4, **kw}
 
 
 def test_range_ends_follow_the_keys_rule():

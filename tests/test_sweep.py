@@ -36,6 +36,7 @@ from copilot_ray.keys import (
     TRAINING_ITERATION,
     TREES_DIR,
     TRIAL_ID_TAG,
+    validation_key,
 )
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -205,7 +206,7 @@ def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
     data["searcher"] = {
         "type": "optuna",
         "sampler": "tpe",
-        "metric": SUCCESS_PLANNED,
+        "metric": validation_key(SUCCESS_PLANNED),
         "mode": "max",
         "num_samples": 2,
         "seed": 0,

@@ -12,7 +12,7 @@ from copilot_ray.algorithms.copilot.settings import SETTINGS
 def test_preset_flag_sets_the_readings_and_explicit_flags_override_it():
     config = train.build_config(train.parse_args(["--preset", "paper_literal", "--tau-max", "40"]))
     assert config.preset == "paper_literal" and config.after_failure == "continue"
-    assert config.tau_max == 40 and config.initial_alpha == 1.0
+    assert config.tau_max == 40 and config.subtask_reward == "halving"
     default = train.build_config(train.parse_args([]))
     assert default.preset is None and default.after_failure == "restart" and default.tau_max == 25
 

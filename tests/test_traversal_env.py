@@ -7,8 +7,12 @@ from copilot_ray.algorithms.copilot.settings import PRESETS
 from copilot_ray.algorithms.copilot.traversal_env import TraversalEnv, TraversalRules, traversal_queue
 
 # These tests read the paper literally unless a test names a rule: (s, g) observations, R / 2^k
-# rewards, the next sub-task continues where the agent stopped.
-PAPER = {k: v for k, v in PRESETS["paper_literal"].items() if k in TraversalRules.__dataclass_fields__}
+# rewards, the next sub-task continues where the agent stopped. (The paper_literal preset keeps the
+# baselines' agent input, goal - position included; the paper's own is (s, g).)
+PAPER = {
+    **{k: v for k, v in PRESETS["paper_literal"].items() if k in TraversalRules.__dataclass_fields__},
+    "agent_input": "state_goal",
+}
 S0 = np.array([0.1, 0.1], np.float32)
 G = np.array([0.9, 0.1], np.float32)
 

@@ -60,7 +60,14 @@ class PlanningTrial(tune.Trainable, ABC):
 
     def step(self) -> dict:
         metrics, checks, done = self.iterate()
-        result = nested({**metrics, keys.PATH_COLLISION_CHECKS: float(checks), keys.ENV_STEPS: int(checks)})
+        privileges = {
+            keys.PRIVILEGE_COLLISION_CHECKS: float(checks),
+            keys.PRIVILEGE_RESETS: 0.0,
+            keys.PRIVILEGE_MAP_QUERIES: 0.0,
+        }
+        result = nested(
+            {**metrics, **privileges, keys.PATH_COLLISION_CHECKS: float(checks), keys.ENV_STEPS: int(checks)}
+        )
         if ray.is_initialized():  # (asking for the context outside Ray would start one)
             result[keys.NODE_ID] = ray.get_runtime_context().get_node_id()
         if done:

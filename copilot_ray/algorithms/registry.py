@@ -10,6 +10,9 @@ starts) and provide:
                                           benchmarks' --set accept (copilot_ray.settings.Setting)
     METRICS: tuple[str, ...]              what it logs that a sweep may optimise (`<k>`: a tree layer)
     combination_problems(values)          optional: [(keys, value, why)] for values that clash together
+    PRIVILEGES: tuple[str, ...]           optional: what the method always uses that agents learning from
+                                          their own episodes do not (copilot_ray.privileges); a setting
+                                          whose value grants more says so itself (Setting.grants)
 
 The config class (an RLlib AlgorithmConfig, imported only when a run is built) provides
 `from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build. The trial
@@ -26,6 +29,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from copilot_ray.privileges import privileges_of
 from copilot_ray.settings import Setting
 
 ALGORITHMS: dict[str, tuple[str, str, str]] = {
@@ -100,6 +104,11 @@ class AlgorithmEntry:
     combination_problems: Callable[[Mapping[str, Any]], list[tuple[tuple[str, ...], Any, str]]]
     config_class: str  # "module:Class", imported by build_config only
     trial_class_path: str  # "module:Class", imported by trial_class only (a sweep's trainable)
+    always_privileges: tuple[str, ...] = ()
+
+    def privileges(self, values: Mapping[str, Any]) -> tuple[str, ...]:
+        """The privileges a run uses at the effective setting `values` (copilot_ray.privileges)."""
+        return privileges_of(self.settings, values, self.always_privileges)
 
     def build_config(self, values: Mapping[str, Any], run: RunContext) -> Any:
         """The algorithm's config for flat setting `values` and one run (imports the config class)."""
@@ -142,4 +151,5 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         combination_problems=getattr(module, "combination_problems", lambda values: []),
         config_class=config_class,
         trial_class_path=trial_class,
+        always_privileges=tuple(getattr(module, "PRIVILEGES", ())),
     )

@@ -505,7 +505,9 @@ class SweepSpec(_Model):
         issues = []
         s = self.searcher
         for path, metric in (("searcher.metric", s.metric),):
-            if metric is not None and not metric_known(metric, entry.metrics):
+            if metric is not None and keys.is_test_metric(metric):
+                issues.append(Issue(path, metric, _test_metric_problem(metric, self.scheduler)))
+            elif metric is not None and not metric_known(metric, entry.metrics):
                 names = [m.replace("<k>", "0") for m in entry.metrics]
                 issues.append(
                     Issue(
@@ -764,6 +766,19 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
         num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners,
     )
     return entry.build_config(spec.merged(flat), run)
+
+
+def _test_metric_problem(metric: str, scheduler: SchedulerSpec | None) -> str:
+    """Why a test-set metric cannot drive a search (or a scheduler), and what to use instead."""
+    who = "the searcher" + (f" and the {scheduler.type} scheduler" if scheduler is not None else "")
+    if metric.startswith(keys.EVAL_PREFIX):
+        instead = f"use {keys.validation_key(metric)!r} (the same figure on the validation tasks)"
+    else:
+        instead = f"no validation figure is logged for it: use one of the {keys.VALIDATION_PREFIX}* metrics"
+    return (
+        f"is a test-set metric: {who} would choose by looking at the test tasks, which the report then "
+        f"shows; {instead}"
+    )
 
 
 def rule_problem(key: str, setting: Setting, value: Any) -> str | None:

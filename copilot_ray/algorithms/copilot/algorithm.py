@@ -71,7 +71,13 @@ from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, Trave
 from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_learner, uses_fast_learner
 from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
-from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
+from copilot_ray.evaluation import (
+    EVAL_SPLITS,
+    EvaluationSchedule,
+    ModulePolicy,
+    SuccessCurve,
+    evaluate_copilot,
+)
 from copilot_ray.planning import (
     AlphaClock,
     AlphaSchedule,
@@ -372,7 +378,14 @@ class CoPilot(SAC):
             self.cost_model.fit(c["fit_steps"] * 4, c["batch_size"], self._rng)
         self.alpha_clock = AlphaClock(AlphaSchedule.from_dict(cfg.alpha_schedule), cfg.repetitions)
         self.train_starts, self.train_goals = env.tasks("train")
-        self.test_starts, self.test_goals = env.tasks("test")
+        # Validation tasks for searchers and probes, test tasks for reports: both at every evaluation.
+        self.eval_tasks = {split: env.tasks(split) for split in EVAL_SPLITS}
+        self.test_starts, self.test_goals = self.eval_tasks["test"]
+        self.eval_schedule = EvaluationSchedule(cfg.eval_interval, cfg.eval_every_env_steps)
+        self.success_curves = {split: SuccessCurve() for split in EVAL_SPLITS}
+        # Privileges used so far (copilot_ray.privileges): resets to a missed sub-goal and the map
+        # queries behind them (after_failure="restart"); collision checks are _planner_checks'.
+        self._privileged = {"resets": 0, "map_queries": 0}
         self.rules = cfg.traversal_rules()
         self._planner_phases = 0  # for the planner's std annealing; checkpointed
         # Every segment the planner's cost asks about: the "collision checks" of Fig. 4c; checkpointed.
@@ -480,6 +493,8 @@ class CoPilot(SAC):
 
             subtasks = self._traverse(trees, idx[:n_tasks])
             t2 = time.perf_counter()
+            self._privileged["resets"] += int(subtasks["reset_to_state"].sum())
+            self._privileged["map_queries"] += int(subtasks["map_queries"].sum())
             for key, value in self._traversal_diagnostics(subtasks).items():
                 stats[key].append(value)
 
@@ -500,6 +515,12 @@ class CoPilot(SAC):
         for key, values in stats.items():
             self.metrics.log_value(keys.metric_path(key), float(np.mean(values)), window=1)
         self.metrics.log_value(keys.metric_path(keys.AGENT_SUBTASKS_LOST), self._subtasks_lost, window=1)
+        for key, count in (
+            (keys.PRIVILEGE_COLLISION_CHECKS, self._planner_checks.count),
+            (keys.PRIVILEGE_RESETS, self._privileged["resets"]),
+            (keys.PRIVILEGE_MAP_QUERIES, self._privileged["map_queries"]),
+        ):
+            self.metrics.log_value(keys.metric_path(key), count, window=1)
         self.metrics.log_value(keys.metric_path(keys.DTAU_SIZE), len(self.cost_model.dataset), window=1)
         try:
             q_mean = float(self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, "qf_mean")))
@@ -517,7 +538,8 @@ class CoPilot(SAC):
             window=1,
         )
 
-        if cfg.eval_interval and (self.iteration + 1) % cfg.eval_interval == 0:
+        env_steps = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
+        if self.eval_schedule.due(self.iteration + 1, env_steps):
             t = time.perf_counter()
             self._evaluate()
             self.metrics.log_value(
@@ -757,67 +779,85 @@ class CoPilot(SAC):
     # ------------------------------------------------------------------------------- evaluation
     def _evaluation_plan(self, n: int) -> dict[str, Any]:
         """How the planned evaluation runs: the planner (anything with `sample(starts, goals,
-        deterministic=True)`), the steps per waypoint of layer k and a total cap. SoRB returns its graph."""
+        deterministic=True)`), the steps per waypoint of layer k, optionally `hop_limits(waypoints)`
+        (per-task, per-hop steps, [N, P - 1]) and a total cap. SoRB returns its graph."""
         return {
             "planner": self.planner,
             "step_limit_of": lambda k: self.rules.step_limit_of(k, self.config.tree_depth),
             "planned_total_steps": None,
         }
 
-    def _evaluate_mastery(self, policy, planner) -> None:
+    def _evaluate_mastery(self, policy, planner, split: str) -> None:
         """On an env with its own episode-level measure (the walker's mastered track distributions,
         `mastery`): the agent following the plan of the first test task (all share one task there), or
-        alone without a planner."""
+        alone without a planner, on the tracks of `split`."""
         mastery = getattr(self.goal_env.unwrapped, "mastery", None)
         if mastery is None:
             return
         path = None
         if planner is not None:
             path = planner.sample(self.test_starts[:1], self.test_goals[:1], deterministic=True)[0]
-        result = mastery(policy, path, with_delta=self.rules.agent_input == "state_goal_delta")
-        self.metrics.log_value(keys.metric_path(keys.EVAL_MASTERED), result.mastered_fraction, window=1)
-        self.metrics.log_value(keys.metric_path(keys.EVAL_ENV_RETURN), float(result.returns.mean()), window=1)
+        result = mastery(policy, path, with_delta=self.rules.agent_input == "state_goal_delta", split=split)
+        self._log_eval(split, keys.EVAL_MASTERED, result.mastered_fraction)
+        self._log_eval(split, keys.EVAL_ENV_RETURN, float(result.returns.mean()))
 
     def _task_reward(self) -> float:
         """R: what reaching a whole task's goal is worth (the goal env's reward x reward_scale)."""
         return float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * self.rules.reward_scale
 
+    def _log_eval(self, split: str, key: str, value: float) -> None:
+        """An evaluation figure of `split`: `key` (copilot/eval/...) for test, its validation twin else."""
+        name = key if split == "test" else keys.validation_key(key)
+        self.metrics.log_value(keys.metric_path(name), value, window=1)
+
     def _evaluate(self) -> None:
-        cfg = self.config
-        n = min(cfg.eval_num_tasks, len(self.test_starts))
+        """The validation tasks (headline figures only: what searchers read), then the test tasks
+        (everything the report shows), with the same plan and policy."""
+        n = min(self.config.eval_num_tasks, min(len(s) for s, _ in self.eval_tasks.values()))
         plan = self._evaluation_plan(n)
         if plan is None:  # nothing to evaluate yet (SoRB's pre-training)
             return
+        env_steps = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
+        for split in EVAL_SPLITS:
+            self._evaluate_split(split, n, plan, env_steps)
+
+    def _evaluate_split(self, split: str, n: int, plan: dict[str, Any], env_steps: int) -> None:
+        cfg = self.config
+        test = split == "test"
+        starts, goals = (x[:n] for x in self.eval_tasks[split])
         module = self.get_module(DEFAULT_MODULE_ID)
         seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
         policies = {
             DETERMINISTIC: ModulePolicy(module),
             SAMPLED: ModulePolicy(module, sampled=True, seed=seed),
         }
-        # The headline action goes first: it also drives the sub-goal tree figure's rollouts.
-        policies = {cfg.eval_action: policies[cfg.eval_action], **policies}
+        # The headline action goes first: it also drives the sub-goal tree figure's rollouts. The
+        # validation tasks get the headline action only.
+        policies = {cfg.eval_action: policies[cfg.eval_action], **(policies if test else {})}
         result = evaluate_copilot(
             goal_env_id=cfg.goal_env,
             goal_env_config=cfg.goal_env_config,
             policies=policies,
-            starts=self.test_starts[:n],
-            goals=self.test_goals[:n],
+            starts=starts,
+            goals=goals,
             depth=cfg.tree_depth,
             tau_max=cfg.tau_max,
-            tree_tasks=min(cfg.eval_tree_tasks, n),
+            tree_tasks=min(cfg.eval_tree_tasks, n) if test else 0,
             with_delta=self.rules.agent_input == "state_goal_delta",
             **plan,
         )
         headline = result.headline(cfg.eval_action)
         for key, value in headline.items():
-            self.metrics.log_value(keys.metric_path(keys.EVAL_PREFIX + key), value, window=1)
+            self._log_eval(split, keys.EVAL_PREFIX + key, value)
         # The figure every algorithm reports: CO-PILOT's is the agent following the plan.
-        self.metrics.log_value(
-            keys.metric_path(keys.EVAL_SUCCESS), headline[keys.eval_leaf(keys.SUCCESS_PLANNED)], window=1
-        )
+        success = headline[keys.eval_leaf(keys.SUCCESS_PLANNED)]
+        self._log_eval(split, keys.EVAL_SUCCESS, success)
+        self._log_eval(split, keys.EVAL_SUCCESS_AUC, self.success_curves[split].add(env_steps, success))
         reached = headline[keys.eval_leaf(keys.REACHED_PLANNED)]
-        self.metrics.log_value(keys.metric_path(keys.EVAL_RETURN), self._task_reward() * reached, window=1)
-        self._evaluate_mastery(policies[cfg.eval_action], plan["planner"])
+        self._log_eval(split, keys.EVAL_RETURN, self._task_reward() * reached)
+        self._evaluate_mastery(policies[cfg.eval_action], plan["planner"], split)
+        if not test:
+            return
         for action, values in result.by_action.items():
             for key, value in values.items():
                 self.metrics.log_value(
@@ -836,8 +876,7 @@ class CoPilot(SAC):
             for key, value in figures.items():
                 self.metrics.log_value(keys.metric_path(key), value, window=1)
         if result.trees is not None:
-            lifetime = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
-            self._save_tree_artifact(result, lifetime)
+            self._save_tree_artifact(result, env_steps)
 
     def _save_tree_artifact(self, result, env_steps: int) -> None:
         """Sub-goal trees of fixed test tasks (all layers) and the agent's steps per sub-task."""
@@ -884,6 +923,9 @@ class CoPilot(SAC):
             "planner_phases": self._planner_phases,
             "planner_checks": self._planner_checks.count,
             "warm_started": self._warm_started,
+            "eval_schedule": self.eval_schedule.get_state(),
+            "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
+            "privileged": dict(self._privileged),
         }
         return state
 
@@ -905,6 +947,10 @@ class CoPilot(SAC):
         self._planner_phases = int(own.get("planner_phases", 0))
         self._planner_checks.count = int(own.get("planner_checks", 0))
         self._warm_started = bool(own.get("warm_started", True))
+        self.eval_schedule.set_state(own.get("eval_schedule", {}))
+        for split, curve in own.get("success_curves", {}).items():
+            self.success_curves[split].set_state(curve)
+        self._privileged.update(own.get("privileged", {}))
 
 
 def dtau_tuples(subtasks: dict[str, np.ndarray], failed_subtask_cost: str, distance, step_distance: float):
@@ -955,4 +1001,6 @@ def _subtask_records(episodes) -> dict[str, np.ndarray]:
         "task": np.array([i["subtask_task"] for i in infos], np.int64),
         "reached": np.array([i["subtask_reached"] for i in infos], bool),
         "collided": np.array([i.get("subtask_collided", False) for i in infos], bool),
+        "reset_to_state": np.array([i.get("subtask_reset_to_state", False) for i in infos], bool),
+        "map_queries": np.array([i.get("subtask_map_queries", 0) for i in infos], np.int64),
     }

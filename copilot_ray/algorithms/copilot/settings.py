@@ -31,6 +31,7 @@ from copilot_ray.planning.alpha_schedule import PRESETS as ALPHA_PRESETS
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
 from copilot_ray.planning.planner import ANGLE_MODES, NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
+from copilot_ray.privileges import COLLISION_CHECKS, MAP_QUERIES, RESET_TO_STATE
 from copilot_ray.settings import (
     Setting,
     bool_setting,
@@ -85,6 +86,8 @@ _TREE = [
         0,
         MAX_TREE_DEPTH,
         note=" (K > 10 is too deep for memory: 2^(K+1) - 1 sub-tasks per task)",
+        # The planner's collision penalty (Eq. 11) asks the map about every segment it costs.
+        grants=lambda k: (COLLISION_CHECKS,) if isinstance(k, int) and k > 0 else (),
     ),
     _int(
         "repetitions", "copilot", 5, "b: traversals of every task mini-batch per iteration (paper 4.1: 5)", 1
@@ -92,9 +95,12 @@ _TREE = [
     _int(
         "task_batch_size",
         "copilot",
-        30,
+        2,
         "tasks the agent traverses per iteration (paper 4.1: a mini-batch of 30)",
         1,
+        why="not a reading: iteration size. With 30 tasks x b = 5 one iteration at K = 5 is up to 236k env "
+        "steps (30 x 5 x 63 x 25), so a 300k-step run gets one or two evaluations; with 2 it is at most 16k "
+        "(about 10k in practice). The planner keeps its batch of 30 (planner_task_batch_size)",
     ),
     _int(
         "planner_task_batch_size",
@@ -160,6 +166,8 @@ _TRAVERSAL = [
         "restart",
         "after a failed sub-task the next starts where the agent stopped, at the missed sub-goal (when free), or the layer ends",
         AFTER_FAILURE,
+        # restart puts the agent at the missed sub-goal after asking the map whether it is free there.
+        grants=lambda v: (RESET_TO_STATE, MAP_QUERIES) if v == "restart" else (),
         why="with `continue` a failed sub-task left the agent against a wall (30-45 % of sub-tasks ended in a "
         "collision over the first 31k env steps) and the next sub-goal out of reach: test success 0.00-0.08 "
         "over 57k env steps, against 0.44 at 27k with `restart`",
@@ -360,10 +368,24 @@ _EVALUATION = [
         "eval_interval",
         "copilot",
         1,
-        "iterations between evaluations on the held-out test tasks (0: never)",
+        "iterations between evaluations (0: never); ignored when eval_every_env_steps is set",
         0,
     ),
-    _int("eval_num_tasks", "copilot", 100, "test tasks per evaluation (the paper's test set has 100)", 1),
+    _int(
+        "eval_every_env_steps",
+        "copilot",
+        0,
+        "evaluate at the end of every iteration that passes another multiple of this many env steps, so "
+        "that methods with different iteration sizes are evaluated on one cadence (0: use eval_interval)",
+        0,
+    ),
+    _int(
+        "eval_num_tasks",
+        "copilot",
+        100,
+        "validation and test tasks per evaluation (the paper's test set has 100)",
+        1,
+    ),
     _int(
         "eval_tree_tasks", "copilot", 3, "fixed test tasks whose sub-goal trees are saved per evaluation", 0
     ),
@@ -494,13 +516,13 @@ PRESETS: dict[str, dict[str, Any]] = {
         "after_failure": "continue",
         "subtask_reward": "halving",
         "traversal_tree": "sampled",
-        "agent_input": "state_goal",
         "failed_subtask_cost": "end_state",
         "planner_warm_start": 0,
         # The reference code's planner noise: a fixed absolute std.
         "planner": {"std": 0.05, "noise": "absolute", "std_final": None, "angles": "raw"},
-        # "For RL training with SAC, we use its default hyperparameters": SAC's initial temperature 1.
-        "initial_alpha": 1.0,
+        # The agent's SAC settings (initial temperature, input) stay those every baseline gets, so that
+        # this preset isolates the paper's readings of CO-PILOT itself. (The paper's "SAC with its
+        # default hyperparameters" is initial_alpha 1.0 and agent_input state_goal: set them to see it.)
     },
     # Not a reading but the baseline CO-PILOT must beat: the same learner, replay and evaluation with
     # no planner (tree depth 0), one episode per task with the step budget of a finest traversal
@@ -512,8 +534,14 @@ assert tuple(PRESETS) == PRESET_NAMES
 # ------------------------------------------------------------------------------------------ metrics
 # What a CO-PILOT run logs that a sweep may optimise or stop on; `<k>` is a tree layer (0..K).
 METRICS: tuple[str, ...] = (
+    # Searchers, schedulers and probes read the validation tasks' figures; the test tasks' are reported.
+    *keys.validation_metrics(
+        keys.EVAL_SUCCESS, keys.SUCCESS_PLANNED, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN
+    ),
+    keys.EVAL_SUCCESS,
     keys.SUCCESS_PLANNED,
     keys.SUCCESS_DIRECT,
+    keys.EVAL_SUCCESS_AUC,
     keys.ALPHA,
     keys.PLANNER_COST_LAYER + "<k>",
     keys.PLANNER_APPROX_KL_MAX,

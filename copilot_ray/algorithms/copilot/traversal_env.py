@@ -13,8 +13,11 @@ Where the paper is silent or its literal reading starves the agent, `TraversalRu
 * `step_limit`: "fixed" (tau_max for every sub-task, the paper) or "scaled" (tau_max * 2^(K-k) for
   layer k, whose segments span 2^(K-k) finest ones).
 * `after_failure`: "continue" (the next sub-task starts where the agent stopped, the paper), "restart"
-  (it starts at the missed sub-goal when that is free space, so one failure does not fail the rest of
-  the layer) or "abort_layer" (the rest of the layer is dropped: no env steps spent on a cascade).
+  (it starts at the missed sub-goal when the map says that is free space, so one failure does not fail
+  the rest of the layer: a privilege no baseline has, a reset to a state other than a task's start and a
+  map query, both counted in the sub-task's last info) or "abort_layer" (the rest of the layer is
+  dropped: no env steps spent on a cascade; the next layer starts at the task's start, as every
+  baseline's episodes do).
 * `subtask_reward`: "halving" (R / 2^k, Eq. 6) or "uniform" (R for every sub-task); `reward_scale`
   multiplies R, the goal env's reward.
 * `agent_collision`: "none" (a blocked move costs nothing, the paper), "penalty" (reward
@@ -154,6 +157,10 @@ class TraversalEnv(gym.Env):
         self._depth = 0
         self._missed: np.ndarray | None = None  # the sub-goal the last sub-task failed to reach
         self._idle_goal: np.ndarray | None = None
+        # Privileges this sub-task's start used (copilot_ray.privileges): a map query, and a reset of
+        # the agent to the missed sub-goal (after_failure="restart"); reported at its end.
+        self._map_queries = 0
+        self._reset_to_state = False
 
     # --- driver-facing -------------------------------------------------------------------------
     def load_plan(self, trees: np.ndarray, depth: int, task_ids: np.ndarray) -> int:
@@ -169,6 +176,7 @@ class TraversalEnv(gym.Env):
     # --- gymnasium -----------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._map_queries, self._reset_to_state = 0, False
         if self._queue:
             self._current = self._queue.popleft()
             start, carry_on = self._current.start, False
@@ -205,12 +213,17 @@ class TraversalEnv(gym.Env):
         that is carrying on from where the agent stands."""
         missed, self._missed = self._missed, None
         if missed is not None and self.rules.after_failure == "restart" and self._is_free(missed):
+            self._reset_to_state = True
             return missed, False
         return self._position, True
 
     def _is_free(self, config: np.ndarray) -> bool:
+        """Asks the map (a privilege, counted)."""
         clearance = getattr(self.inner, "is_free", None)
-        return bool(clearance(config)) if clearance is not None else True
+        if clearance is None:
+            return True
+        self._map_queries += 1
+        return bool(clearance(config))
 
     def _drop_rest_of_layer(self) -> None:
         cur = self._current
@@ -246,6 +259,8 @@ class TraversalEnv(gym.Env):
                 subtask_steps=self._steps,
                 subtask_reached=bool(reached),
                 subtask_collided=collision and not reached,
+                subtask_reset_to_state=self._reset_to_state,
+                subtask_map_queries=self._map_queries,
             )
             if not reached and self._current is not None:
                 self._missed = self._current.goal.copy()

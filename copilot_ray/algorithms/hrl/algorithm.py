@@ -3,8 +3,9 @@
 One `train()` is one iteration: batches of `task_batch_size` training episodes (random training tasks,
 run side by side) until `env_steps_per_iteration` env steps, each batch followed by the low level's
 `updates_per_env_step` x new env steps and the high level's `updates_per_transition` x new high-level
-transitions SAC gradient steps; then, every `eval_interval` iterations, an evaluation on the first
-`eval_num_tasks` test tasks with `tau_max` steps each, deterministic and sampled actions (both levels).
+transitions SAC gradient steps; then, every `eval_interval` iterations (or `eval_every_env_steps`), an
+evaluation on the first `eval_num_tasks` validation tasks (the headline action) and test tasks with
+`tau_max` steps each, deterministic and sampled actions (both levels).
 Before `num_steps_sampled_before_learning_starts` env steps both levels act uniformly at random.
 """
 
@@ -27,6 +28,7 @@ from copilot_ray.algorithms.hrl.rollout import Episode, run_episodes
 from copilot_ray.algorithms.hrl.transitions import high_level_rows, low_level_rows, subgoals_reached
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
+from copilot_ray.evaluation import EVAL_SPLITS, EvaluationSchedule, SuccessCurve
 
 DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
 # The evaluation's figures: the common ones, and the same per action mode.
@@ -66,8 +68,14 @@ class HRL:
         )
         self.high_schedule = GradientStepSchedule(cfg.high["updates_per_transition"])
         self.train_starts, self.train_goals = maze.tasks("train")
-        starts, goals = maze.tasks("test")
-        self.test_starts, self.test_goals = starts[: cfg.eval_num_tasks], goals[: cfg.eval_num_tasks]
+        # Validation tasks for searchers and probes, test tasks for reports: both at every evaluation.
+        self.eval_tasks = {}
+        for split in EVAL_SPLITS:
+            starts, goals = maze.tasks(split)
+            self.eval_tasks[split] = (starts[: cfg.eval_num_tasks], goals[: cfg.eval_num_tasks])
+        self.test_starts, self.test_goals = self.eval_tasks["test"]
+        self.eval_schedule = EvaluationSchedule(cfg.eval_interval, cfg.eval_every_env_steps)
+        self.success_curves = {split: SuccessCurve() for split in EVAL_SPLITS}
         self.eval_envs: list | None = None
         self.env_steps = 0
         self.iteration = 0
@@ -161,7 +169,8 @@ class HRL:
         }
         if corrected:
             metrics[S.CORRECTION_KEPT] = (self.high_buffer.num_kept - kept_before) / corrected
-        fresh = bool(cfg.eval_interval) and self.iteration % cfg.eval_interval == 0
+        metrics.update(dict.fromkeys(keys.PRIVILEGE_COUNTS, 0.0))  # none: its own episodes alone
+        fresh = self.eval_schedule.due(self.iteration, self.env_steps)
         if fresh:
             self.last_eval = self.evaluate()
         metrics.update(self.last_eval or dict.fromkeys(self._eval_names(), float("nan")))
@@ -171,16 +180,31 @@ class HRL:
     # ------------------------------------------------------------------ evaluation
     def _eval_names(self) -> list[str]:
         per_action = [keys.eval_by_action(k, a) for k in _EVAL_KEYS for a in keys.EVAL_ACTIONS]
-        return [keys.EVAL_SUCCESS, *_EVAL_KEYS, *per_action]
+        headline = [keys.EVAL_SUCCESS, keys.EVAL_SUCCESS_AUC, *_EVAL_KEYS]
+        return [*headline, *per_action, *keys.validation_metrics(*headline)]
 
     def evaluate(self) -> dict[str, float]:
-        """Both levels on the test tasks, lockstep: deterministic (tanh of the means) and sampled
-        actions; the headline figures are `eval_action`'s. Success: the goal reached with no collision."""
-        cfg = self.cfg
-        if self.eval_envs is None:
-            self.eval_envs = [make(cfg.env_id, **dict(cfg.env_config)) for _ in range(len(self.test_starts))]
+        """The validation tasks (the headline action's figures, for searchers), then the test tasks."""
         out: dict[str, float] = {}
-        for action in keys.EVAL_ACTIONS:
+        for split in EVAL_SPLITS:
+            figures = self._evaluate_split(split)
+            if split == "test":
+                out.update(figures)
+            else:
+                out.update({keys.validation_key(k): v for k, v in figures.items() if "/" not in keys.eval_leaf(k)})
+        return out
+
+    def _evaluate_split(self, split: str) -> dict[str, float]:
+        """Both levels on one task set, lockstep: deterministic (tanh of the means) and sampled
+        actions (the validation set: `eval_action`'s only); the headline figures are `eval_action`'s.
+        Success: the goal reached with no collision."""
+        cfg = self.cfg
+        starts, goals = self.eval_tasks[split]
+        if self.eval_envs is None:
+            self.eval_envs = [make(cfg.env_id, **dict(cfg.env_config)) for _ in range(len(starts))]
+        out: dict[str, float] = {}
+        actions = keys.EVAL_ACTIONS if split == "test" else (cfg.eval_action,)
+        for action in actions:
             # Its own stream per evaluation: sampled evaluations do not move training's randomness.
             gen = (
                 torch.Generator().manual_seed(cfg.seed * 1_000_003 + self.iteration)
@@ -188,9 +212,9 @@ class HRL:
                 else None
             )
             episodes = self._episodes(
-                self.eval_envs,
-                self.test_starts,
-                self.test_goals,
+                self.eval_envs[: len(starts)],
+                starts,
+                goals,
                 lambda x, g=gen: self.high.act(x, g),
                 lambda x, g=gen: self.low.act(x, g),
             )
@@ -204,6 +228,7 @@ class HRL:
                 if action == cfg.eval_action:
                     out[key] = float(value)
         out[keys.EVAL_SUCCESS] = out[keys.SUCCESS_DIRECT]
+        out[keys.EVAL_SUCCESS_AUC] = self.success_curves[split].add(self.env_steps, out[keys.EVAL_SUCCESS])
         return out
 
     # ------------------------------------------------------------------ state
@@ -223,6 +248,8 @@ class HRL:
             "env_steps": self.env_steps,
             "iteration": self.iteration,
             "last_eval": dict(self.last_eval),
+            "eval_schedule": self.eval_schedule.get_state(),
+            "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -238,6 +265,9 @@ class HRL:
         torch.set_rng_state(state["torch_rng"])
         self.env_steps, self.iteration = int(state["env_steps"]), int(state["iteration"])
         self.last_eval = dict(state["last_eval"])
+        self.eval_schedule.set_state(state.get("eval_schedule", {}))
+        for split, curve in state.get("success_curves", {}).items():
+            self.success_curves[split].set_state(curve)
 
     def stop(self) -> None:
         for env in self.envs + (self.eval_envs or []):

@@ -30,6 +30,7 @@ class HRLConfig:
     reward_scale: float = SETTINGS["reward_scale"].default
     agent_input: str = SETTINGS["agent_input"].default
     eval_interval: int = SETTINGS["eval_interval"].default
+    eval_every_env_steps: int = SETTINGS["eval_every_env_steps"].default
     eval_num_tasks: int = SETTINGS["eval_num_tasks"].default
     eval_action: str = SETTINGS["eval_action"].default
     env_steps_per_iteration: int = SETTINGS["env_steps_per_iteration"].default

@@ -43,6 +43,7 @@ TASK = [
     _SAC["reward_scale"],
     _SAC["agent_input"],
     _SAC["eval_interval"],
+    _SAC["eval_every_env_steps"],
     _SAC["eval_num_tasks"],
     replace(
         _SAC["eval_action"],
@@ -131,7 +132,9 @@ LOW_ALPHA, HIGH_ALPHA = f"{_P}low/alpha", f"{_P}high/alpha"
 EPISODE_RETURN_MEAN = "env_runners/episode_return_mean"  # RLlib's name: training episodes' mean return
 
 METRICS: tuple[str, ...] = (
+    *keys.validation_metrics(keys.EVAL_SUCCESS, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN),
     keys.EVAL_SUCCESS,
+    keys.EVAL_SUCCESS_AUC,
     keys.SUCCESS_DIRECT,
     keys.REACHED_DIRECT,
     keys.EVAL_RETURN,

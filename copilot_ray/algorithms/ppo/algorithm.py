@@ -20,6 +20,7 @@ import numpy as np
 from ray.rllib.algorithms.ppo import PPO, PPOConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.utils.annotations import override
+from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 from ray.tune.registry import register_env
 
 from copilot_ray import keys
@@ -28,11 +29,18 @@ from copilot_ray.algorithms.ppo import settings as ppo_settings
 from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
-from copilot_ray.evaluation import ModulePolicy, evaluate_copilot
+from copilot_ray.evaluation import (
+    EVAL_SPLITS,
+    EvaluationSchedule,
+    ModulePolicy,
+    SuccessCurve,
+    evaluate_copilot,
+)
 
 GOAL_TASK_ENV_ID = "copilot-goal-task"
 DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
 _TASK_KEYS = [s.key for s in ppo_settings.TASK]
+_STATE_KEY = "goal_ppo"
 _RULE_KEYS = [k for k in _TASK_KEYS if k in TraversalRules.__dataclass_fields__]
 
 
@@ -147,18 +155,26 @@ class GoalPPO(PPO):
         register_goal_task_env()
         super().setup(config)
         self.goal_env = make(self.config.goal_env, **self.config.goal_env_config)
-        self.test_starts, self.test_goals = self.goal_env.unwrapped.tasks("test")
+        self.eval_tasks = {split: self.goal_env.unwrapped.tasks(split) for split in EVAL_SPLITS}
+        self.test_starts, self.test_goals = self.eval_tasks["test"]
+        self.eval_schedule = EvaluationSchedule(self.config.eval_interval, self.config.eval_every_env_steps)
+        self.success_curves = {split: SuccessCurve() for split in EVAL_SPLITS}
 
     @override(PPO)
     def training_step(self) -> None:
         super().training_step()
-        cfg = self.config
-        if cfg.eval_interval and (self.iteration + 1) % cfg.eval_interval == 0:
-            self._evaluate()
+        for key in keys.PRIVILEGE_COUNTS:  # none: PPO learns from its own episodes alone
+            self.metrics.log_value(keys.metric_path(key), 0, window=1)
+        env_steps = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
+        if self.eval_schedule.due(self.iteration + 1, env_steps):
+            for split in EVAL_SPLITS:
+                self._evaluate(split, env_steps)
 
-    def _evaluate(self) -> None:
+    def _evaluate(self, split: str, env_steps: int) -> None:
         cfg = self.config
-        n = min(cfg.eval_num_tasks, len(self.test_starts))
+        test = split == "test"
+        starts, goals = self.eval_tasks[split]
+        n = min(cfg.eval_num_tasks, len(starts))
         module = self.get_module(DEFAULT_MODULE_ID)
         seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
         # PPO's Gaussian is not squashed: its actions are clipped, as GoalTaskEnv clips them.
@@ -166,30 +182,55 @@ class GoalPPO(PPO):
             DETERMINISTIC: ModulePolicy(module, squash="clip"),
             SAMPLED: ModulePolicy(module, sampled=True, seed=seed, squash="clip"),
         }
-        policies = {cfg.eval_action: policies[cfg.eval_action], **policies}
+        policies = {cfg.eval_action: policies[cfg.eval_action], **(policies if test else {})}
         result = evaluate_copilot(
             goal_env_id=cfg.goal_env,
             goal_env_config=cfg.goal_env_config,
             policies=policies,
             planner=None,
-            starts=self.test_starts[:n],
-            goals=self.test_goals[:n],
+            starts=starts[:n],
+            goals=goals[:n],
             depth=0,
             tau_max=cfg.tau_max,
             with_delta=cfg.agent_input == "state_goal_delta",
         )
+
+        def log(key: str, value: float) -> None:
+            name = key if test else keys.validation_key(key)
+            self.metrics.log_value(keys.metric_path(name), value, window=1)
+
         direct = (keys.SUCCESS_DIRECT, keys.REACHED_DIRECT)
         for action, values in result.by_action.items():
             for key in direct:
                 value = values[keys.eval_leaf(key)]
-                self.metrics.log_value(keys.metric_path(keys.eval_by_action(key, action)), value, window=1)
+                if test:
+                    self.metrics.log_value(keys.metric_path(keys.eval_by_action(key, action)), value, window=1)
                 if action == cfg.eval_action:
-                    self.metrics.log_value(keys.metric_path(key), value, window=1)
+                    log(key, value)
         headline = result.by_action[cfg.eval_action]
-        self.metrics.log_value(
-            keys.metric_path(keys.EVAL_SUCCESS), headline[keys.eval_leaf(keys.SUCCESS_DIRECT)], window=1
-        )
+        success = headline[keys.eval_leaf(keys.SUCCESS_DIRECT)]
+        log(keys.EVAL_SUCCESS, success)
+        log(keys.EVAL_SUCCESS_AUC, self.success_curves[split].add(env_steps, success))
         # R x reached (keys.EVAL_RETURN), R = the goal env's reward x reward_scale
         reward = float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * cfg.reward_scale
-        reached = headline[keys.eval_leaf(keys.REACHED_DIRECT)]
-        self.metrics.log_value(keys.metric_path(keys.EVAL_RETURN), reward * reached, window=1)
+        log(keys.EVAL_RETURN, reward * headline[keys.eval_leaf(keys.REACHED_DIRECT)])
+
+    @override(PPO)
+    def get_state(self, components=None, *, not_components=None, **kwargs) -> dict[str, Any]:
+        """PPO's state plus the evaluation's schedule and success curves."""
+        state = super().get_state(components, not_components=not_components, **kwargs)
+        state[_STATE_KEY] = {
+            "eval_schedule": self.eval_schedule.get_state(),
+            "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
+        }
+        return state
+
+    @override(PPO)
+    def set_state(self, state: dict[str, Any]) -> None:
+        super().set_state(state)
+        own = state.get(_STATE_KEY)
+        if own is None:
+            return
+        self.eval_schedule.set_state(own["eval_schedule"])
+        for split, curve in own["success_curves"].items():
+            self.success_curves[split].set_state(curve)

@@ -15,7 +15,7 @@ from copilot_ray.settings import float_setting, int_setting
 
 # The agent-side settings shared with the SAC baselines (not SAC's own learning settings).
 _SHARED = ("tau_max", "reward_scale", "agent_collision", "agent_collision_penalty", "agent_input")
-_EVALUATION = ("eval_interval", "eval_num_tasks", "eval_action")
+_EVALUATION = ("eval_interval", "eval_every_env_steps", "eval_num_tasks", "eval_action")
 TASK = [s for s in AGENT if s.key in _SHARED + _EVALUATION]
 
 # RLlib's PPOConfig defaults (ray 2.x, new API stack), so a spec can sweep them.

@@ -9,6 +9,7 @@ also stored in the shared RRT* reference cache (copilot_ray.planning.path_metric
 from __future__ import annotations
 
 from copilot_ray import keys
+from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import float_setting, int_setting
 
 SETTINGS = {
@@ -36,4 +37,6 @@ SETTINGS = {
 }
 
 # What an RRT* run logs that a sweep may optimise or stop on.
+# A planner that searches the map: every segment or motion it considers is a ground-truth check.
+PRIVILEGES = (COLLISION_CHECKS,)
 METRICS: tuple[str, ...] = (*keys.PATH_METRICS, keys.ENV_STEPS)

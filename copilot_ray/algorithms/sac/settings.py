@@ -25,13 +25,14 @@ AGENT = [
         default=800,
         doc="steps per episode (one training task each); also the test tasks' step budget",
     ),
-    replace(_C["task_batch_size"], default=4, doc="episodes per iteration (one training task each)"),
+    replace(_C["task_batch_size"], default=4, doc="episodes per iteration (one training task each)", why=""),
     _C["reward_scale"],
     _C["agent_collision"],
     _C["agent_collision_penalty"],
     _C["agent_input"],
     _C["subtasks_per_sample"],
     _C["eval_interval"],
+    _C["eval_every_env_steps"],
     _C["eval_num_tasks"],
     _C["eval_action"],
     *(s for s in _C.values() if s.target == "training"),
@@ -57,8 +58,10 @@ HINDSIGHT = [
 SETTINGS = {s.key: s for s in AGENT}
 # What a run logs that a sweep may optimise or stop on.
 METRICS: tuple[str, ...] = (
+    *keys.validation_metrics(keys.EVAL_SUCCESS, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN),
     keys.EVAL_SUCCESS,
     keys.SUCCESS_DIRECT,
+    keys.EVAL_SUCCESS_AUC,
     keys.ENV_STEPS,
     "env_runners/episode_return_mean",  # RLlib's
 )

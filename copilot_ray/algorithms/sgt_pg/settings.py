@@ -13,6 +13,7 @@ import dataclasses
 
 from copilot_ray import keys
 from copilot_ray.algorithms.copilot.settings import SETTINGS as COPILOT_SETTINGS
+from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import float_setting, int_setting
 
 _PLANNER = [
@@ -51,4 +52,6 @@ SETTINGS = {
 }
 
 # What an SGT-PG run logs that a sweep may optimise or stop on.
+# A planner that searches the map: every segment or motion it considers is a ground-truth check.
+PRIVILEGES = (COLLISION_CHECKS,)
 METRICS: tuple[str, ...] = (*keys.PATH_METRICS, keys.PLANNER_UPDATES, keys.ENV_STEPS)

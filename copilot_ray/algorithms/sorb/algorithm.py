@@ -7,7 +7,8 @@ drawn from its replay buffer (graph.py): the weight of edge i -> j is the agent'
 steps from state i to state j's achieved goal, read off its critic, and edges longer than
 `sorb.max_edge_steps` are dropped. Each test task is routed start -> graph -> goal by shortest path and
 the agent follows the waypoints (`sorb.waypoint_steps` each, `tau_max` steps in all, the budget every
-method gets).
+method gets); a task the graph cannot route (or whose goal is within one edge) is one hop with the whole
+`tau_max` budget, as the agent alone gets.
 
 Distance from the critic. The reward is sparse (R = goal_reward x reward_scale on arrival, the episode
 ending there), so a policy that arrives in d steps has Q = R * gamma^(d - 1) and
@@ -122,13 +123,14 @@ class SoRB(GoalSAC):
         t0 = time.perf_counter()
         observations, achieved = self.agent_updater.buffer.sample_states(cfg.sorb["graph_size"], self._rng)
         graph = ReplayGraph.build(observations, achieved, self.critic_distance, cfg.sorb["max_edge_steps"])
-        search = _GraphWaypoints(graph, self.goal_env)
+        search = _GraphWaypoints(graph, self.goal_env, cfg.sorb["waypoint_steps"], cfg.tau_max)
         self.metrics.log_value(keys.metric_path(keys.SORB_GRAPH_EDGES), graph.num_edges, window=1)
         self.metrics.log_value(keys.metric_path(keys.SORB_GRAPH_S), time.perf_counter() - t0, window=1)
         self._search = search
         return {
             "planner": search,
             "step_limit_of": lambda k: cfg.sorb["waypoint_steps"],
+            "hop_limits": search.hop_limits,
             "planned_total_steps": cfg.tau_max,
         }
 
@@ -144,12 +146,18 @@ class SoRB(GoalSAC):
 
 class _GraphWaypoints:
     """A SoRB graph behind the planner interface evaluation takes: `sample(starts, goals)` ->
-    [N, P, d] waypoints (front-padded with the start where a route is shorter than the longest)."""
+    [N, P, d] waypoints (front-padded with the start where a route is shorter than the longest), and
+    `hop_limits(waypoints)`: `waypoint_steps` per hop, except that a task routed straight to its goal
+    (the goal within one edge, or no route through the graph) gets the task's whole budget `total_steps`
+    for that one hop, as the agent alone would."""
 
-    def __init__(self, graph: ReplayGraph, goal_env):
+    def __init__(self, graph: ReplayGraph, goal_env, waypoint_steps: int, total_steps: int):
         self.graph = graph
         self.goal_env = goal_env
+        self.waypoint_steps = int(waypoint_steps)
+        self.total_steps = int(total_steps)
         self.mean_waypoints = float("nan")
+        self._straight: np.ndarray | None = None  # [N] of the last `sample`: routed straight to g
 
     def sample(self, starts: np.ndarray, goals: np.ndarray, deterministic: bool = True) -> np.ndarray:
         # The agent's observation at each start (the goal env's own, whatever its observation is).
@@ -161,4 +169,13 @@ class _GraphWaypoints:
         )
         paths = self.graph.waypoints(observations, starts.astype(np.float32), goals.astype(np.float32))
         self.mean_waypoints = float(np.mean([len(p) for p in paths]))
+        self._straight = np.array([len(p) == 2 for p in paths])
         return pad_front(paths)
+
+    def hop_limits(self, waypoints: np.ndarray) -> np.ndarray:
+        """int [N, P - 1]: the steps each hop of the last `sample`'s routes may take."""
+        if self._straight is None or len(self._straight) != len(waypoints):
+            raise ValueError("hop_limits needs the waypoints of the last sample() call")
+        limits = np.full((len(waypoints), waypoints.shape[1] - 1), self.waypoint_steps, np.int64)
+        limits[self._straight, -1] = self.total_steps
+        return limits

@@ -57,9 +57,13 @@ _HINDSIGHT = [
 ]
 SETTINGS = {s.key: s for s in (*AGENT, *_HINDSIGHT, *SEARCH)}
 METRICS: tuple[str, ...] = (
+    *keys.validation_metrics(
+        keys.EVAL_SUCCESS, keys.SUCCESS_PLANNED, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN
+    ),
     keys.EVAL_SUCCESS,
     keys.SUCCESS_PLANNED,
     keys.SUCCESS_DIRECT,
+    keys.EVAL_SUCCESS_AUC,
     keys.ENV_STEPS,
     keys.SORB_GRAPH_EDGES,
     keys.SORB_WAYPOINTS,
