@@ -87,6 +87,13 @@ def experiment_names(spec) -> list[tuple[str, int | None]]:
 def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None) -> Path:
     """The spec as it runs: absolute storage, the tracking URI and layout files resolved, re-validated."""
     data = spec.document  # this spec's own part of its file, as written
+    if spec.best_of is not None and spec.best_of.chosen is not None:
+        # What stage 2 runs with, read from stage 1's store once: a resumed part keeps it.
+        data["best_of"] = {
+            **(data.get("best_of") or {}),
+            "chosen": dict(spec.best_of.chosen),
+            "chosen_from": spec.best_of.chosen_from,
+        }
     data.setdefault("tracking", {})
     data["tracking"] = {**(data["tracking"] or {}), "storage": spec.tracking.storage}
     data["tracking"]["uri"] = tracking_uri or spec.tracking.uri
@@ -289,10 +296,37 @@ def resolve_sweep(spec, *, resume: bool, tracking_uri: str | None) -> SweepRun:
         if running.model_dump(exclude={"tracking"}) != spec.model_dump(exclude={"tracking"}):
             _say(f"note: {spec.source} differs from the spec this sweep ran with; resuming with {saved_spec}")
     else:
+        if spec.best_of is not None and spec.best_of.chosen is None:
+            spec = choose_best_of(spec, tracking_uri)
         write_resolved_spec(spec, saved_spec, tracking_uri)
         running = load_spec(saved_spec)
     uri = tracking_uri or running.tracking.uri
     return SweepRun(running, uri, resume, Path(spec.source), root, saved_spec, experiments)
+
+
+def choose_best_of(spec, tracking_uri: str | None):
+    """A copy of stage-2 `spec` with `best_of.chosen`: the winner of its stage-1 sweep (copilot_ray.stages),
+    read from that sweep's store now. Raises SweepError when there is none yet."""
+    from copilot_ray.stages import StageError, best_configuration
+
+    b = spec.best_of
+    uri, experiment = spec.best_of_store(tracking_uri)
+    try:
+        winner = best_configuration(uri, experiment, b.sweep, b.metric, b.mode)
+    except StageError as err:
+        raise SweepError(str(err)) from None
+    clashes = sorted(set(winner.values) & set(spec.config))
+    if clashes:
+        raise SweepError(
+            f"best_of: {b.sweep!r} searched {clashes[0]!r}, which {spec.name!r} also fixes in config: keep one"
+        )
+    chosen = spec.model_copy(deep=True)
+    chosen.best_of = b.model_copy(
+        update={"chosen": winner.values, "chosen_from": winner.provenance(b.sweep, b.metric)}
+    )
+    chosen._source, chosen._document = spec.source, spec.document
+    _say(f"{spec.name}: configuration = {winner.values} ({chosen.best_of.chosen_from})")
+    return chosen
 
 
 def _check_resume(root: Path, experiments: list[tuple[str, int | None]], resume: bool) -> None:
@@ -357,6 +391,11 @@ def _sweep_params(spec) -> dict[str, Any]:
         "stop.env_steps": spec.stop.env_steps,
         "stop.iterations": spec.stop.iterations,
         "searched": ",".join(spec.searched_keys) or "-",
+        **(
+            {"best_of.chosen": spec.best_of.chosen, "best_of.from": spec.best_of.chosen_from}
+            if spec.best_of is not None
+            else {}
+        ),
     }
 
 

@@ -38,6 +38,7 @@ from copilot_ray.keys import (
 )
 from copilot_ray.spec import (
     build_algorithm_config,
+    default_point,
     optuna_define_by_run,
     to_tune_scheduler,
     to_tune_search_space,
@@ -313,10 +314,12 @@ def _searcher(spec, spec_path: Path, study_db: Path, index: int, seed: int):
         "random": lambda: optuna.samplers.RandomSampler(seed=sampler_seed),
         "cmaes": lambda: optuna.samplers.CmaEsSampler(seed=sampler_seed),
     }[s.sampler or "tpe"]()
+    first = default_point(spec)
     return OptunaSearch(
         space=OptunaSpace(str(spec_path)),
         metric=s.metric,
         mode=s.mode,
+        points_to_evaluate=[first] if first else None,  # the defaults always compete
         sampler=sampler,
         study_name=f"{spec.name}-seed{seed}",
         storage=optuna.storages.RDBStorage(f"sqlite:///{study_db}"),

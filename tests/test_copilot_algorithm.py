@@ -42,6 +42,17 @@ def tiny_config(
 EXPECTED_METRICS = [
     ("copilot", "eval", "success_planned"),
     ("copilot", "eval", "success_direct"),
+    ("copilot", "eval", "success_auc"),
+    # the same headline figures on the validation tasks (what searchers read)
+    ("copilot", "validation", "success"),
+    ("copilot", "validation", "success_planned"),
+    ("copilot", "validation", "success_direct"),
+    ("copilot", "validation", "success_auc"),
+    ("copilot", "validation", "return"),
+    # privileges used so far: the planner's collision checks, the restart resets and map queries
+    ("copilot", "privileges", "collision_checks"),
+    ("copilot", "privileges", "resets"),
+    ("copilot", "privileges", "map_queries"),
     ("copilot", "alpha"),
     ("copilot", "planner", "cost_layer_0"),
     ("copilot", "planner", "cost_layer_2"),
@@ -102,6 +113,9 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
         # 5 tasks x 4 sampled trees x 7 segments).
         checks = [lookup(r, ("paths", "collision_checks")) for r in results]
         assert 5 * 4 * 7 <= checks[0] < checks[1] == algo._planner_checks.count
+        assert [lookup(r, ("copilot", "privileges", "collision_checks")) for r in results] == checks
+        # validation tasks are not test tasks: the sub-goal trees and per-action figures are test-only
+        assert "deterministic" not in results[-1]["copilot"]["validation"]
         assert ("success_vs_rrt" in results[-1]["paths"]) == fast_learner
         if fast_learner:
             assert len(list((tmp_path / "cache" / "rrt_reference").glob("maze-point-4tasks-*.npz"))) == 1

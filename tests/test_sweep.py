@@ -25,6 +25,8 @@ from copilot_ray.keys import (
     GIT_COMMIT_TAG,
     K_TAG,
     PARENT_TAG,
+    PRIVILEGE_COLLISION_CHECKS,
+    PRIVILEGES_TAG,
     ROLE_SWEEP,
     ROLE_TAG,
     ROLE_TRIAL,
@@ -131,6 +133,10 @@ def test_smoke_sweep_is_tracked_in_mlflow(ray_session, tmp_path):
         assert tags[SWEEP_TAG] == "smoke" and tags[SEED_TAG] == "0" and tags[B_TAG] == "1"
         assert tags[K_TAG] == params["tree_depth"] and tags[CONFIG_KEY_TAG] == f"tree_depth={tags[K_TAG]}"
         assert tags[GIT_COMMIT_TAG] and tags[ALPHA_SCHEDULE_TAG] == "paper_per_task"
+        # CO-PILOT's planner pays its collision penalty with ground-truth checks: declared and counted
+        assert "collision_checks" in tags[PRIVILEGES_TAG].split(",")
+        checks = client.get_metric_history(run.info.run_id, PRIVILEGE_COLLISION_CHECKS)
+        assert checks and checks[-1].value > 0
         assert run.info.status == "FINISHED"
         success = client.get_metric_history(run.info.run_id, SUCCESS_PLANNED)
         steps = client.get_metric_history(run.info.run_id, ENV_STEPS)

@@ -137,6 +137,14 @@ def run_subtask(env, policy=drive_to_goal):
             return obs, total, steps, term, info
 
 
+def finish_subtask(env, policy):
+    """Steps the sub-task `env.reset()` already started until it ends; its last info."""
+    while True:
+        obs, _, term, trunc, info = env.step(policy(env, None))
+        if term or trunc:
+            return info
+
+
 def stand_still(env, obs):
     return np.zeros(2, np.float32)
 
@@ -160,9 +168,24 @@ def test_after_failure_restart_starts_the_next_subtask_at_the_missed_subgoal():
     env.load_plan(tree[None], depth, np.array([0]))
     *_, info = run_subtask(env, stand_still)  # fails: stays at s0
     assert info["subtask_reached"] is False
+    # the first sub-task of a layer starts at the task's start: no privilege used
+    assert info["subtask_reset_to_state"] is False and info["subtask_map_queries"] == 0
     obs, _ = env.reset()  # next sub-task of the layer starts at the sub-goal it missed
     np.testing.assert_allclose(obs[:2], tree[1], atol=1e-6)
     np.testing.assert_allclose(obs[2:], tree[2], atol=1e-6)
+    # ... after asking the map: a reset to a state that is no task's start, and a map query, counted
+    info = finish_subtask(env, stand_still)
+    assert info["subtask_reset_to_state"] is True and info["subtask_map_queries"] == 1
+
+
+def test_continue_and_abort_layer_use_no_privilege():
+    depth = 2
+    for rule in ("continue", "abort_layer"):
+        env = make_ruled_env(after_failure=rule)
+        env.load_plan(np.stack([straight_tree(depth)] * 2), depth, np.array([0, 1]))
+        while env.remaining():
+            *_, info = run_subtask(env, stand_still)  # every sub-task fails
+            assert info["subtask_reset_to_state"] is False and info["subtask_map_queries"] == 0, rule
 
 
 def test_after_failure_restart_falls_back_to_the_agent_position_when_the_subgoal_is_in_a_wall():
@@ -186,6 +209,8 @@ def test_after_failure_restart_falls_back_to_the_agent_position_when_the_subgoal
     *_, info = run_subtask(env, stand_still)
     obs, _ = env.reset()
     np.testing.assert_allclose(obs[:2], info["subtask_end"], atol=1e-6)
+    info = finish_subtask(env, stand_still)  # the map was asked, the answer was no: no reset
+    assert info["subtask_map_queries"] == 1 and info["subtask_reset_to_state"] is False
 
 
 def test_after_failure_abort_layer_drops_the_rest_of_the_layer():

@@ -10,6 +10,8 @@ starts) and provide:
                                           benchmarks' --set accept (copilot_ray.settings.Setting)
     METRICS: tuple[str, ...]              what it logs that a sweep may optimise (`<k>`: a tree layer)
     combination_problems(values)          optional: [(keys, value, why)] for values that clash together
+    SEARCH_SPACE: dict[str, dict]         optional: what a comparison tunes (`search: declared` in a spec),
+                                          in the spec's domain syntax, every default inside its range
     PRIVILEGES: tuple[str, ...]           optional: what the method always uses that agents learning from
                                           their own episodes do not (copilot_ray.privileges); a setting
                                           whose value grants more says so itself (Setting.grants)
@@ -105,6 +107,7 @@ class AlgorithmEntry:
     config_class: str  # "module:Class", imported by build_config only
     trial_class_path: str  # "module:Class", imported by trial_class only (a sweep's trainable)
     always_privileges: tuple[str, ...] = ()
+    search_space: Mapping[str, Any] = field(default_factory=dict)  # raw domains (spec syntax)
 
     def privileges(self, values: Mapping[str, Any]) -> tuple[str, ...]:
         """The privileges a run uses at the effective setting `values` (copilot_ray.privileges)."""
@@ -152,4 +155,5 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         config_class=config_class,
         trial_class_path=trial_class,
         always_privileges=tuple(getattr(module, "PRIVILEGES", ())),
+        search_space=dict(getattr(module, "SEARCH_SPACE", {})),
     )

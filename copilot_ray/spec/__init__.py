@@ -84,7 +84,7 @@ from copilot_ray.spec.models import (
     metric_known,
     parse_spec,
 )
-from copilot_ray.spec.plan import format_plan
+from copilot_ray.spec.plan import default_point, format_plan
 from copilot_ray.spec.tune_translation import (
     optuna_define_by_run,
     to_tune_scheduler,
@@ -99,6 +99,7 @@ __all__ = [
     "SpecLoader",
     "SweepSpec",
     "build_algorithm_config",
+    "default_point",
     "format_plan",
     "load_spec",
     "load_specs",

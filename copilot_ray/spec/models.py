@@ -25,6 +25,7 @@ from copilot_ray.envs import env_ids, make
 from copilot_ray.envs.maze.layouts import LayoutError
 from copilot_ray.settings import Setting, is_int, is_number
 from copilot_ray.settings import problems as setting_problems
+from copilot_ray.spec.comparison import comparison_problems, link_stages
 from copilot_ray.spec.errors import Issue, Issues, SpecError, did_you_mean, short
 from copilot_ray.spec.yaml_loader import read_yaml_documents, read_yaml_file
 
@@ -308,6 +309,26 @@ class TrackingSpec(_Model):
     storage: str = "results/"
 
 
+# `search: declared`: the algorithm's own search space (its settings module's SEARCH_SPACE).
+DECLARED = "declared"
+
+
+class BestOfSpec(_Model):
+    """Stage 2 of a comparison: this part's configuration is the best trial of another sweep (stage 1),
+    read from the MLflow store when the part starts, never from a hand edit. ``metric`` (a validation
+    metric) ranks that sweep's finished trials, averaged over their seeds; the winner's searched values
+    become this part's fixed config. The resolved spec the part runs with records them in ``chosen``
+    (and the runs they came from in ``chosen_from``), so a resumed part keeps them."""
+
+    sweep: str
+    metric: str
+    mode: Literal["max", "min"] = "max"
+    uri: str | None = None  # the store of that sweep (default: its part in this file, else this part's)
+    experiment: str | None = None  # its MLflow experiment (default: as for uri)
+    chosen: dict[str, Any] | None = None
+    chosen_from: str | None = None
+
+
 class SweepSpec(_Model):
     name: str
     experiment: str | None = None
@@ -317,6 +338,7 @@ class SweepSpec(_Model):
     config: dict[str, Any] = Field(default_factory=dict)
     variants: dict[str, dict[str, Any]] = Field(default_factory=dict)
     search: dict[str, ParamSearch] = Field(default_factory=dict)
+    best_of: BestOfSpec | None = None
     seeds: list[int] = Field(default_factory=lambda: [0])
     searcher: SearcherSpec = Field(default_factory=SearcherSpec)
     scheduler: SchedulerSpec | None = None
@@ -327,6 +349,27 @@ class SweepSpec(_Model):
 
     _source: str = PrivateAttr(default="<spec>")
     _document: Any = PrivateAttr(default=None)  # the mapping it was parsed from, as written
+    # best_of's sweep when it is a part of the same file: its store and experiment (load_specs sets them)
+    _best_of_store: tuple[str, str] | None = PrivateAttr(default=None)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _declared_search(cls, data: Any) -> Any:
+        """`search: declared` -> the algorithm's own search space (SEARCH_SPACE of its settings)."""
+        if not (isinstance(data, dict) and data.get("search") == DECLARED):
+            return data
+        try:
+            entry = get_algorithm(data.get("algorithm", "copilot"))
+        except (UnknownAlgorithmError, TypeError):
+            return {**data, "search": {}}  # the algorithm's own error says what is wrong
+        if not entry.search_space:
+            raise Issue(
+                "search",
+                DECLARED,
+                f"{entry.name} declares no search space (SEARCH_SPACE in {ALGORITHMS[entry.name][0]}); "
+                "give the domains here",
+            )
+        return {**data, "search": copy.deepcopy(dict(entry.search_space))}
 
     # ------------------------------------------------------------------ validation across sections
     @model_validator(mode="after")
@@ -353,6 +396,7 @@ class SweepSpec(_Model):
         issues += self._check_search(entry.settings)
         issues += self._check_seeds()
         issues += self._check_searcher(entry)
+        issues += self._check_best_of(entry.settings)
         if not issues:
             issues += self._check_combinations(entry)
         storage = Path(self.tracking.storage).expanduser().resolve()
@@ -538,6 +582,45 @@ class SweepSpec(_Model):
             )
         return issues
 
+    def _check_best_of(self, settings: Mapping[str, Setting]) -> list[Issue]:
+        b = self.best_of
+        if b is None:
+            return []
+        issues = []
+        if keys.is_test_metric(b.metric):
+            issues.append(Issue("best_of.metric", b.metric, _test_metric_problem(b.metric, None)))
+        if self.search:
+            issues.append(
+                Issue(
+                    "best_of",
+                    b.sweep,
+                    "a part that takes the best configuration of another sweep searches nothing; drop search",
+                )
+            )
+        if b.sweep == self.name:
+            issues.append(Issue("best_of.sweep", b.sweep, "names this part itself; name the tuning sweep"))
+        for key, value in (b.chosen or {}).items():
+            if key not in settings:
+                issues.append(
+                    Issue(f"best_of.chosen.{key}", value, f"unknown key{did_you_mean(key, settings)}")
+                )
+            elif msg := rule_problem(key, settings[key], value):
+                issues.append(Issue(f"best_of.chosen.{key}", value, msg))
+            elif key in self.config:
+                issues.append(
+                    Issue(f"best_of.chosen.{key}", value, f"{key} is also fixed in config; keep one")
+                )
+        return issues
+
+    def best_of_store(self, tracking_uri: str | None = None) -> tuple[str, str]:
+        """(MLflow URI, experiment) holding `best_of.sweep`'s trials: best_of's own, else that sweep's
+        part of this file (under a --tracking-uri override: the override), else this part's."""
+        b = self.best_of
+        if b is None:
+            raise ValueError(f"sweep {self.name!r} has no best_of")
+        sibling_uri, sibling_experiment = self._best_of_store or (self.tracking.uri, self.experiment)
+        return (b.uri or tracking_uri or sibling_uri, b.experiment or sibling_experiment)
+
     def _check_combinations(self, entry: AlgorithmEntry) -> list[Issue]:
         """Keys valid one by one can clash together (an alpha schedule missing a field): try them."""
         points = self.grid_points() if self.searcher.type == "grid" else _representative_points(self.search)
@@ -588,7 +671,8 @@ class SweepSpec(_Model):
     def merged(self, point: Mapping[str, Any]) -> dict[str, Any]:
         """A trial's effective fixed keys: ``config``, its variant's overrides, then its own values."""
         rest = {k: v for k, v in point.items() if k not in ("variant", "seed", keys.ENV_PARAM)}
-        return {**self.config, **self.variants.get(point.get("variant"), {}), **rest}
+        chosen = (self.best_of.chosen or {}) if self.best_of is not None else {}
+        return {**self.config, **chosen, **self.variants.get(point.get("variant"), {}), **rest}
 
     def num_configurations(self) -> int:
         if self.searcher.type == "grid":
@@ -708,7 +792,10 @@ def load_specs(path: str | Path) -> list[SweepSpec]:
     validated before this returns; problems name the part they are in."""
     documents = read_yaml_documents(path)
     if len(documents) == 1:
-        return [parse_spec(documents[0], str(path))]
+        spec = parse_spec(documents[0], str(path))
+        if problems := link_stages([spec]):
+            raise SpecError(problems)
+        return [spec]
     specs, problems = [], []
     for i, doc in enumerate(documents, start=1):
         try:
@@ -718,6 +805,8 @@ def load_specs(path: str | Path) -> list[SweepSpec]:
     names = [s.name for s in specs]
     for name in sorted({n for n in names if names.count(n) > 1}):
         problems.append(f"{path}: name: {name!r} is invalid: every part of a spec file needs its own name")
+    if not problems:
+        problems += link_stages(specs) + comparison_problems(specs)
     if problems:
         raise SpecError(problems)
     return specs

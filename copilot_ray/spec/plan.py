@@ -25,6 +25,15 @@ def format_plan(spec: SweepSpec) -> str:
     for name, overrides in spec.variants.items():
         text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "(config as it is)"
         lines.append(f"  variant {name}: {text}")
+    if spec.best_of is not None:
+        b = spec.best_of
+        if b.chosen is None:
+            lines.append(
+                f"  best_of: the searched values of sweep {b.sweep!r}'s best configuration by {b.mode} "
+                f"{b.metric} (read from its MLflow store when this part starts)"
+            )
+        else:
+            lines.append(f"  best_of {b.sweep!r}: " + ", ".join(f"{k}={v!r}" for k, v in b.chosen.items()))
     seeds = ", ".join(str(s) for s in spec.seeds)
     if spec.searcher.type == "grid":
         points = spec.grid_points()
@@ -48,6 +57,12 @@ def format_plan(spec: SweepSpec) -> str:
             f"seeds [{seeds}] (one study per seed, sampler seed {s.seed} + index)"
         )
         lines.extend(_describe_space(spec.search, "    "))
+        first = default_point(spec)
+        if first:
+            lines.append(
+                "    first trial of each study: the defaults "
+                + ", ".join(f"{k}={v!r}" for k, v in first.items())
+            )
     if spec.scheduler is not None:
         sch = spec.scheduler
         args = {k: v for k, v in sch.model_dump().items() if k != "type" and v is not None}
@@ -73,6 +88,28 @@ def format_plan(spec: SweepSpec) -> str:
         f"  a checkpoint every {ft.checkpoint_every} iteration(s); a failed trial is retried from it {retries}"
     )
     return "\n".join(lines)
+
+
+def default_point(spec: SweepSpec) -> dict[str, Any]:
+    """Every searched setting at its default, when each default lies in its domain and no parameter is
+    conditional: an Optuna study tries this point first (so the defaults always compete). {} otherwise."""
+    from copilot_ray.algorithms.registry import get_algorithm
+
+    if spec.searcher.type != "optuna" or spec.has_conditional_params:
+        return {}
+    settings = get_algorithm(spec.algorithm).settings
+    point = {}
+    for key, ps in spec.search.items():
+        value = settings[key].default
+        inside = (
+            value in ps.values
+            if ps.domain in ("grid", "categorical")
+            else (value is not None and ps.values[0] <= value <= ps.values[1])
+        )
+        if not inside:
+            return {}
+        point[key] = value
+    return point
 
 
 def _cell(value: Any) -> str:

@@ -531,6 +531,17 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 assert tuple(PRESETS) == PRESET_NAMES
 
+# What a comparison tunes (`search: declared` in a spec; rl-zoo style, each algorithm's space next to
+# its settings). The goal-conditioned SAC learner that CO-PILOT, SAC, HER and SoRB share: its learning
+# rates and discount. The defaults lie inside every range (an Optuna study tries them first).
+LEARNER_SEARCH_SPACE: dict[str, dict] = {
+    "actor_lr": {"float": [1e-4, 1e-3], "log": True},
+    "critic_lr": {"float": [1e-4, 1e-3], "log": True},
+    "gamma": {"categorical": [0.98, 0.99, 0.995]},
+}
+# CO-PILOT, its readings (the preset) held fixed: the learner's space plus the planner's learning rate.
+SEARCH_SPACE: dict[str, dict] = {**LEARNER_SEARCH_SPACE, "planner.lr": {"float": [1e-3, 1e-2], "log": True}}
+
 # ------------------------------------------------------------------------------------------ metrics
 # What a CO-PILOT run logs that a sweep may optimise or stop on; `<k>` is a tree layer (0..K).
 METRICS: tuple[str, ...] = (

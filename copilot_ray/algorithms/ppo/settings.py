@@ -33,6 +33,14 @@ TRAINING = [
     int_setting("num_epochs", "training", 30, "passes over each batch", 1),
 ]
 SETTINGS = {s.key: s for s in (*TASK, *TRAINING)}
+# What a comparison tunes for PPO (`search: declared`): rl-zoo's usual suspects for sparse rewards; the
+# defaults (RLlib's) lie inside and are tried first.
+SEARCH_SPACE: dict[str, dict] = {
+    "lr": {"float": [5e-5, 1e-3], "log": True},
+    "entropy_coeff": {"float": [0.0, 0.01]},
+    "lambda_": {"categorical": [0.9, 0.95, 1.0]},
+    "gamma": {"categorical": [0.98, 0.99, 0.995]},
+}
 METRICS = sac_settings.METRICS  # the same figures as the SAC baseline's
 
 

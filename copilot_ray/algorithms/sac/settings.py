@@ -56,6 +56,10 @@ HINDSIGHT = [
 ]
 
 SETTINGS = {s.key: s for s in AGENT}
+
+# What a comparison tunes (`search: declared`): the learner's space CO-PILOT's agent gets too.
+LEARNER_SEARCH_SPACE = copilot_settings.LEARNER_SEARCH_SPACE
+SEARCH_SPACE: dict[str, dict] = dict(LEARNER_SEARCH_SPACE)
 # What a run logs that a sweep may optimise or stop on.
 METRICS: tuple[str, ...] = (
     *keys.validation_metrics(keys.EVAL_SUCCESS, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN),

@@ -2,7 +2,8 @@
 `SoRBConfig` and `SoRB`.
 
 Training is the HER baseline's goal-conditioned SAC (copilot_ray.algorithms.sac). At each evaluation,
-once `sorb.pretrain_env_steps` env steps are done, SoRB builds a graph over `sorb.graph_size` states
+once `sorb.pretrain_env_steps` env steps are done (before that it is evaluated as its agent alone),
+SoRB builds a graph over `sorb.graph_size` states
 drawn from its replay buffer (graph.py): the weight of edge i -> j is the agent's estimated number of
 steps from state i to state j's achieved goal, read off its critic, and edges longer than
 `sorb.max_edge_steps` are dropped. Each test task is routed start -> graph -> goal by shortest path and
@@ -119,7 +120,9 @@ class SoRB(GoalSAC):
         cfg = self.config
         steps = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
         if steps < cfg.sorb["pretrain_env_steps"] or len(self.agent_updater.buffer) == 0:
-            return None
+            # Before its search starts, SoRB is its agent alone: evaluated as such, on the cadence
+            # every method shares (no gap at the start of its curve).
+            return super()._evaluation_plan(n)
         t0 = time.perf_counter()
         observations, achieved = self.agent_updater.buffer.sample_states(cfg.sorb["graph_size"], self._rng)
         graph = ReplayGraph.build(observations, achieved, self.critic_distance, cfg.sorb["max_edge_steps"])

@@ -4,7 +4,8 @@ SoRB trains the same goal-conditioned SAC as the HER baseline (its settings, rel
 adds search at test time: a graph over ``sorb.graph_size`` replayed states whose edges are the critic's
 distance estimates up to ``sorb.max_edge_steps``; the agent follows the shortest path's waypoints
 (``sorb.waypoint_steps`` steps each, ``tau_max`` in all, the same budget as every other method). It
-"starts later": no search, and no evaluation, before ``sorb.pretrain_env_steps`` env steps.
+"starts later": no search before ``sorb.pretrain_env_steps`` env steps (evaluations before that are its
+agent alone, so its curve shares every method's cadence).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from copilot_ray import keys
+from copilot_ray.algorithms.sac.her_settings import SEARCH_SPACE as HER_SEARCH_SPACE
 from copilot_ray.algorithms.sac.settings import AGENT, HINDSIGHT, combination_problems
 from copilot_ray.settings import int_setting
 
@@ -20,7 +22,7 @@ SEARCH = [
         "sorb.pretrain_env_steps",
         "sorb",
         20_000,
-        "env steps of goal-conditioned SAC before the first search (and evaluation): SoRB starts later",
+        "env steps of goal-conditioned SAC before the first search (evaluated as the agent alone until then)",
         0,
     ),
     int_setting(
@@ -69,4 +71,7 @@ METRICS: tuple[str, ...] = (
     keys.SORB_WAYPOINTS,
 )
 
-__all__ = ["METRICS", "SETTINGS", "combination_problems"]
+# HER's space (SoRB trains HER's agent) plus the search's edge cutoff.
+SEARCH_SPACE: dict[str, dict] = {**HER_SEARCH_SPACE, "sorb.max_edge_steps": {"categorical": [25, 50, 100]}}
+
+__all__ = ["METRICS", "SEARCH_SPACE", "SETTINGS", "combination_problems"]
