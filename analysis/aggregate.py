@@ -1,5 +1,10 @@
-"""Trials -> configurations: per-configuration curves, final success, steps-to-threshold and wall time
-aggregated over seeds, plus the list of what is missing from the sweep.
+"""Trials -> configurations: per-configuration curves, final success, the normalised area under the
+success curve, steps-to-threshold, wall time, env steps and privileges aggregated over seeds, plus the
+list of what is missing from the sweep.
+
+Over seeds, every figure follows `stats.SeedSummary`: IQM and a 95 % bootstrap CI from
+`stats.MIN_SEEDS_FOR_CI` seeds on, else the mean and the seeds' range. No "best over evaluations": a
+maximum over noisy evaluations is biased upwards and rewards evaluating often.
 
 Kept apart from `tables` and `figures` so that both draw from the same numbers.
 """
@@ -10,12 +15,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from copilot_ray.keys import ALGORITHM_TAG, CURVE_METRICS
+from copilot_ray.keys import (
+    ALGORITHM_TAG,
+    CURVE_METRICS,
+    EVAL_SUCCESS,
+    PRESET_TAG,
+    PRIVILEGE_COUNTS,
+    PRIVILEGES_TAG,
+    SUCCESS_PLANNED,
+)
+from copilot_ray.privileges import from_tag
 
 from . import stats
 from .load import CONFIG_KEY_AXIS, Sweep, Trial, natural_key
 
 THRESHOLDS = (0.5, 0.9)
+COPILOT = "copilot"  # the algorithm tag of CO-PILOT's runs
+DEFAULT_PRESETS = ("default", "", "None")  # preset tag of a run without a preset
+UNKNOWN = "-"  # privileges of runs older than the tag
 
 
 @dataclass
@@ -23,23 +40,31 @@ class CurveSummary:
     """One metric of one configuration on the common env-step grid."""
 
     grid: np.ndarray
-    iqm: np.ndarray
-    low: np.ndarray
+    center: np.ndarray  # IQM over seeds (>= MIN_SEEDS_FOR_CI seeds), else the mean
+    low: np.ndarray  # the CI's bounds when `has_ci`, else the seeds' min and max
     high: np.ndarray
     coverage: np.ndarray  # seeds with data at each grid step
     n_seeds: int
     single_point: bool  # every seed has at most one evaluation: a marker, never a line
     point_step: float = float("nan")  # where to put that marker
+    seed_curves: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # each seed's evaluations
+
+    @property
+    def has_ci(self) -> bool:
+        return stats.has_ci(self.n_seeds)
 
 
 @dataclass
 class MetricSummary:
     n_seeds: int  # seeds with at least one evaluation of this metric
-    final_iqm: float
-    final_low: float
-    final_high: float
-    final_step: float  # IQM over seeds of the step of each seed's last evaluation
-    # threshold -> (IQM over seeds of steps to reach it, inf = not reached; seeds that reached it)
+    finals: np.ndarray  # each seed's last evaluation
+    final: stats.SeedSummary
+    aucs: np.ndarray  # each seed's normalised area under the curve over `auc_window` (NaN: not covered)
+    auc: stats.SeedSummary
+    auc_window: tuple[float, float]  # env steps, the same for every configuration
+    final_step: float  # mean over seeds of the step of each seed's last evaluation
+    # threshold -> (IQM, or mean with fewer than 5 seeds, of steps to reach it, inf = not reached;
+    # seeds that reached it)
     to_threshold: dict[float, tuple[float, int]]
     curve: CurveSummary | None
 
@@ -52,10 +77,23 @@ class ConfigSummary:
     all_trials: list[Trial]
     metrics: dict[str, MetricSummary]
     wall_time_s: float  # mean over seeds of the last `time_total_s`
+    env_steps: float = float("nan")  # mean over seeds of the env steps at the last result
+    # privilege counter key -> mean over seeds of its final (cumulative) count; NaN: not logged
+    privilege_counts: dict[str, float] = field(default_factory=dict)
+    privileges: str = UNKNOWN  # the names from the tag, "none", or "-" (runs older than the tag)
 
     @property
     def n_seeds(self) -> int:
         return len(self.trials)
+
+    @property
+    def algorithm(self) -> str:
+        return self.all_trials[0].tags.get(ALGORITHM_TAG, "")
+
+    @property
+    def is_copilot_default(self) -> bool:
+        """CO-PILOT with its default settings (no preset): the configuration the paper's claims are about."""
+        return self.algorithm == COPILOT and self.all_trials[0].tags.get(PRESET_TAG, "") in DEFAULT_PRESETS
 
 
 @dataclass
@@ -125,6 +163,12 @@ def summarise(
 
     included = [t for t in sweep.trials if t.usable and t.has_eval]
     grids = {m: stats.common_grid([t.curves[m][0] for t in included if m in t.curves]) for m in CURVE_METRICS}
+    # The AUC window is set by the finished seeds (they ran to the budget): a running one must not cut
+    # everyone's window short; it gets an AUC once it covers the window.
+    finished = [t for t in included if t.status == "FINISHED"] or included
+    windows = {
+        m: stats.auc_window([t.curves[m][0] for t in finished if m in t.curves]) for m in CURVE_METRICS
+    }
     all_seeds = sorted({t.seed for t in sweep.trials}, key=natural_key)
 
     configs = []
@@ -137,7 +181,7 @@ def summarise(
             missing.short_configs.append((label, lacking))
         metrics = {}
         for m in CURVE_METRICS:
-            ms = _metric_summary([t for t in use if m in t.curves], m, grids[m], reps, seed)
+            ms = _metric_summary([t for t in use if m in t.curves], m, grids[m], windows[m], reps, seed)
             if ms is not None:
                 metrics[m] = ms
                 if ms.curve is not None and ms.curve.single_point:
@@ -151,6 +195,9 @@ def summarise(
                 all_trials=trials,
                 metrics=metrics,
                 wall_time_s=float(np.mean(walls)) if walls else float("nan"),
+                env_steps=_mean([t.env_steps for t in use]),
+                privilege_counts={k: _mean([t.latest.get(k, np.nan) for t in use]) for k in PRIVILEGE_COUNTS},
+                privileges=privileges_label(trials),
             )
         )
     configs.sort(key=lambda c: _config_order(c, axes))
@@ -163,51 +210,94 @@ def _config_order(c: ConfigSummary, axes: list[str]):
     return tuple(natural_key(t.tags.get(a, "") if a != CONFIG_KEY_AXIS else c.key) for a in axes) + (c.key,)
 
 
-def _metric_summary(trials: list[Trial], metric: str, grid: np.ndarray, reps: int, seed: int):
+def _mean(values) -> float:
+    """Mean over seeds of the values they have; NaN when none has one (not logged)."""
+    finite = [float(v) for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
+def privileges_label(trials: list[Trial]) -> str:
+    """What a configuration's privilege tags say: names joined by ", ", "none", or "-" (not tagged);
+    several different tags (which one configuration should not have) are all shown, " / "-separated."""
+    labels = []
+    for t in trials:
+        tag = t.tags.get(PRIVILEGES_TAG)
+        label = UNKNOWN if tag is None else ", ".join(from_tag(tag)) or "none"
+        if label not in labels:
+            labels.append(label)
+    return " / ".join(labels) or UNKNOWN
+
+
+def headline_metric(configs: list[ConfigSummary]) -> str:
+    """The success every method reports (copilot/eval/success); older CO-PILOT runs: success_planned."""
+    return EVAL_SUCCESS if any(EVAL_SUCCESS in c.metrics for c in configs) else SUCCESS_PLANNED
+
+
+def improvement_pairs(configs: list[ConfigSummary], metric: str) -> list[tuple[ConfigSummary, ConfigSummary]]:
+    """(CO-PILOT default, best other method) for each CO-PILOT default configuration with `metric`:
+    the other method is the configuration of another algorithm with the highest final `metric` (IQM,
+    or mean with fewer than 5 seeds). [] without such a pair (e.g. a sweep of one algorithm)."""
+    others = [c for c in configs if c.algorithm != COPILOT and metric in c.metrics]
+    if not others:
+        return []
+    best = max(others, key=lambda c: np.nan_to_num(c.metrics[metric].final.point, nan=-np.inf))
+    return [(c, best) for c in configs if c.is_copilot_default and metric in c.metrics]
+
+
+def _metric_summary(trials, metric: str, grid: np.ndarray, window, reps: int, seed: int):
     if not trials:
         return None
     finals = np.array([t.curves[metric][1][-1] for t in trials])
     final_steps = np.array([t.curves[metric][0][-1] for t in trials])
-    lo, hi = stats.bootstrap_ci(finals, reps=reps, seed=seed)
+    aucs = np.array([stats.normalised_auc(*t.curves[metric], *window) for t in trials])
     to_thr = {}
     for thr in THRESHOLDS:
         s = np.array([stats.steps_to_threshold(*t.curves[metric], thr) for t in trials])
-        to_thr[thr] = (float(stats.iqm(s)), int(np.isfinite(s).sum()))
+        to_thr[thr] = (float(stats.center(s)), int(np.isfinite(s).sum()))
     return MetricSummary(
         n_seeds=len(trials),
-        final_iqm=float(stats.iqm(finals)),
-        final_low=float(lo),
-        final_high=float(hi),
-        final_step=float(stats.iqm(final_steps)),
+        finals=finals,
+        final=stats.summarise_seeds(finals, reps=reps, seed=seed),
+        aucs=aucs,
+        auc=stats.summarise_seeds(aucs, reps=reps, seed=seed),
+        auc_window=window,
+        final_step=float(np.mean(final_steps)),
         to_threshold=to_thr,
         curve=_curve(trials, metric, grid, reps, seed),
     )
 
 
 def _curve(trials: list[Trial], metric: str, grid: np.ndarray, reps: int, seed: int) -> CurveSummary:
-    if max(len(t.curves[metric][0]) for t in trials) <= 1:
-        # One evaluation per seed: the aggregate is a point, with the CI of that point.
-        values = np.array([t.curves[metric][1][0] for t in trials])
-        steps = np.array([t.curves[metric][0][0] for t in trials])
-        lo, hi = stats.bootstrap_ci(values, reps=reps, seed=seed)
+    n = len(trials)
+    seed_curves = [t.curves[metric] for t in trials]
+    if max(len(steps) for steps, _ in seed_curves) <= 1:
+        # One evaluation per seed: the aggregate is a point (with a CI from 5 seeds on).
+        values = np.array([values[0] for _, values in seed_curves])
+        s = stats.summarise_seeds(values, reps=reps, seed=seed)
         return CurveSummary(
             grid=np.zeros(0),
-            iqm=np.atleast_1d(stats.iqm(values)),
-            low=np.atleast_1d(lo),
-            high=np.atleast_1d(hi),
-            coverage=np.array([len(trials)]),
-            n_seeds=len(trials),
+            center=np.atleast_1d(s.point),
+            low=np.atleast_1d(s.low),
+            high=np.atleast_1d(s.high),
+            coverage=np.array([n]),
+            n_seeds=n,
             single_point=True,
-            point_step=float(np.median(steps)),
+            point_step=float(np.median([steps[0] for steps, _ in seed_curves])),
+            seed_curves=seed_curves,
         )
-    mat = np.stack([stats.interpolate(*t.curves[metric], grid) for t in trials])  # [n_seeds, G]
-    low, high = stats.bootstrap_ci(mat, reps=reps, seed=seed)
+    mat = np.stack([stats.interpolate(*c, grid) for c in seed_curves])  # [n_seeds, G]
+    if stats.has_ci(n):
+        low, high = stats.bootstrap_ci(mat, reps=reps, seed=seed)
+    else:
+        with stats.quiet_all_nan():  # columns no seed reached: NaN is right
+            low, high = np.nanmin(mat, axis=0), np.nanmax(mat, axis=0)
     return CurveSummary(
         grid=grid,
-        iqm=stats.iqm(mat),
+        center=stats.center(mat, n),
         low=low,
         high=high,
         coverage=(~np.isnan(mat)).sum(axis=0),
-        n_seeds=len(trials),
+        n_seeds=n,
         single_point=False,
+        seed_curves=seed_curves,
     )

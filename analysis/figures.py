@@ -1,5 +1,9 @@
 """PNG figures: success against environment steps, final success per configuration (paper Fig. 2b when
-the axis is K), and the evolution of one task's sub-goal tree over training (paper Fig. 4d)."""
+the axis is K), and the evolution of one task's sub-goal tree over training (paper Fig. 4d).
+
+Intervals follow `stats.MIN_SEEDS_FOR_CI`: from 5 seeds on, the IQM with a shaded 95 % bootstrap band
+(curves) or error bars (bars); with fewer, the mean with each seed drawn (thin lines, dots: their range)
+and no band, so that two seeds never look like a confident estimate."""
 
 from __future__ import annotations
 
@@ -29,7 +33,8 @@ from copilot_ray.keys import (  # noqa: E402
     eval_by_action,
 )
 
-from .aggregate import ConfigSummary  # noqa: E402
+from . import stats  # noqa: E402
+from .aggregate import ConfigSummary, CurveSummary  # noqa: E402
 from .load import TreeSnapshot  # noqa: E402
 
 TITLES = {
@@ -64,7 +69,7 @@ def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
 
     def score(c):
         m = c.metrics.get(EVAL_SUCCESS) or c.metrics.get(SUCCESS_PLANNED)
-        return m.final_iqm if m and np.isfinite(m.final_iqm) else -1.0
+        return m.final.point if m and np.isfinite(m.final.point) else -1.0
 
     keep = set(id(c) for c in sorted(configs, key=score, reverse=True)[:MAX_CURVES])
     return [c for c in configs if id(c) in keep], len(configs) - MAX_CURVES
@@ -73,10 +78,10 @@ def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
 def success_curves(
     configs: list[ConfigSummary], axis_name: str, path: Path, metrics: tuple[str, ...] = PLANNED_AND_DIRECT
 ) -> Path:
-    """One panel per metric (planned and direct; `BY_METHOD`: the common success, paper Fig. 4a): IQM
-    over seeds and its 95 % bootstrap band, one colour per configuration. Solid where every seed of the
-    configuration has data, dashed where only some do (seeds are never extrapolated past their last
-    evaluation)."""
+    """One panel per metric (planned and direct; `BY_METHOD`: the common success, paper Fig. 4a), one
+    colour per configuration: IQM over seeds and its 95 % bootstrap band from 5 seeds on, else the mean
+    and each seed as a thin line (no band). Solid where every seed of the configuration has data, dashed
+    where only some do (seeds are never extrapolated past their last evaluation)."""
     shown, dropped = _select(configs)
     colors = _colors(len(shown))
     fig, axes = plt.subplots(1, len(metrics), figsize=(6 * len(metrics) + 1, 4.5), sharey=True, squeeze=False)
@@ -87,26 +92,26 @@ def success_curves(
             if m is None or m.curve is None:
                 continue
             cv = m.curve
-            label = f"{c.label} (n={cv.n_seeds})"
+            label = f"{c.label} ({seeds_label(cv.n_seeds)})"
             if cv.single_point:
-                err = np.array([[cv.iqm[0] - cv.low[0]], [cv.high[0] - cv.iqm[0]]])
-                ax.errorbar(
-                    [cv.point_step],
-                    cv.iqm,
-                    yerr=np.clip(err, 0, None),
-                    fmt="o",
-                    color=color,
-                    capsize=4,
-                    label=label + ", 1 eval",
-                )
+                _point(ax, cv, color, label + ", 1 eval")
                 continue
             some = cv.coverage > 0
             full = cv.coverage == cv.n_seeds
-            ax.fill_between(cv.grid, cv.low, cv.high, where=some, color=color, alpha=0.18, linewidth=0)
+            if cv.has_ci:
+                ax.fill_between(cv.grid, cv.low, cv.high, where=some, color=color, alpha=0.18, linewidth=0)
+            else:  # too few seeds for a band: each seed, thin (together: the range)
+                for steps, values in cv.seed_curves:
+                    ax.plot(steps, values, color=color, linewidth=0.7, alpha=0.55)
             ax.plot(
-                cv.grid, np.where(some, cv.iqm, np.nan), color=color, linestyle="--", linewidth=1, alpha=0.7
+                cv.grid,
+                np.where(some, cv.center, np.nan),
+                color=color,
+                linestyle="--",
+                linewidth=1,
+                alpha=0.7,
             )
-            ax.plot(cv.grid, np.where(full, cv.iqm, np.nan), color=color, linewidth=2, label=label)
+            ax.plot(cv.grid, np.where(full, cv.center, np.nan), color=color, linewidth=2, label=label)
         ax.set_title(f"{metric.split('/')[-1]}: {TITLES[metric]}", fontsize=10)
         ax.set_xlabel("environment steps")
         ylabel, ylim = Y_AXES.get(metric, SUCCESS_AXIS)
@@ -122,7 +127,7 @@ def success_curves(
         fig.legend(
             handles, labels, loc="center left", bbox_to_anchor=(0.83, 0.5), fontsize=8, title=axis_name
         )
-    note = "IQM over seeds, shaded: 95% stratified bootstrap CI; dashed: not all seeds have reached this step"
+    note = INTERVAL_NOTE + "; dashed: not all seeds have reached this step"
     if dropped:
         note += f"; {dropped} more configurations not drawn"
     what = {RETURN: "Return", MASTERED: "Mastered track distributions"}.get(metrics, "Success")
@@ -133,11 +138,36 @@ def success_curves(
     return path
 
 
+def seeds_label(n: int) -> str:
+    """The legend's account of a configuration's seeds: what its line and interval are."""
+    if stats.has_ci(n):
+        return f"n = {n} seeds, IQM, 95% CI"
+    return f"n = {n} seeds, range" if n > 1 else "n = 1 seed"
+
+
+INTERVAL_NOTE = (
+    f"n >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM, shaded 95% stratified bootstrap CI; "
+    f"fewer: mean (thick) and each seed (thin), no CI"
+)
+
+
+def _point(ax, cv: CurveSummary, color, label: str) -> None:
+    """A configuration whose seeds evaluated once: a marker, with error bars only when they are a CI."""
+    if cv.has_ci:
+        err = np.clip(np.array([[cv.center[0] - cv.low[0]], [cv.high[0] - cv.center[0]]]), 0, None)
+        ax.errorbar([cv.point_step], cv.center, yerr=err, fmt="o", color=color, capsize=4, label=label)
+        return
+    ax.plot([cv.point_step], cv.center, "o", color=color, label=label)
+    for steps, values in cv.seed_curves:
+        ax.plot(steps[:1], values[:1], ".", color=color, alpha=0.6)
+
+
 def final_success(
     configs: list[ConfigSummary], axis_name: str, path: Path, metrics: tuple[str, ...] = PLANNED_AND_DIRECT
 ) -> Path:
     """Grouped bars (one per metric: planned and direct, or `BY_METHOD`'s common success, paper
-    Fig. 2a) of final success with 95 % CIs, and each seed as a dot."""
+    Fig. 2a) of final success, each seed as a dot: the IQM with its 95 % CI from 5 seeds on, else the
+    mean without error bars (the dots are the range)."""
     shown, dropped = _select(configs)
     x = np.arange(len(shown))
     width = 0.76 / len(metrics)
@@ -145,31 +175,21 @@ def final_success(
     palette = ("tab:blue", "tab:orange", "tab:green")
     for i, metric in enumerate(metrics):
         offset, color = (i - (len(metrics) - 1) / 2) * width, palette[i % len(palette)]
-        vals, lo, hi = [], [], []
-        for c in shown:
-            m = c.metrics.get(metric)
-            vals.append(m.final_iqm if m else np.nan)
-            lo.append(m.final_low if m else np.nan)
-            hi.append(m.final_high if m else np.nan)
-        vals, lo, hi = map(np.asarray, (vals, lo, hi))
-        err = np.clip(np.nan_to_num(np.stack([vals - lo, hi - vals])), 0, None)
-        ax.bar(
-            x + offset,
-            np.nan_to_num(vals),
-            width,
-            yerr=err,
-            capsize=4,
-            color=color,
-            alpha=0.8,
-            label=metric.split("/")[-1],
-        )
-        for i, c in enumerate(shown):
+        vals = np.array([c.metrics[metric].final.point if metric in c.metrics else np.nan for c in shown])
+        ax.bar(x + offset, np.nan_to_num(vals), width, color=color, alpha=0.8, label=metric.split("/")[-1])
+        with_ci = [j for j, c in enumerate(shown) if metric in c.metrics and c.metrics[metric].final.has_ci]
+        if with_ci:  # error bars only where they are a CI
+            finals = [shown[j].metrics[metric].final for j in with_ci]
+            err = np.clip([[f.point - f.low for f in finals], [f.high - f.point for f in finals]], 0, None)
+            points = [f.point for f in finals]
+            ax.errorbar(x[with_ci] + offset, points, yerr=err, fmt="none", ecolor="black", capsize=4)
+        for j, c in enumerate(shown):
             seeds = [t.curves[metric][1][-1] for t in c.trials if metric in t.curves]
             # dots beside the error bar, not on it, so both stay readable
-            ax.scatter(np.full(len(seeds), x[i] + offset + width * 0.3), seeds, s=10, color="black", zorder=3)
+            ax.scatter(np.full(len(seeds), x[j] + offset + width * 0.3), seeds, s=10, color="black", zorder=3)
     ax.set_xticks(
         x,
-        [c.label for c in shown],
+        [f"{c.label}\n(n = {c.n_seeds})" for c in shown],
         rotation=30 if len(shown) > 6 else 0,
         ha="right" if len(shown) > 6 else "center",
     )
@@ -181,11 +201,12 @@ def final_success(
     paper = " (paper Fig. 2b)" if axis_name == "K" else " (paper Fig. 2a)" if metrics == BY_METHOD else ""
     extra = f"; {dropped} more configurations not drawn" if dropped else ""
     ax.set_title(
-        f"Final success by {axis_name}{paper}\nIQM over seeds, 95% bootstrap CI, dots: seeds{extra}",
+        f"Final success by {axis_name}{paper}\nn >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM, 95% bootstrap CI; "
+        f"fewer: mean, no CI\ndots: seeds (their range){extra}",
         fontsize=10,
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return path
 

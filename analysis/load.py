@@ -5,6 +5,9 @@ parent run per sweep (tag `copilot.role=sweep`), one child run per trial (tags `
 `copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `variant`, `preset`, `K`, `b`,
 `alpha_schedule`), success metrics logged with `step` = environment steps, and sub-goal tree snapshots as
 `copilot_trees/trees_iterNNNNNN.npz` artifacts.
+
+Evaluation curves keep only real evaluations: a sweep trial logs every iteration and repeats its last
+evaluation in between, marking the rows that evaluated with `copilot/eval/fresh` = 1 (`fresh_only`).
 """
 
 from __future__ import annotations
@@ -24,20 +27,25 @@ from copilot_ray.keys import (
     CONFIG_KEY_TAG,
     CURVE_METRICS,
     DIAG_PREFIX,
+    ENV_STEPS,
+    EVAL_FRESH,
     EVAL_PREFIX,
     PARENT_TAG,
     PATH_SUCCESS,
     PATHS_PREFIX,
     REPORT_ARTIFACT,
+    RESOLVED_SPEC_ARTIFACT,
     ROLE_SWEEP,
     ROLE_TAG,
     ROLE_TRIAL,
     SEED_PARAM,
     SEED_TAG,
+    SPEC_ARTIFACT,
     SUCCESS_METRICS,
     SWEEP_TAG,
     TIME_TOTAL_S,
     TREES_DIR,
+    VALIDATION_PREFIX,
 )
 
 # Curves for the diagnostics page (copilot_ray.algorithms.copilot.diagnostics): every metric under these
@@ -48,6 +56,8 @@ CONFIG_KEY_AXIS = "config_key"
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
 # KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
 USABLE_STATUSES = ("FINISHED", "RUNNING")
+# Metrics whose rows between evaluations are stale copies of the last evaluation (see `fresh_only`).
+EVALUATION_PREFIXES = (EVAL_PREFIX, VALIDATION_PREFIX)
 
 
 ALL_SWEEPS = "all"  # --parent-run all: the trials of every sweep run of the experiment
@@ -72,6 +82,15 @@ class Trial:
     wall_time_s: float = float("nan")
     tree_artifacts: list[str] = field(default_factory=list)
     tracking_uri: str = ""  # the store it came from (report --also-from: several stores)
+    latest: dict[str, float] = field(default_factory=dict)  # every metric's last logged value
+
+    @property
+    def env_steps(self) -> float:
+        """Env steps at the last logged result (older runs without the metric: the last curve step)."""
+        if ENV_STEPS in self.latest:
+            return float(self.latest[ENV_STEPS])
+        ends = [steps[-1] for steps, _ in self.curves.values() if len(steps)]
+        return float(max(ends)) if ends else float("nan")
 
     @property
     def usable(self) -> bool:
@@ -92,6 +111,8 @@ class Sweep:
     sweep_name: str
     trials: list[Trial]
     other_parent_ids: list[str] = field(default_factory=list)
+    # (tracking URI, run id, sweep name) of every sweep (parent) run whose trials are included
+    parents: list[tuple[str, str, str]] = field(default_factory=list)
 
     def axes(self) -> list[str]:
         """The axis tags that take more than one value among the child runs; `config_key` when none of the
@@ -181,6 +202,7 @@ def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
     sweep.trials.extend(other.trials)
     sweep.trials.sort(key=_trial_order)
     sweep.sweep_name += " + " + other.sweep_name
+    sweep.parents.extend(other.parents)
     return len(other.trials)
 
 
@@ -219,6 +241,7 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
             parent_run_id=parents[0].info.run_id if parents else None,
             sweep_name=" + ".join(names) or experiment,
             trials=trials,
+            parents=[_parent_entry(tracking_uri, p) for p in parents],
         )
     if parent_run_id is not None:
         chosen = [p for p in parents if p.info.run_id == parent_run_id]
@@ -254,7 +277,22 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         other_parent_ids=[
             p.info.run_id for p in parents if parent is None or p.info.run_id != parent.info.run_id
         ],
+        parents=[_parent_entry(tracking_uri, parent)] if parent else [],
     )
+
+
+def _parent_entry(tracking_uri: str, run) -> tuple[str, str, str]:
+    return tracking_uri, run.info.run_id, run.data.tags.get(SWEEP_TAG, run.info.run_id)
+
+
+def spec_artifacts(tracking_uri: str, run_id: str) -> list[str]:
+    """The spec files a sweep (parent) run holds: `spec.resolved.yaml` (what ran) and `spec.yaml`
+    (what was given); [] when there are none or the artifact store cannot be read."""
+    try:
+        names = {f.path for f in _client(tracking_uri).list_artifacts(run_id)}
+    except Exception:  # provenance must not cost the report
+        return []
+    return [n for n in (RESOLVED_SPEC_ARTIFACT, SPEC_ARTIFACT) if n in names]
 
 
 def _trial(client, run) -> Trial:
@@ -267,17 +305,15 @@ def _trial(client, run) -> Trial:
         seed=tags.get(SEED_TAG, run.data.params.get(SEED_PARAM, "?")),
         tags=tags,
         tracking_uri=str(client.tracking_uri),
+        latest=dict(run.data.metrics),
     )
     wanted = set(CURVE_METRICS) | {
         k for k in run.data.metrics if k.startswith((*DIAGNOSTIC_PREFIXES, PATHS_PREFIX))
     }
     for key in sorted(wanted):
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
-            hist = client.get_metric_history(run.info.run_id, key)
-            steps = np.array([m.step for m in hist], dtype=np.float64)
-            values = np.array([m.value for m in hist], dtype=np.float64)
-            order = np.argsort(steps, kind="stable")
-            trial.curves[key] = (steps[order], values[order])
+            trial.curves[key] = metric_curve(client, run.info.run_id, key)
+    trial.curves = fresh_only(trial.curves, trial.curves.get(EVAL_FRESH))  # loaded above: under copilot/eval/
     trial.wall_time_s = float(run.data.metrics.get(TIME_TOTAL_S, float("nan")))
     try:
         trial.tree_artifacts = sorted(
@@ -286,6 +322,42 @@ def _trial(client, run) -> Trial:
     except Exception:  # an unreachable artifact store must not cost the whole report its tables
         trial.tree_artifacts = []
     return trial
+
+
+def metric_curve(client, run_id: str, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """One metric's history as (steps, values), sorted by step."""
+    hist = client.get_metric_history(run_id, key)
+    steps = np.array([m.step for m in hist], dtype=np.float64)
+    values = np.array([m.value for m in hist], dtype=np.float64)
+    order = np.argsort(steps, kind="stable")
+    return steps[order], values[order]
+
+
+def metric_histories(tracking_uri: str, run_id: str, keys) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """`metric_curve` of each of `keys` of one run (one client for all)."""
+    client = _client(tracking_uri)
+    return {key: metric_curve(client, run_id, key) for key in keys}
+
+
+def fresh_only(
+    curves: dict[str, tuple[np.ndarray, np.ndarray]], fresh: tuple[np.ndarray, np.ndarray] | None
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The evaluation curves (copilot/eval/..., copilot/validation/...) at the steps where `fresh`
+    (the history of copilot/eval/fresh) is 1: the rows in between repeat the last evaluation and would
+    draw flat steps and move "final" and areas. Without `fresh` (`copilot_ray.train` runs, older stores:
+    every row is an evaluation) the curves are returned as they are. A curve left empty is dropped."""
+    if fresh is None:
+        return curves
+    fresh_steps = fresh[0][fresh[1] >= 0.5]
+    out = {}
+    for key, (steps, values) in curves.items():
+        if key.startswith(EVALUATION_PREFIXES) and key != EVAL_FRESH:
+            keep = np.isin(steps, fresh_steps)
+            steps, values = steps[keep], values[keep]
+            if not len(steps):
+                continue
+        out[key] = (steps, values)
+    return out
 
 
 def natural_key(value: str):

@@ -1,7 +1,8 @@
 """The planners' figures (the paper's Fig. 4b/4c): every run that logged ``paths/*`` (RRT*, SGT-PG,
 CO-PILOT's finest paths) in one table and one figure, per agent (env) and method (algorithm).
 
-Table: per (algorithm, env), the mean over seeds of each metric's last value, with the seeds' range.
+Table: per (algorithm, env), the mean over seeds of each metric's last value, with the seeds' range, and
+the method's privileges (copilot_ray.privileges; "-": runs older than the tag).
 Figure: one column per env, rows success / length vs RRT* / collision checks vs RRT*, one line per method
 (mean over seeds at the env steps every seed reached), against env steps on a log axis: for the
 planner-only methods their collision checks (what they report as env steps), for CO-PILOT real env
@@ -32,6 +33,7 @@ from copilot_ray.keys import (  # noqa: E402
     PATH_SUCCESS_VS_RRT,
 )
 
+from .aggregate import privileges_label  # noqa: E402
 from .load import Trial  # noqa: E402
 
 COLUMNS = {
@@ -74,6 +76,7 @@ def path_frame(trials: list[Trial]) -> pd.DataFrame:
             row[f"{name} min"] = float(np.min(finals)) if finals else math.nan
             row[f"{name} max"] = float(np.max(finals)) if finals else math.nan
         row["env steps"] = float(np.mean([t.curves[PATH_SUCCESS][0][-1] for t in group]))
+        row["privileges"] = privileges_label(group)
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -89,13 +92,14 @@ def _final(trial: Trial, key: str) -> float:
 def markdown(frame: pd.DataFrame) -> str:
     """The table with mean [min, max] cells (a single seed: just its value)."""
     names = list(COLUMNS.values())
-    header = ["env", "algorithm", "seeds", *names, "env steps (planners: checks)"]
+    header = ["env", "algorithm", "seeds", *names, "env steps (planners: checks)", "privileges"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     for _, r in frame.iterrows():
         cells = [str(r["env"]), str(r["algorithm"]), str(r["n_seeds"])]
         for name in names:
             cells.append(_cell(r[name], r[f"{name} min"], r[f"{name} max"], big=name == "collision checks"))
         cells.append(f"{r['env steps']:,.0f}")
+        cells.append(str(r["privileges"]))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -1,8 +1,9 @@
 """`python -m analysis.report [EXPERIMENT] [--experiment NAME] [--tracking-uri URI] [--out DIR]`
 
 Reads one sweep from MLflow and writes, under --out (default `results/<experiment>/report`):
-  success_vs_env_steps.png   success (planned, direct) against env steps, IQM + 95 % bootstrap band
-  final_success.png          final success per configuration with 95 % CIs (paper Fig. 2b for K)
+  success_vs_env_steps.png   success (planned, direct) against env steps: IQM + 95 % bootstrap band
+                             from 5 seeds on, else the mean and each seed (no band)
+  final_success.png          final success per configuration (95 % CIs from 5 seeds on; paper Fig. 2b for K)
   success_by_method.png, final_success_by_method.png
                              when the runs hold several algorithms: copilot/eval/success (each
                              method's headline) against env steps and at the end (paper Fig. 4a, 2a)
@@ -11,11 +12,16 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
   mastered_vs_env_steps.png  copilot/eval/mastered (share of the walker's evaluation track
                              distributions mastered) against env steps (paper Fig. 3)
   subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
-  summary.csv, summary.md    per-configuration table
+  summary.csv, summary.md    per-configuration table: final success, success AUC, steps to thresholds,
+                             env steps, privileges (names and counts)
+  improvement.csv            P(CO-PILOT's default beats the best other method), when there is one
+  metrics.csv.gz             every run's copilot/*, paths/* and env-step metrics (run, config, seed,
+                             metric, env steps, value)
   planners_paths.png, planners.csv, planners.md
                              runs that logged paths/* (RRT*, SGT-PG, CO-PILOT): success, length and
                              collision checks, each against RRT*'s (paper Fig. 4a-c), per agent
-  report.md, report.html     all of the above on one page, missing/failed runs listed first
+  report.md, report.html     all of the above on one page: provenance (commits, store, spec, command)
+                             first, then missing/failed runs
 and logs the folder to the sweep's parent MLflow run under `report/`.
 
 Tracking store: --tracking-uri, else $MLFLOW_TRACKING_URI, else an existing ./mlflow.db or
@@ -31,15 +37,18 @@ import argparse
 import datetime as _dt
 import html
 import re
+import shlex
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from copilot_ray.keys import ALGORITHM_TAG, GIT_COMMIT_TAG, SUCCESS_PLANNED, TREES_DIR
+from copilot_ray.privileges import DESCRIPTIONS
 
 from . import figures, paths, stats, tables
-from .aggregate import ConfigSummary, Missing, summarise
+from .aggregate import ConfigSummary, Missing, privileges_label, summarise
+from .export import METRICS_CSV, write_metrics_csv
 from .load import (
     AnalysisError,
     Sweep,
@@ -49,10 +58,21 @@ from .load import (
     load_tree_snapshots,
     log_report_artifacts,
     resolve_tracking_uri,
+    spec_artifacts,
 )
 
 MAX_TREE_FIGURES = 8
-OWNED = ("*.png", "report.md", "report.html", "summary.csv", "summary.md", "planners.csv", "planners.md")
+OWNED = (
+    "*.png",
+    "report.md",
+    "report.html",
+    "summary.csv",
+    "summary.md",
+    "planners.csv",
+    "planners.md",
+    "improvement.csv",
+    METRICS_CSV,
+)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -90,7 +110,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def command_line(argv: list[str]) -> str:
+    """The command that produced the report, as one can paste it again."""
+    return shlex.join(["python", "-m", "analysis.report", *argv])
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     try:
         uri = resolve_tracking_uri(args.tracking_uri, experiment=args.experiment)
@@ -111,39 +137,47 @@ def main(argv: list[str] | None = None) -> int:
     _print_status(sweep, configs, missing)
     axis_name = ", ".join(sweep.axes()) or "configuration"
 
-    figs: list[tuple[str, Path]] = []
+    # (title, png, caption): the comparison figures' captions name each configuration's privileges
+    figs: list[tuple[str, Path, str]] = []
     notes: list[str] = []
+    several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
     if any(c.metrics for c in configs):
+        caption = _privilege_caption(configs)
         figs.append(
             (
                 "Success against environment steps",
                 figures.success_curves(configs, axis_name, out / "success_vs_env_steps.png"),
+                caption,
             )
         )
-        figs.append(("Final success", figures.final_success(configs, axis_name, out / "final_success.png")))
-        if len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1:
+        figs.append(
+            ("Final success", figures.final_success(configs, axis_name, out / "final_success.png"), caption)
+        )
+        if several:
             # Several algorithms: the one success figure they all report, per method (paper Fig. 2a, 4a).
             by = figures.BY_METHOD
             figs.append(
                 (
                     "Success against environment steps, by method (paper Fig. 4a)",
                     figures.success_curves(configs, "method", out / "success_by_method.png", by),
+                    caption,
                 )
             )
             figs.append(
                 (
                     "Final success by method (paper Fig. 2a)",
                     figures.final_success(configs, "method", out / "final_success_by_method.png", by),
+                    caption,
                 )
             )
-        several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
         for metric, title, name in (
             (figures.EVAL_RETURN, "Return against environment steps (paper Fig. 2d)", "return_vs_env_steps"),
             (figures.EVAL_MASTERED, "Mastered track distributions (paper Fig. 3)", "mastered_vs_env_steps"),
         ):
             if any(metric in c.metrics for c in configs):
                 by = "method" if several else axis_name
-                figs.append((title, figures.success_curves(configs, by, out / f"{name}.png", (metric,))))
+                png = figures.success_curves(configs, by, out / f"{name}.png", (metric,))
+                figs.append((title, png, caption))
     else:
         notes.append("No run has evaluation metrics yet: no success figures.")
     planner_figs, planner_table, planner_frame = _planner_section(sweep, out)
@@ -155,22 +189,36 @@ def main(argv: list[str] | None = None) -> int:
     tables.write_csv(frame, out / "summary.csv")
     table_md = tables.markdown(frame)
     (out / "summary.md").write_text(table_md)
+    improvement = tables.improvement_frame(configs, reps=args.bootstrap_reps, seed=args.seed)
+    if not improvement.empty:
+        tables.write_csv(improvement, out / "improvement.csv")
+    labels = {t.run_id: c.label for c in configs for t in c.all_trials}
+    try:
+        write_metrics_csv(sweep, labels, out)
+    except Exception as e:  # an unreadable history must not cost the report its tables and figures
+        notes.append(f"{METRICS_CSV} not written: {type(e).__name__}: {e}")
 
     log_to = None if args.no_log else sweep.parent_run_id
     if not args.no_log and sweep.parent_run_id is None:
         msg = "no sweep (parent) run in this experiment: the report is not logged to MLflow"
         notes.append(msg)
         print(f"note: {msg}")
+    provenance = _provenance(sweep, argv, log_to)
+    for line in provenance:
+        if line.startswith("WARNING"):
+            print(line, file=sys.stderr)
     doc = _document(
-        sweep, configs, missing, axis_name, figs, tree_figs + diag_figs, table_md, frame, notes, log_to
+        sweep, configs, missing, axis_name, figs, tree_figs + diag_figs, table_md, frame, notes, provenance
     )
+    below = _improvement_blocks(configs, improvement, several)  # right under the headline table
     if planner_table:
-        at = next(i for i, part in enumerate(doc) if part[0] == "table") + 1
-        doc[at:at] = [
+        below += [
             ("h2", "Planners: paths on the test tasks (Fig. 4b/4c)"),
             ("p", paths.__doc__.split("\n\n")[1].replace("\n", " ")),
             ("table", planner_table, planner_frame),
         ]
+    at = _after(doc, "table")
+    doc[at:at] = below
     (out / "report.md").write_text(_to_markdown(doc))
     (out / "report.html").write_text(_to_html(doc, sweep.experiment))
     print(f"report: {out / 'report.md'}")
@@ -196,8 +244,21 @@ def _planner_section(sweep: Sweep, out: Path):
     table = paths.markdown(frame)
     (out / "planners.md").write_text(table)
     fig = paths.path_figure(sweep.trials, out / "planners_paths.png")
-    figs = [("Planners: success, length and collision checks against RRT*", fig)] if fig else []
+    groups: dict[str, list[Trial]] = {}
+    for t in paths.path_trials(sweep.trials):
+        groups.setdefault(t.tags.get(ALGORITHM_TAG, "?"), []).append(t)
+    caption = "Privileges: " + "; ".join(f"{a}: {privileges_label(ts)}" for a, ts in sorted(groups.items()))
+    figs = [("Planners: success, length and collision checks against RRT*", fig, caption)] if fig else []
     return figs, table, frame
+
+
+def _privilege_caption(configs: list[ConfigSummary]) -> str:
+    """Under a comparison figure: what each configuration may use that its baselines may not."""
+    return (
+        "Privileges ('-': runs older than the privileges tag): "
+        + "; ".join(f"{c.label}: {c.privileges}" for c in configs)
+        + "."
+    )
 
 
 # ---------------------------------------------------------------------------------------------- trees
@@ -211,7 +272,7 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
 
         def score(c):
             m = c.metrics.get(SUCCESS_PLANNED)
-            return m.final_iqm if m and np.isfinite(m.final_iqm) else -1.0
+            return m.final.point if m and np.isfinite(m.final.point) else -1.0
 
         best = {c.key for c in sorted(candidates, key=score, reverse=True)[:MAX_TREE_FIGURES]}
         notes.append(
@@ -289,23 +350,108 @@ def _tree_trial(c: ConfigSummary) -> Trial:
 # the MLflow UI previews).
 
 
-def _document(sweep, configs, missing: Missing, axis_name, figs, tree_figs, table_md, frame, notes, log_to):
+def _after(doc, kind: str) -> int:
+    """The index just after the first block of `kind`."""
+    return next(i for i, part in enumerate(doc) if part[0] == kind) + 1
+
+
+def _provenance(sweep: Sweep, argv: list[str], log_to: str | None) -> list[str]:
+    """Where the numbers come from: commits, stores, experiment, spec, and the command that made the report."""
+    commits = sorted({t.tags.get(GIT_COMMIT_TAG, "") for t in sweep.trials} - {""})
+    untagged = sum(1 for t in sweep.trials if not t.tags.get(GIT_COMMIT_TAG))
+    lines = [f"git commit{'s' if len(commits) > 1 else ''}: {', '.join(commits) or '(not tagged)'}"]
+    if len(commits) > 1:
+        lines.append(
+            f"WARNING: the runs come from {len(commits)} different commits, not from one: "
+            "the code may differ between the configurations compared"
+        )
+    if untagged:
+        lines.append(f"{untagged} of {len(sweep.trials)} runs carry no {GIT_COMMIT_TAG} tag")
+    stores = sorted({sweep.tracking_uri, *(t.tracking_uri for t in sweep.trials if t.tracking_uri)})
+    lines.append(f"tracking URI{'s' if len(stores) > 1 else ''}: {', '.join(stores)}")
+    lines.append(f"experiment: {sweep.experiment} (id {sweep.experiment_id}); sweep: {sweep.sweep_name}")
+    lines += _spec_lines(sweep)
+    lines.append(f"command: {command_line(argv)}")
+    lines.append(
+        f"generated {_dt.datetime.now().isoformat(timespec='seconds')}"
+        + (f"; logged to run {log_to} under report/" if log_to else "")
+    )
+    return lines
+
+
+def _spec_lines(sweep: Sweep) -> list[str]:
+    if not sweep.parents:
+        return [f"spec: no sweep (parent) run; sweep names from the runs' tags: {sweep.sweep_name}"]
+    out = []
+    for uri, run_id, name in sweep.parents:
+        files = spec_artifacts(uri, run_id)  # the resolved spec (what ran) first
+        if files:
+            out.append(f"spec: {', '.join(f'runs:/{run_id}/{f}' for f in files)} (sweep {name!r})")
+        else:
+            out.append(f"spec: sweep {name!r}; its sweep run {run_id} holds no spec artifact")
+    return out
+
+
+def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
+    """Under the headline table: P(CO-PILOT's default beats the best other method)."""
+    if not several:
+        return []
+    head = ("h2", "Probability of improvement over the best other method")
+    why = (
+        "P(X > Y) (Agarwal et al. 2021): the chance that a seed of CO-PILOT's default configuration "
+        "(algorithm copilot, no preset) scores higher than a seed of the best other method (highest final "
+        "success), ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
+        f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
+        "seeds on each side."
+    )
+    if frame.empty:
+        return [head, ("p", why), ("p", "No CO-PILOT default configuration or no other method with success.")]
+    return [head, ("p", why), ("table", tables.improvement_markdown(frame), frame)]
+
+
+def _summary_text(configs: list[ConfigSummary]) -> str:
+    windows = []
+    for metric, short in tables.SHORT.items():
+        m = next((c.metrics[metric] for c in configs if metric in c.metrics), None)
+        if m is not None:
+            lo, hi = m.auc_window
+            windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
+    return (
+        "Test tasks only. Final = each seed's last evaluation (rows that only repeat an earlier "
+        "evaluation are left out everywhere). AUC = area under each seed's success curve, linear between "
+        "evaluations, over one env-step window for every configuration (from the latest first evaluation "
+        "to the earliest last evaluation among the finished seeds: no success is assumed before an "
+        "evaluation or after a seed's last; a seed that does not cover it, e.g. one still running, has "
+        "no AUC), divided by its length; windows: "
+        + (", ".join(windows) or "none")
+        + f". No best-over-evaluations figure. With >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM over seeds "
+        "(inter-quartile mean) and 95% CI = percentile bootstrap over seeds (one env per experiment, so "
+        "the stratified bootstrap resamples seeds within the configuration); with fewer: the mean and the "
+        "range over the seeds, no CI. Steps to a threshold = first evaluation at or above it, IQM (mean "
+        "with fewer than 5 seeds) over seeds counting a seed that never got there as infinitely late, so "
+        "'not reached' means that figure is infinite; (k/n) = seeds that reached it. Env steps: mean over "
+        "seeds at the last result. Privileges: from the runs' tags ('-': runs older than the tag): "
+        + "; ".join(f"{k} = {v}" for k, v in DESCRIPTIONS.items())
+        + "; collision checks, resets, map queries: cumulative counts at the last result, mean over seeds "
+        "('-': not logged). FAILED/KILLED runs are excluded; RUNNING runs count with what they have so far."
+    )
+
+
+def _document(
+    sweep, configs, missing: Missing, axis_name, figs, tree_figs, table_md, frame, notes, provenance
+):
     statuses: dict[str, int] = {}
     for t in sweep.trials:
         statuses[t.status] = statuses.get(t.status, 0) + 1
-    commits = sorted({t.tags.get(GIT_COMMIT_TAG, "")[:10] for t in sweep.trials} - {""})
-    doc: list[tuple] = [("h1", f"Sweep report: {sweep.experiment}")]
+    doc: list[tuple] = [("h1", f"Sweep report: {sweep.experiment}"), ("h2", "Provenance"), ("ul", provenance)]
     doc.append(
         (
             "ul",
             [
                 f"sweep: {sweep.sweep_name}; parent run: {sweep.parent_run_id or '(none)'}",
-                f"tracking URI: {sweep.tracking_uri}",
                 f"trials: {len(sweep.trials)} ({', '.join(f'{n} {s}' for s, n in sorted(statuses.items()))}); "
                 f"configurations: {len(configs)}; varying axis: {axis_name}",
-                f"git commits: {', '.join(commits) or '(not tagged)'}",
-                f"generated {_dt.datetime.now().isoformat(timespec='seconds')}"
-                + (f"; logged to run {log_to} under report/" if log_to else ""),
+                f"every run's metrics: {METRICS_CSV}",
             ],
         )
     )
@@ -320,22 +466,13 @@ def _document(sweep, configs, missing: Missing, axis_name, figs, tree_figs, tabl
         else ("p", "Nothing missing: every trial finished with evaluations.")
     )
     doc.append(("h2", "Summary"))
-    doc.append(
-        (
-            "p",
-            "Final = each seed's last evaluation; IQM = inter-quartile mean over seeds (plain mean "
-            "for 3 seeds or fewer); 95% CI = percentile bootstrap over seeds. Steps to a threshold = "
-            "first evaluation at or above it, IQM over seeds counting a seed that never got there as "
-            "infinitely late, so 'not reached' means the IQM is infinite (with 4 or more seeds: over a "
-            "quarter never got there; with 3 or fewer: at least one); "
-            "(k/n) = seeds that reached it. FAILED/KILLED runs are excluded; RUNNING runs count "
-            "with what they have so far.",
-        )
-    )
+    doc.append(("p", _summary_text(configs)))
     doc.append(("table", table_md, frame))
-    for title, path in figs + tree_figs:
+    for title, path, *caption in figs + tree_figs:
         doc.append(("h2", title))
         doc.append(("img", path.name, title))
+        if caption and caption[0]:
+            doc.append(("p", caption[0]))
     return doc
 
 

@@ -1,5 +1,6 @@
 """Aggregate statistics over seeds: IQM, percentile-bootstrap confidence intervals, curve interpolation
-onto a common env-step grid, and env steps to reach a success threshold.
+onto a common env-step grid, env steps to reach a success threshold, the normalised area under a curve
+and the probability of improvement of one configuration over another.
 
 This follows rliable (Agarwal et al., 2021) without depending on it: rliable 1.2 is an sdist that pulls in
 `arch`, `statsmodels`, `seaborn` and `absl-py` for what is, here, a few lines of numpy. A sweep has one
@@ -8,17 +9,23 @@ to resampling seeds within one configuration, which is what `bootstrap_ci` does.
 
 NaN marks "no data" (a seed that stopped before that step); statistics ignore it per column.
 Infinity marks "never reached" in steps-to-threshold; the IQM trims it away when it is an outlier.
+
+Honest intervals: a bootstrap over 2 or 3 seeds resamples almost nothing and gives intervals that look
+precise and are not, and an IQM of fewer than 5 values trims nothing useful. So a CI, a band and the IQM
+are used only from `MIN_SEEDS_FOR_CI` seeds on; with fewer, the mean and the seeds' range (`SeedSummary`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 IQM_TRIM = 0.25  # trim 25 % from each end: the inter-quartile mean
 DEFAULT_REPS = 2000
 DEFAULT_CONFIDENCE = 0.95
+MIN_SEEDS_FOR_CI = 5  # fewer seeds: no CI, no band, no IQM (the mean and the seeds' range instead)
 
 
 def iqm(x: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -69,13 +76,13 @@ def bootstrap_ci(
         sample = x[idx[lo : lo + chunk]]  # [chunk, n, ...]
         boots[lo : lo + chunk] = statistic(sample, axis=1)
     tail = 100.0 * (1.0 - confidence) / 2.0
-    with np.errstate(invalid="ignore"), _quiet_all_nan():
+    with np.errstate(invalid="ignore"), quiet_all_nan():
         low = np.nanpercentile(boots, tail, axis=0)
         high = np.nanpercentile(boots, 100.0 - tail, axis=0)
     return low, high
 
 
-class _quiet_all_nan:
+class quiet_all_nan:
     """nanpercentile warns on all-NaN columns (steps no seed reached); NaN is the right answer there."""
 
     def __enter__(self):
@@ -131,3 +138,177 @@ def common_grid(step_arrays: list[np.ndarray], points: int = 200, max_points: in
     if grid.size > max_points:
         grid = np.union1d(np.linspace(every[0], every[-1], max_points), every[[0, -1]])
     return grid
+
+
+# ---------------------------------------------------------------------------------------------- over seeds
+
+
+def has_ci(n_seeds: int) -> bool:
+    """Whether `n_seeds` are enough for an IQM with a bootstrap CI (else: mean and range)."""
+    return n_seeds >= MIN_SEEDS_FOR_CI
+
+
+def center(x: np.ndarray, n_seeds: int | None = None) -> np.ndarray:
+    """The point estimate over seeds (axis 0), ignoring NaN: the IQM from `MIN_SEEDS_FOR_CI` seeds on,
+    else the mean. `n_seeds` decides for a whole matrix (a curve's columns have fewer seeds near its end)."""
+    x = np.asarray(x, dtype=np.float64)
+    # seeds (rows) with any value
+    n = int((~np.isnan(x.reshape(len(x), -1))).any(axis=1).sum()) if n_seeds is None else n_seeds
+    if has_ci(n):
+        return iqm(x)
+    valid = ~np.isnan(x)
+    count = valid.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        total = np.where(valid, x, 0.0).sum(axis=0)  # inf stays inf ("never reached" drags the mean)
+        return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+
+
+@dataclass(frozen=True)
+class SeedSummary:
+    """One figure over a configuration's seeds: from `MIN_SEEDS_FOR_CI` seeds on the IQM and its
+    percentile-bootstrap CI; with fewer, the mean and the seeds' [min, max] (`low`, `high`)."""
+
+    n: int
+    point: float
+    low: float
+    high: float
+    confidence: float = DEFAULT_CONFIDENCE
+
+    @property
+    def has_ci(self) -> bool:
+        return has_ci(self.n)
+
+    @property
+    def estimator(self) -> str:
+        return "IQM" if self.has_ci else "mean"
+
+    @property
+    def interval(self) -> str:
+        """What [low, high] is: a CI, the seeds' range, or nothing (one seed)."""
+        if self.n == 0:
+            return ""
+        if self.has_ci:
+            return f"{100 * self.confidence:g}% CI"
+        return "range" if self.n > 1 else "n = 1"
+
+    def text(self, fmt: str = ".3f") -> str:
+        if self.n == 0 or not np.isfinite(self.point):
+            return "-"
+        p, lo, hi = (format(v, fmt) for v in (self.point, self.low, self.high))
+        if self.has_ci:
+            return f"IQM {p} [{self.interval} {lo}, {hi}]"
+        if self.n == 1:
+            return f"{p} (n = 1)"
+        return f"mean {p}, range over {self.n} seeds: [{lo}, {hi}]"
+
+
+def summarise_seeds(
+    values: np.ndarray, reps: int = DEFAULT_REPS, seed: int = 0, confidence: float = DEFAULT_CONFIDENCE
+) -> SeedSummary:
+    """`SeedSummary` of one value per seed (NaN: that seed has none)."""
+    x = np.asarray(values, dtype=np.float64)
+    x = x[~np.isnan(x)]
+    n = int(x.size)
+    if n == 0:
+        return SeedSummary(0, np.nan, np.nan, np.nan, confidence)
+    if has_ci(n):
+        low, high = bootstrap_ci(x, reps=reps, confidence=confidence, seed=seed)
+        return SeedSummary(n, float(iqm(x)), float(low), float(high), confidence)
+    return SeedSummary(n, float(np.mean(x)), float(np.min(x)), float(np.max(x)), confidence)
+
+
+# ---------------------------------------------------------------------------------------------- area
+
+
+def auc_window(step_arrays: list[np.ndarray]) -> tuple[float, float]:
+    """The env-step window every curve covers: from the latest first evaluation to the earliest last
+    one. Curves with fewer than two evaluations have no area and are left out. (nan, nan) when the
+    window is empty.
+
+    Why this window: starting at 0 would invent a success of 0 (or anything) before the first
+    evaluation, and ending past a seed's last evaluation would extrapolate it; one window for every
+    configuration keeps their areas comparable. For a finished sweep it ends within one evaluation of
+    the env-step budget.
+    """
+    arrays = [np.asarray(s, dtype=np.float64) for s in step_arrays if len(s) >= 2]
+    if not arrays:
+        return np.nan, np.nan
+    start = max(float(s.min()) for s in arrays)
+    end = min(float(s.max()) for s in arrays)
+    return (start, end) if end > start else (np.nan, np.nan)
+
+
+def normalised_auc(steps: np.ndarray, values: np.ndarray, start: float, end: float) -> float:
+    """Area under the linearly interpolated curve over [start, end] divided by end - start (so a
+    success curve gives a number in [0, 1]); NaN when the curve does not cover the window."""
+    if not (np.isfinite(start) and np.isfinite(end) and end > start):
+        return np.nan
+    steps = np.asarray(steps, dtype=np.float64)
+    inner = steps[(steps > start) & (steps < end)]
+    grid = np.union1d([start, end], inner)  # every kink of the piecewise-linear curve: the trapezoid is exact
+    y = interpolate(steps, values, grid)
+    if np.isnan(y).any():
+        return np.nan
+    return float(np.sum((y[1:] + y[:-1]) * np.diff(grid)) / 2.0 / (end - start))
+
+
+# ---------------------------------------------------------------------------------------------- P(X > Y)
+
+
+def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
+    """P(X > Y) (Agarwal et al. 2021): the share of (seed of X, seed of Y) pairs where X's score is
+    higher, ties counting 1/2 (the Mann-Whitney U statistic over nx * ny). NaN scores are left out."""
+    x, y = _valid(x)[:, None], _valid(y)[None, :]
+    if not (x.size and y.size):
+        return np.nan
+    return float(np.mean((x > y) + 0.5 * (x == y)))
+
+
+@dataclass(frozen=True)
+class Improvement:
+    """P(X > Y) with its percentile-bootstrap CI, or why there is none (fewer than 5 seeds on a side)."""
+
+    p: float
+    low: float
+    high: float
+    nx: int
+    ny: int
+    confidence: float = DEFAULT_CONFIDENCE
+
+    @property
+    def available(self) -> bool:
+        return has_ci(self.nx) and has_ci(self.ny)
+
+    def text(self, fmt: str = ".2f") -> str:
+        if not self.available:
+            return f"n/a (needs >= {MIN_SEEDS_FOR_CI} seeds each; here {self.nx} and {self.ny})"
+        p, lo, hi = (format(v, fmt) for v in (self.p, self.low, self.high))
+        return f"{p} [{100 * self.confidence:g}% CI {lo}, {hi}]"
+
+
+def improvement(
+    x: np.ndarray,
+    y: np.ndarray,
+    reps: int = DEFAULT_REPS,
+    seed: int = 0,
+    confidence: float = DEFAULT_CONFIDENCE,
+) -> Improvement:
+    """`probability_of_improvement` of X over Y and, when both have `MIN_SEEDS_FOR_CI` seeds, its
+    percentile-bootstrap CI: the seeds of X and of Y resampled independently (rliable's scheme with one
+    task), each replicate's P(X > Y) computed, the percentiles taken."""
+    x, y = _valid(x), _valid(y)
+    point = probability_of_improvement(x, y)
+    if not (has_ci(x.size) and has_ci(y.size)):
+        return Improvement(point, np.nan, np.nan, int(x.size), int(y.size), confidence)
+    rng = np.random.default_rng(seed)
+    xb = x[rng.integers(0, x.size, size=(reps, x.size))][:, :, None]
+    yb = y[rng.integers(0, y.size, size=(reps, y.size))][:, None, :]
+    boots = ((xb > yb) + 0.5 * (xb == yb)).mean(axis=(1, 2))
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(boots, [tail, 100.0 - tail])
+    return Improvement(point, float(low), float(high), int(x.size), int(y.size), confidence)
+
+
+def _valid(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=np.float64).ravel()
+    return x[~np.isnan(x)]

@@ -35,6 +35,16 @@ TRACKED_PREFIXES = (
     "timers/",
 )
 
+# RLlib's own bookkeeping inside those namespaces (connector and env-runner timers, throughputs, weight
+# sequence numbers: ~100 per trial): kept out of MLflow unless a spec asks (tracking.rllib_timers).
+RLLIB_INTERNAL_PREFIXES = ("timers/", "env_runners/sample", "env_runners/time_between_sampling")
+RLLIB_INTERNAL_PARTS = ("_timer", "connector", "throughput", "weights_seq_no")
+
+
+def is_rllib_internal(key: str) -> bool:
+    return key.startswith(RLLIB_INTERNAL_PREFIXES) or any(part in key for part in RLLIB_INTERNAL_PARTS)
+
+
 # CO-PILOT's own metrics (copilot_ray.algorithms.copilot), all under "copilot/".
 COPILOT_PREFIX = "copilot/"
 ALPHA = "copilot/alpha"

@@ -61,8 +61,11 @@ from copilot_ray.keys import (
     TIME_TOTAL_S,
     TUNE_PATH_TAG,
     result_value,
+    validation_key,
 )
 from copilot_ray.spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
+from copilot_ray.spec.estimate import total_wall_time_line
+from copilot_ray.store import tracking_uri_problem
 from copilot_ray.tracking import config_key, trial_flat
 
 EXIT_INTERRUPTED = 130
@@ -135,12 +138,13 @@ class SweepOutcome:
     wall_s: float = 0.0
 
 
-# The summary's columns, where any trial logged them: every agent's headline, CO-PILOT's pair, the
-# planners' (Fig. 4b/4c).
+# The summary's columns, where any trial logged them: every agent's headline, CO-PILOT's pair (on the
+# VALIDATION tasks: what one may look at while choosing; the report shows the test tasks'), the
+# planners' (Fig. 4b/4c, test tasks: they have no validation figure).
 SUMMARY_METRICS = {
-    EVAL_SUCCESS: "success",
-    SUCCESS_PLANNED: "success_planned",
-    SUCCESS_DIRECT: "success_direct",
+    validation_key(EVAL_SUCCESS): "validation success",
+    validation_key(SUCCESS_PLANNED): "validation planned",
+    validation_key(SUCCESS_DIRECT): "validation direct",
     PATH_SUCCESS: "path success",
     PATH_LENGTH_VS_RRT: "length / RRT*",
 }
@@ -211,10 +215,7 @@ def summary_table(rows: Sequence[TrialRow]) -> str:
         groups.setdefault(row.config_key, []).append(row)
     shown = [
         key for key in SUMMARY_METRICS if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
-    ] or [
-        SUCCESS_PLANNED,
-        SUCCESS_DIRECT,
-    ]
+    ] or [validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT)]
     header = ["configuration", "seeds", *(SUMMARY_METRICS[key] for key in shown)]
     header += ["env steps", "wall s/trial", "status"]
     lines = [header]
@@ -367,6 +368,7 @@ def open_tracking(run: SweepRun) -> tuple[str, str]:
         },
         params=_sweep_params(spec),
         artifact_location=tracking.local_artifact_location(run.uri, run.root / "mlartifacts"),
+        description=spec.description,
     )
     if not reused:
         files = {RESOLVED_SPEC_ARTIFACT: run.saved_spec}
@@ -435,7 +437,9 @@ def _tuner(run: SweepRun, runtime, index, exp_name, seed, exp_id, parent_id, ext
             return tuner
     callbacks = [
         runtime.ProgressPrinter(),
-        runtime.MlflowSweepCallback(run.uri, exp_id, run.spec.name, parent_id),
+        runtime.MlflowSweepCallback(
+            run.uri, exp_id, run.spec.name, parent_id, run.spec.tracking.rllib_timers
+        ),
         *extra_callbacks,
     ]
     root = sweep_root(run.spec)
@@ -452,7 +456,8 @@ def report_sweep(
     status = "interrupted" if interrupted else ("errored" if errored else "finished")
     header = (
         f"# sweep {spec.name}: {status}\n\n{len(rows)} trial(s), wall {wall:.0f}s (this session). "
-        "Success = last evaluation of each trial; mean ± sample std over seeds.\n\n"
+        "Success = last evaluation of each trial on the validation tasks (the report shows the test tasks'); "
+        "mean ± sample std over seeds.\n\n"
     )
     mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
     tracking.end_sweep_run(uri, parent_id, mlflow_status, header + summary + "\n")
@@ -465,6 +470,7 @@ def report_sweep(
         _say(f"  the MLflow UI is the server's own page: {uri}")
     else:
         _say(f"  mlflow ui --backend-store-uri {uri}")
+    _say(f"Report: {report_command(spec, uri)}")
     if interrupted:
         _say(f"interrupted: state saved. Resume with: python -m copilot_ray.sweep {spec.source} --resume")
     elif errored:
@@ -474,6 +480,12 @@ def report_sweep(
         )
     code = EXIT_INTERRUPTED if interrupted else (1 if errored else 0)
     return SweepOutcome(status, code, rows, summary, uri, parent_id, tune_paths, wall)
+
+
+def report_command(spec, uri: str) -> str:
+    """The exact command that draws this sweep's report: every sweep of its experiment (the parts of a
+    comparison file, stage-2 of a two-stage one) from the store it wrote to."""
+    return f"python -m analysis.report {spec.experiment} --parent-run all --tracking-uri {uri}"
 
 
 def _say(line: str) -> None:
@@ -493,18 +505,39 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    problems = []
+    if args.tracking_uri is not None and (why := tracking_uri_problem(args.tracking_uri)) is not None:
+        problems.append(f"--tracking-uri {args.tracking_uri!r} is invalid: {why}")
     try:
         specs = load_specs(args.spec)
     except SpecError as err:
-        for line in err.problems:
+        problems += err.problems
+    if problems:
+        for line in problems:
             print(line, file=sys.stderr)
         return 2
     if args.check:
-        print("\n\n".join(format_plan(spec) for spec in specs))
+        cpus, where = _available_cpus(args.address)
+        print("\n\n".join(format_plan(spec, args.tracking_uri, cpus, where) for spec in specs))
+        if len(specs) > 1:
+            print(f"\n{total_wall_time_line(specs)}")
         return 0
     if len(specs) == 1:
         return _run_one(specs[0], args, resume=args.resume)
     return _run_parts(specs, args)
+
+
+def _available_cpus(address: str | None) -> tuple[int | None, str]:
+    """The CPUs a plan can use: this machine's, or (--address) the cluster's, read without starting
+    anything (a cluster that cannot be reached is said, not fatal: --check is a plan)."""
+    if not address:
+        return os.cpu_count(), "this machine"
+    runtime = _import_runtime()
+    try:
+        return runtime.cluster_cpus(address), f"the cluster at {address}"
+    except Exception as err:  # noqa: BLE001 - any failure to reach it: no figure, the reason said
+        _say(f"note: could not read the resources of the cluster at {address} ({type(err).__name__}: {err})")
+        return None, f"the cluster at {address}"
 
 
 def _run_one(spec, args, *, resume: bool) -> int:

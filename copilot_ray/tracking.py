@@ -51,17 +51,13 @@ from copilot_ray.keys import (
     TRIAL_ID_TAG,
     VARIANT_PARAM,
     VARIANT_TAG,
+    is_rllib_internal,
     result_value,
 )
 from copilot_ray.privileges import tag_value
 from copilot_ray.spec import build_algorithm_config, load_spec
 
 MLFLOW_PARAM_LIMIT = 500  # MLflow rejects longer param values
-
-
-def default_tracking_uri(directory: str | Path = ".") -> str:
-    """An embedded SQLite store (MLflow 3 refuses the plain ./mlruns file store by default)."""
-    return f"sqlite:///{(Path(directory) / 'mlflow.db').resolve()}"
 
 
 def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str, Any]:
@@ -75,12 +71,13 @@ def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str,
     return out
 
 
-def metrics_from_result(result: Mapping[str, Any]) -> dict[str, float]:
-    """The numeric metrics worth tracking from an RLlib result dict (flattened with '/')."""
+def metrics_from_result(result: Mapping[str, Any], rllib_timers: bool = False) -> dict[str, float]:
+    """The numeric metrics worth tracking from an RLlib result dict (flattened with '/'); RLlib's own
+    timers and throughputs only with `rllib_timers`."""
     flat = flatten(result)
     out = {}
     for key, value in flat.items():
-        if not key.startswith(TRACKED_PREFIXES):
+        if not key.startswith(TRACKED_PREFIXES) or (not rllib_timers and is_rllib_internal(key)):
             continue
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue
@@ -173,14 +170,29 @@ def _client(tracking_uri: str):
     return mlflow.MlflowClient(tracking_uri)
 
 
-def ensure_experiment(client, name: str, artifact_location: str | None = None) -> str:
-    """The experiment's id, creating it (with ``artifact_location`` for a local store) if needed."""
+# MLflow 3's UI opens an experiment on its GenAI traces page unless the experiment says it is model
+# training; with this tag it opens on the runs.
+EXPERIMENT_KIND_TAG, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
+NOTE_TAG = "mlflow.note.content"  # an experiment's or a run's description in the UI
+
+
+def ensure_experiment(
+    client, name: str, artifact_location: str | None = None, description: str | None = None
+) -> str:
+    """The experiment's id, creating it (with ``artifact_location`` for a local store) if needed, marked
+    as model training (the UI opens on its runs) and described by `description` unless it has a note."""
     exp = client.get_experiment_by_name(name)
     if exp is not None:
         if exp.lifecycle_stage == "deleted":
             client.restore_experiment(exp.experiment_id)
-        return exp.experiment_id
-    return client.create_experiment(name, artifact_location=artifact_location)
+        exp_id, tags = exp.experiment_id, exp.tags
+    else:
+        exp_id, tags = client.create_experiment(name, artifact_location=artifact_location), {}
+    if tags.get(EXPERIMENT_KIND_TAG) != MODEL_TRAINING:
+        client.set_experiment_tag(exp_id, EXPERIMENT_KIND_TAG, MODEL_TRAINING)
+    if description and NOTE_TAG not in tags:
+        client.set_experiment_tag(exp_id, NOTE_TAG, description.strip())
+    return exp_id
 
 
 def local_artifact_location(tracking_uri: str, directory: str | Path) -> str | None:
@@ -225,6 +237,7 @@ def open_sweep_run(
     tags: Mapping[str, str] = (),
     params: Mapping[str, Any] = (),
     artifact_location: str | None = None,
+    description: str | None = None,
 ) -> tuple[str, str, bool]:
     """The sweep's parent run: ``(experiment_id, run_id, reused)``.
 
@@ -232,17 +245,18 @@ def open_sweep_run(
     back to RUNNING); a new one is created when there is none. Otherwise always a new parent run.
     """
     client = _client(tracking_uri)
-    exp_id = ensure_experiment(client, experiment, artifact_location)
+    exp_id = ensure_experiment(client, experiment, artifact_location, description)
     if resume:
         found = find_runs(client, exp_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP})
         if found:
             run_id = found[-1].info.run_id
             client.update_run(run_id, status="RUNNING")
             return exp_id, run_id, True
+    note = {NOTE_TAG: description.strip()} if description else {}
     run = client.create_run(
         exp_id,
         run_name=sweep,
-        tags={SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP, GIT_COMMIT_TAG: git_commit(), **tags},
+        tags={SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP, GIT_COMMIT_TAG: git_commit(), **note, **tags},
     )
     run_id = run.info.run_id
     if params:
@@ -424,9 +438,9 @@ def env_params(spec: Any, env_id: str) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------- a sweep's child runs
-def result_metrics(result: Mapping[str, Any]) -> dict[str, float]:
+def result_metrics(result: Mapping[str, Any], rllib_timers: bool = False) -> dict[str, float]:
     """What a trial logs per result: ``metrics_from_result`` plus Tune's wall time and iteration."""
-    metrics = metrics_from_result(result)
+    metrics = metrics_from_result(result, rllib_timers)
     for key in (TIME_TOTAL_S, TRAINING_ITERATION):
         if isinstance(result.get(key), int | float):
             metrics[key] = float(result[key])
@@ -443,13 +457,16 @@ class TrialRuns:
     restored from a checkpoint replays the iterations after it). Pickled without its caches.
     """
 
-    _STATE = ("tracking_uri", "experiment_id", "sweep", "parent_run_id")
+    _STATE = ("tracking_uri", "experiment_id", "sweep", "parent_run_id", "rllib_timers")
 
-    def __init__(self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str):
+    def __init__(
+        self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str, rllib_timers: bool = False
+    ):
         self.tracking_uri = tracking_uri
         self.experiment_id = experiment_id
         self.sweep = sweep
         self.parent_run_id = parent_run_id
+        self.rllib_timers = rllib_timers
         self._reset()
 
     def _reset(self) -> None:
@@ -462,7 +479,7 @@ class TrialRuns:
         return {k: self.__dict__[k] for k in self._STATE}
 
     def __setstate__(self, state):
-        self.__dict__.update(state)
+        self.__dict__.update({"rllib_timers": False, **state})
         self._reset()
 
     @property
@@ -501,7 +518,13 @@ class TrialRuns:
         name = f"{info['config_key']}-seed{info['seed']}"
         run = self.client.create_run(self.experiment_id, run_name=name, tags=self._tags(trial, info))
         run_id = run.info.run_id
-        params = {**info["settings"], SEED_PARAM: info["seed"], **env_params(info["spec"], info["env"])}
+        # (params and tags agree: the preset a run used is "default" when none was named)
+        params = {
+            **info["settings"],
+            **({"preset": info["preset"]} if "preset" in info["settings"] else {}),
+            SEED_PARAM: info["seed"],
+            **env_params(info["spec"], info["env"]),
+        }
         _log_params(self.client, run_id, params_for_mlflow(params))
         self.client.log_text(run_id, trial_config_yaml(info), CONFIG_ARTIFACT)
         return run_id
@@ -533,7 +556,7 @@ class TrialRuns:
         step = int(result_value(result, ENV_STEPS, 0))
         if step <= self._last_step.get(run_id, -1):
             return
-        self._log_metrics(run_id, result_metrics(result), step)
+        self._log_metrics(run_id, result_metrics(result, self.rllib_timers), step)
         self._last_step[run_id] = step
 
     def _log_metrics(self, run_id: str, metrics: Mapping[str, float], step: int) -> None:

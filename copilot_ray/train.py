@@ -1,12 +1,14 @@
 """One CO-PILOT run without Tune.
 
     python -m copilot_ray.train --env maze-point --layout four-rooms --tree-depth 5 --repetitions 5 \
-        --stop-env-steps 200000 --seed 0 [--tracking-uri sqlite:///mlflow.db]
+        --stop-env-steps 200000 --seed 0
 
 Every CO-PILOT setting is a flag (`--planner-std-final 0.015`, `--preset paper_literal`; values are
 written as in a sweep spec, so `null`, `[64, 64]` and `1e-3` work); `--help` lists them with their
-rules. Prints one progress line per iteration, writes a checkpoint at the end (and on Ctrl-C), and logs
-to MLflow when a tracking URI is given. Bad arguments are reported before Ray starts (exit status 2).
+rules and defaults. Prints one progress line per iteration; the run is tracked in MLflow (by default
+in the embedded store results/train/mlflow.db; `--no-tracking` for none) and its checkpoint (at the end
+and on Ctrl-C) goes to a folder of its own named after the run. Every bad argument is reported, each
+naming the flag and its value, before Ray starts (exit status 2).
 """
 
 from __future__ import annotations
@@ -20,29 +22,64 @@ from typing import Any
 
 from copilot_ray import keys
 from copilot_ray.algorithms.registry import RunContext, get_algorithm
-from copilot_ray.envs import make
+from copilot_ray.envs import UnknownEnvError, make
 from copilot_ray.settings import problems
 from copilot_ray.spec import load_yaml_value
+from copilot_ray.store import default_tracking_uri, tracking_uri_problem
 
 ALGORITHM = "copilot"
 # The flags of settings whose names changed, so that old command lines keep working.
 _ALIASES = {"eval_num_tasks": ["--eval-tasks"]}
 
 
+RESULTS = Path("results") / "train"  # the default store and the runs' checkpoint folders, under the cwd
+EXAMPLE = """example (about an hour on two cores; --help lists every setting):
+  python -m copilot_ray.train --layout four-rooms --preset paper_literal --stop-env-steps 300000 --seed 1
+  mlflow ui --backend-store-uri sqlite:///$PWD/results/train/mlflow.db"""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, but a bad flag is one line (its usage lists ~60 flags): exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"error: {message}\n({self.prog} --help lists every flag)\n")
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m copilot_ray.train", description=__doc__.split("\n\n")[0])
-    run = p.add_argument_group("the run")
-    run.add_argument("--env", default="maze-point", help="goal-conditioned env id (see copilot_ray.envs)")
-    run.add_argument("--layout", default=None, help="maze layout: a built-in name or a layout file")
-    run.add_argument("--stop-env-steps", type=int, default=100_000, help="stop after this many env steps")
-    run.add_argument("--stop-iters", type=int, default=None, help="stop after this many iterations")
-    run.add_argument("--seed", type=int, default=0)
-    run.add_argument(
-        "--num-env-runners", type=int, default=0, help="remote env runners (0: sample on driver)"
+    p = _Parser(
+        prog="python -m copilot_ray.train",
+        usage="%(prog)s [--env ENV] [--layout LAYOUT] [--stop-env-steps N] [--seed S] [--SETTING VALUE ...]",
+        description=__doc__.split("\n\n")[0],
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    run.add_argument("--checkpoint-dir", default="results/train", help="where checkpoints go")
-    run.add_argument("--tracking-uri", default=None, help="MLflow tracking URI; none: no MLflow")
-    run.add_argument("--experiment", default="copilot-train", help="MLflow experiment name")
+    run = p.add_argument_group("the run")
+    run.add_argument(
+        "--env", default="maze-point", help="goal-conditioned env id (copilot_ray.envs; default maze-point)"
+    )
+    run.add_argument(
+        "--layout", default=None, help="maze layout: a built-in name or a layout file (default four-rooms)"
+    )
+    run.add_argument(
+        "--stop-env-steps", type=int, default=100_000, help="stop after this many env steps (default 100000)"
+    )
+    run.add_argument("--stop-iters", type=int, default=None, help="stop after this many iterations (default: none)")
+    run.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    run.add_argument(
+        "--num-env-runners", type=int, default=0, help="remote env runners (default 0: sample on the driver)"
+    )
+    run.add_argument(
+        "--checkpoint-dir",
+        default=None,
+        help=f"where the checkpoint goes (default: {RESULTS}/<run name>, a folder of its own per run)",
+    )
+    run.add_argument(
+        "--tracking-uri",
+        default=None,
+        help=f"MLflow tracking URI (default: the embedded store sqlite:///$PWD/{RESULTS}/mlflow.db)",
+    )
+    run.add_argument("--no-tracking", action="store_true", help="log nothing to MLflow")
+    run.add_argument("--experiment", default="copilot-train", help="MLflow experiment (default copilot-train)")
     settings = p.add_argument_group("CO-PILOT settings (default: the setting's own; see the README's table)")
     for s in get_algorithm(ALGORITHM).settings.values():
         if s.on_cli:
@@ -67,7 +104,11 @@ class _Value:
         self.__name__ = key  # argparse names the type in its errors
 
     def __call__(self, text: str) -> Any:
-        return _Given(load_yaml_value(text))
+        try:
+            return _Given(load_yaml_value(text))
+        except Exception as err:  # noqa: BLE001 - any YAML error is "not a value", said in one line
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            raise argparse.ArgumentTypeError(f"{text!r} is invalid: not a value ({first})") from None
 
 
 class _Given:
@@ -85,20 +126,54 @@ def setting_values(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+class ArgumentsError(ValueError):
+    """Bad command-line arguments: every problem, one line each ("--flag value is invalid: why")."""
+
+    def __init__(self, lines: list[str]):
+        super().__init__("\n".join(lines))
+        self.lines = lines
+
+
+def run_problems(args: argparse.Namespace) -> list[str]:
+    """The run's own flags out of range, each named with its value."""
+    out = []
+    for flag, value, ok, need in (
+        ("--stop-env-steps", args.stop_env_steps, args.stop_env_steps >= 1, "an integer >= 1"),
+        ("--stop-iters", args.stop_iters, args.stop_iters is None or args.stop_iters >= 1, "an integer >= 1"),
+        ("--seed", args.seed, args.seed >= 0, "an integer >= 0"),
+        ("--num-env-runners", args.num_env_runners, args.num_env_runners >= 0, "an integer >= 0"),
+    ):
+        if not ok:
+            out.append(f"{flag} {value!r} is invalid: must be {need}")
+    if args.tracking_uri is not None and (why := tracking_uri_problem(args.tracking_uri)) is not None:
+        out.append(f"--tracking-uri {args.tracking_uri!r} is invalid: {why}")
+    if args.checkpoint_dir is not None and Path(args.checkpoint_dir).is_file():
+        out.append(f"--checkpoint-dir {args.checkpoint_dir!r} is invalid: it is a file, not a folder")
+    return out
+
+
 def build_config(args: argparse.Namespace):
-    """Builds and validates the algorithm config; raises ValueError naming the bad flag and value."""
+    """Builds and validates the algorithm config; raises ArgumentsError naming every bad flag and value."""
     entry = get_algorithm(ALGORITHM)
     values = setting_values(args)
     found = problems(entry.settings, values)
     found += [(involved[-1], value, why) for involved, value, why in entry.combination_problems(values)]
-    if found:
-        key, value, why = found[0]
-        raise ValueError(f"{entry.settings[key].flag} {value!r} is invalid: {why}")
+    lines = run_problems(args) + [
+        f"{entry.settings[key].flag} {value!r} is invalid: {why}" for key, value, why in found
+    ]
     env_config: dict[str, Any] = {}
     if args.layout is not None:
         env_config["layout"] = args.layout
     # Building the env once here turns a bad env id, layout or env_config into an error now.
-    make(args.env, **env_config).close()
+    try:
+        make(args.env, **env_config).close()
+    except UnknownEnvError as err:
+        lines.append(f"--env {args.env!r} is invalid: {err}")
+    except (ValueError, OSError) as err:
+        flag, value = ("--layout", args.layout) if args.layout is not None else ("--env", args.env)
+        lines.append(f"{flag} {value!r} is invalid: {err}")
+    if lines:
+        raise ArgumentsError(lines)
     run = RunContext(
         env_id=args.env,
         env_config=env_config,
@@ -127,10 +202,19 @@ def progress_line(result: dict[str, Any], started: float) -> str:
     )
 
 
+def run_name(args: argparse.Namespace, config) -> str:
+    """What the run is called in MLflow and its checkpoint folder: env, K, b, seed and when it started."""
+    return f"{args.env}-K{config.tree_depth}-b{config.repetitions}-s{args.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         config = build_config(args)
+    except ArgumentsError as err:
+        for line in err.lines:
+            print(f"error: {line}", file=sys.stderr)
+        return 2
     except (ValueError, KeyError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -140,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
     from copilot_ray.privileges import tag_value
     from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
 
+    name = run_name(args, config)
+    checkpoint_dir = Path(args.checkpoint_dir or RESULTS / name).resolve()
+    tracking_uri = None if args.no_tracking else args.tracking_uri or default_tracking_uri(RESULTS)
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     ray.init(
         num_cpus=max(os.cpu_count() or 1, args.num_env_runners + 1),
@@ -147,11 +234,12 @@ def main(argv: list[str] | None = None) -> int:
         log_to_driver=False,
     )
     run = None
-    if args.tracking_uri:
+    if tracking_uri:
+        RESULTS.mkdir(parents=True, exist_ok=True)
         run = MlflowRun(
-            args.tracking_uri,
+            tracking_uri,
             args.experiment,
-            run_name=f"{args.env}-K{config.tree_depth}-b{config.repetitions}-s{args.seed}",
+            run_name=name,
             tags={
                 keys.ALGORITHM_TAG: ALGORITHM,
                 keys.ENV_TAG: args.env,
@@ -165,10 +253,11 @@ def main(argv: list[str] | None = None) -> int:
             },
         )
         run_args = {k: v for k, v in vars(args).items() if not k.startswith("setting:")}
-        run.log_params(params_for_mlflow({**run_args, **config.setting_values()}))
+        settings = {**config.setting_values(), "preset": config.preset or "default"}
+        run.log_params(params_for_mlflow({**run_args, **settings, "checkpoint_dir": str(checkpoint_dir)}))
+        print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}", flush=True)
     algo = config.build_algo()
     started = time.time()
-    checkpoint_dir = Path(args.checkpoint_dir).resolve()
     status = "FINISHED"
     try:
         while True:
@@ -192,6 +281,7 @@ def main(argv: list[str] | None = None) -> int:
             if trees.is_dir():
                 run.log_artifacts(trees, keys.TREES_DIR)
             run.end(status)
+            print(f"compare runs: mlflow ui --backend-store-uri {tracking_uri}")
         algo.stop()
         ray.shutdown()
     return 0 if status == "FINISHED" else 130

@@ -34,6 +34,7 @@ from copilot_ray.keys import (
     TIME_TOTAL_S,
     TRAINING_ITERATION,
     result_value,
+    validation_key,
     validation_metrics,
 )
 from copilot_ray.spec import (
@@ -179,7 +180,9 @@ class ProgressPrinter(Callback):
         _say(f"{self._head(trial)}  started")
 
     def on_trial_result(self, iteration, trials, trial, result, **info):
-        success, planned, direct = (result_value(result, key) for key in SUCCESS_METRICS)
+        # The validation tasks' figures: what one may watch (and choose by) while a sweep runs; the test
+        # tasks' are the report's.
+        success, planned, direct = (result_value(result, validation_key(k)) for k in SUCCESS_METRICS)
         steps = result_value(result, ENV_STEPS, 0)
         mark = "" if result_value(result, EVAL_FRESH, 1.0) else " (last eval)"
         if success is None:  # a planner-only baseline: its paths' figures
@@ -188,9 +191,9 @@ class ProgressPrinter(Callback):
                 f"length/RRT* {_fmt(result_value(result, PATH_LENGTH_VS_RRT))}"
             )
         elif planned is None:
-            figures = f"success {_fmt(success)}{mark}"
+            figures = f"validation success {_fmt(success)}{mark}"
         else:
-            figures = f"success {_fmt(success)} (planned {_fmt(planned)} direct {_fmt(direct)}){mark}"
+            figures = f"validation success {_fmt(success)} (planned {_fmt(planned)} direct {_fmt(direct)}){mark}"
         _say(
             f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
             f"env_steps {int(steps):8d}  {figures}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"
@@ -220,8 +223,10 @@ class MlflowSweepCallback(Callback):
     """One MLflow child run per Tune trial under the sweep's parent run: Tune's hooks, handed to
     ``copilot_ray.tracking.TrialRuns``."""
 
-    def __init__(self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str):
-        self.runs = TrialRuns(tracking_uri, experiment_id, sweep, parent_run_id)
+    def __init__(
+        self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str, rllib_timers: bool = False
+    ):
+        self.runs = TrialRuns(tracking_uri, experiment_id, sweep, parent_run_id, rllib_timers)
 
     def on_trial_start(self, iteration, trials, trial, **info):
         self.runs.run_id(trial)
@@ -253,6 +258,15 @@ def start_ray(address: str | None) -> bool:
 
 def stop_ray() -> None:
     ray.shutdown()
+
+
+def cluster_cpus(address: str) -> int:
+    """The CPUs of the running cluster at `address` (connects, reads, disconnects)."""
+    ray.init(address=address, log_to_driver=False)
+    try:
+        return int(ray.cluster_resources().get("CPU", 0))
+    finally:
+        ray.shutdown()
 
 
 def restore_tuner(spec, path: Path) -> tune.Tuner | None:

@@ -206,11 +206,6 @@ def table(store):
     return pd.read_csv(store["out"] / "summary.csv").set_index("config_key")
 
 
-def _iqm4(x):
-    s = sorted(x)
-    return (s[1] + s[2]) / 2  # n = 4: trim one from each end, average the middle two
-
-
 def _boot_ci(x, reps=2000, seed=0):
     # independent of analysis.stats: same documented draws, IQM by sorting each row by hand
     x = np.asarray(x, dtype=float)
@@ -226,43 +221,46 @@ def test_report_succeeds(store):
     assert store["rc"] == 0
 
 
-def test_table_final_success_iqm_and_ci(table):
+def test_table_final_success_below_five_seeds_is_mean_and_range(table, store):
+    """4 seeds: no IQM, no CI; the mean and the seeds' range, and the table says so."""
     finals = [v[-1] for v in A_PLANNED.values()]
     row = table.loc["tree_depth=2"]
     assert row["n_seeds"] == 4
-    assert row["planned_final_iqm"] == pytest.approx(_iqm4(finals)) == pytest.approx(0.85)
-    lo, hi = _boot_ci(finals)
-    assert row["planned_final_ci_low"] == pytest.approx(lo)
-    assert row["planned_final_ci_high"] == pytest.approx(hi)
-    assert lo <= row["planned_final_iqm"] <= hi
-    assert row["direct_final_iqm"] == pytest.approx(0.85 / 2)
+    assert row["planned_final"] == pytest.approx(np.mean(finals)) == pytest.approx(0.7875)
+    assert row["planned_final_estimator"] == "mean" and row["planned_final_interval"] == "range"
+    assert (row["planned_final_low"], row["planned_final_high"]) == (min(finals), max(finals))
+    assert row["direct_final"] == pytest.approx(0.7875 / 2)
     assert row["wall_time_s_mean"] == pytest.approx(25.0)
+    md = (store["out"] / "summary.md").read_text()
+    assert f"mean {np.mean(finals):.3f}, range over 4 seeds: [0.450, 1.000]" in md
+    assert "CI" not in md.split("\n", 2)[2]  # no configuration has 5 seeds: no interval is a CI
 
 
 def test_failed_run_is_excluded_from_numbers(table):
     row = table.loc["tree_depth=3"]
     assert row["n_seeds"] == 3  # the FAILED seed does not count
-    assert row["planned_final_iqm"] == pytest.approx(np.mean([0.4, 0.5, 0.9]))  # n = 3: IQM is the mean
+    assert row["planned_final"] == pytest.approx(np.mean([0.4, 0.5, 0.9]))
     assert row["wall_time_s_mean"] == pytest.approx(100.0)
 
 
 def test_steps_to_threshold(table):
     row = table.loc["tree_depth=2"]
-    # to 0.5: seeds reach at 3000, 2000, never, 2000 -> sorted 2000, 2000, 3000, inf -> IQM 2500
-    assert float(row["planned_steps_to_0.5"]) == pytest.approx(2500.0)
+    # to 0.5: seeds reach at 3000, 2000, never, 2000; 4 seeds: the mean, infinite -> not reached, 3/4
+    assert row["planned_steps_to_0.5"] == "not reached"
     assert row["planned_seeds_reaching_0.5"] == 3
-    # to 0.9: never, 4000, never, 3000 -> the middle two are 4000 and inf -> not reached
     assert row["planned_steps_to_0.9"] == "not reached"
     assert row["planned_seeds_reaching_0.9"] == 2
-    # direct success (= planned / 2) reaches 0.5 only for seed 3 at 4000: IQM 'not reached', 1/4
+    # direct success (= planned / 2) reaches 0.5 only for seed 3 at 4000
     assert row["direct_steps_to_0.5"] == "not reached"
     assert row["direct_seeds_reaching_0.5"] == 1
+    # both seeds of tree_depth=4 reach 0.5 (at 1500 and 1600): the mean
+    assert float(table.loc["tree_depth=4", "planned_steps_to_0.5"]) == pytest.approx(1550.0)
 
 
 def test_single_evaluation_config(table, store):
     row = table.loc["tree_depth=4"]
     assert row["n_seeds"] == 2  # FINISHED and RUNNING with one evaluation each; the one without evals not
-    assert row["planned_final_iqm"] == pytest.approx(0.6)
+    assert row["planned_final"] == pytest.approx(0.6)
     report = (store["out"] / "report.md").read_text()
     assert "tree_depth=4" in report or "K=4" in report
     assert "single evaluation" in report
@@ -561,9 +559,9 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
     argv = ["baselines", "--tracking-uri", uris["copilot"], "--out", str(out), "--parent-run", "all"]
     assert main([*argv, "--also-from", uris["ppo"]]) == 0
     frame = pd.read_csv(out / "summary.csv").set_index("configuration")
-    assert frame.loc["algorithm=ppo", "success_final_iqm"] == pytest.approx(0.2)
-    assert frame.loc["algorithm=copilot", "success_final_iqm"] == pytest.approx(0.85)
-    assert np.isnan(frame.loc["algorithm=ppo", "planned_final_iqm"])  # PPO has no plan
+    assert frame.loc["algorithm=ppo", "success_final"] == pytest.approx(0.2)
+    assert frame.loc["algorithm=copilot", "success_final"] == pytest.approx(0.85)
+    assert np.isnan(frame.loc["algorithm=ppo", "planned_final"])  # PPO has no plan
     # the Ant maze's return (Fig. 2d) from both, the walker's mastered share (Fig. 3) where logged
     names = ("success_by_method.png", "final_success_by_method.png", "return_vs_env_steps.png")
     for name in (*names, "mastered_vs_env_steps.png"):
@@ -585,3 +583,267 @@ def test_a_label_leaves_out_axes_the_trials_algorithm_lacks():
     )
     assert config_label(sac, axes) == "algorithm=sac"
     assert config_label(copilot, axes) == "algorithm=copilot, K=3, alpha_schedule=p"
+
+
+# ------------------------------------------------------------------------ honest numbers and provenance
+# A second hand-made store: CO-PILOT's default (5 seeds, three privileges) against SAC (5 seeds, none)
+# and an old PPO run (2 seeds, no privileges tag, no counters). Every trial evaluates at 1000, 2000 and
+# 3000 env steps; its 4000 row only repeats the 3000 evaluation (copilot/eval/fresh = 0).
+HONEST = "honest-sweep"
+FRESH_STEPS = [1000, 2000, 3000, 4000]
+FRESH_FLAGS = [1.0, 1.0, 1.0, 0.0]
+HONEST_SUCCESS = {
+    "copilot": [[0.2 + 0.05 * i, 0.5 + 0.05 * i, 0.7 + 0.05 * i] for i in range(5)],
+    "sac": [[0.0, 0.1 + 0.02 * i, 0.2 + 0.02 * i] for i in range(5)],
+    "ppo": [[0.0, 0.05, 0.1 + 0.05 * i] for i in range(2)],
+}
+PRIVILEGE_TAGS = {"copilot": "collision_checks,map_queries,reset_to_state", "sac": "none", "ppo": None}
+COMMITS = {"copilot": "1111111aaaaaaa", "sac": "2222222bbbbbbb", "ppo": None}
+
+
+def _honest_trial(client, exp_id, pid, algorithm, seed, values):
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import (
+        EVAL_FRESH,
+        EVAL_SUCCESS,
+        PRESET_TAG,
+        PRIVILEGE_COLLISION_CHECKS,
+        PRIVILEGE_MAP_QUERIES,
+        PRIVILEGE_RESETS,
+        PRIVILEGES_TAG,
+    )
+
+    tags = {
+        PARENT_TAG: pid,
+        ROLE_TAG: ROLE_TRIAL,
+        SWEEP_TAG: "honest",
+        CONFIG_KEY_TAG: "default",
+        ALGORITHM_TAG: algorithm,
+        ENV_TAG: "maze-point",
+        PRESET_TAG: "default",
+        SEED_TAG: str(seed),
+    }
+    if PRIVILEGE_TAGS[algorithm] is not None:  # the old PPO run predates the tags
+        tags[PRIVILEGES_TAG] = PRIVILEGE_TAGS[algorithm]
+        tags[GIT_COMMIT_TAG] = COMMITS[algorithm]
+    rid = client.create_run(exp_id, run_name=f"{algorithm}-seed{seed}", tags=tags).info.run_id
+    now = int(time.time() * 1000)
+    logged = [*values, values[-1]]  # the last row repeats the last evaluation
+    ms = [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(FRESH_STEPS, logged, strict=True)]
+    ms += [Metric(ENV_STEPS, s, now, s) for s in FRESH_STEPS]
+    ms.append(Metric("timers/training_step", 1.0, now, FRESH_STEPS[-1]))  # not exported
+    if PRIVILEGE_TAGS[algorithm] is not None:
+        ms += [Metric(EVAL_FRESH, f, now, s) for s, f in zip(FRESH_STEPS, FRESH_FLAGS, strict=True)]
+        scale = (seed + 1) * (algorithm == "copilot")  # cumulative counts; SAC's are 0
+        for key, final in (
+            (PRIVILEGE_COLLISION_CHECKS, 100),
+            (PRIVILEGE_RESETS, 1),
+            (PRIVILEGE_MAP_QUERIES, 10),
+        ):
+            ms += [Metric(key, final * scale * s / FRESH_STEPS[-1], now, s) for s in FRESH_STEPS]
+    client.log_batch(rid, metrics=ms)
+    client.set_terminated(rid, "FINISHED")
+    return rid
+
+
+@pytest.fixture(scope="module")
+def honest(tmp_path_factory):
+    import mlflow
+
+    from copilot_ray.keys import RESOLVED_SPEC_ARTIFACT, SPEC_ARTIFACT
+
+    root = tmp_path_factory.mktemp("honest")
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment(HONEST, artifact_location=(root / "artifacts").as_uri())
+    pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "honest"}).info.run_id
+    client.log_text(pid, "name: honest\n", RESOLVED_SPEC_ARTIFACT)
+    client.log_text(pid, "name: honest\n", SPEC_ARTIFACT)
+    for algorithm, seeds in HONEST_SUCCESS.items():
+        for seed, values in enumerate(seeds):
+            _honest_trial(client, exp_id, pid, algorithm, seed, values)
+    out = root / "report"
+    argv = [HONEST, "--tracking-uri", uri, "--out", str(out), "--no-log"]
+    rc = main(argv)
+    frame = pd.read_csv(out / "summary.csv").set_index("configuration")
+    return {"uri": uri, "out": out, "rc": rc, "argv": argv, "frame": frame, "parent": pid}
+
+
+def _auc(values):  # three evaluations 1000 apart, window [1000, 3000]: the trapezoid by hand
+    return (values[0] + 2 * values[1] + values[2]) / 4
+
+
+def test_fresh_evaluations_only(tmp_path):
+    """fresh = 1, 0, 0, 1 at four steps: the curve keeps two points; a run that never logged the flag
+    (copilot_ray.train, older stores) keeps all four."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from analysis.load import fresh_only, load_sweep
+    from copilot_ray.keys import EVAL_FRESH, EVAL_SUCCESS, validation_key
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("fresh", artifact_location=(tmp_path / "art").as_uri())
+    now = int(time.time() * 1000)
+    for seed, flags in (("0", [1.0, 0.0, 0.0, 1.0]), ("1", None)):
+        tags = {ROLE_TAG: ROLE_TRIAL, CONFIG_KEY_TAG: "default", SEED_TAG: seed}
+        rid = client.create_run(exp_id, tags=tags).info.run_id
+        ms = [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS, [0.2, 0.2, 0.2, 0.6], strict=True)]
+        if flags:
+            ms += [Metric(EVAL_FRESH, f, now, s) for s, f in zip(STEPS, flags, strict=True)]
+        client.log_batch(rid, metrics=ms)
+        client.set_terminated(rid, "FINISHED")
+    trials = {t.seed: t for t in load_sweep(uri, "fresh").trials}
+    steps, values = trials["0"].curves[EVAL_SUCCESS]
+    np.testing.assert_array_equal(steps, [1000, 4000])
+    np.testing.assert_allclose(values, [0.2, 0.6])
+    assert len(trials["1"].curves[EVAL_SUCCESS][0]) == 4
+    # validation curves are filtered the same way; other metrics are not
+    curve = (np.array(STEPS, float), np.array([0.1, 0.1, 0.1, 0.3]))
+    fresh = (np.array(STEPS, float), np.array([1.0, 0.0, 0.0, 1.0]))
+    kept = fresh_only({validation_key(EVAL_SUCCESS): curve, ENV_STEPS: curve}, fresh)
+    assert len(kept[validation_key(EVAL_SUCCESS)][0]) == 2 and len(kept[ENV_STEPS][0]) == 4
+
+
+def test_seed_summary_range_below_five_seeds_ci_from_five():
+    two = stats.summarise_seeds(np.array([0.2, 0.4]))
+    assert two.text() == "mean 0.300, range over 2 seeds: [0.200, 0.400]"
+    assert not two.has_ci and "CI" not in two.text()
+    assert stats.summarise_seeds(np.array([0.7])).text() == "0.700 (n = 1)"
+    five = np.array([0.2, 0.4, 0.5, 0.9, 0.3])
+    s = stats.summarise_seeds(five)
+    lo, hi = _boot_ci(five)
+    assert s.has_ci and s.point == pytest.approx(stats.iqm(five))
+    assert (s.low, s.high) == (pytest.approx(lo), pytest.approx(hi))
+    assert s.text() == f"IQM {s.point:.3f} [95% CI {lo:.3f}, {hi:.3f}]"
+    assert stats.MIN_SEEDS_FOR_CI == 5
+
+
+def test_probability_of_improvement_on_hand_made_scores():
+    x, y = np.array([0.6, 0.7, 0.8, 0.9, 1.0]), np.array([0.1, 0.2, 0.3, 0.4, 0.5])
+    assert stats.probability_of_improvement(x, y) == 1.0
+    assert stats.probability_of_improvement(y, x) == 0.0
+    assert stats.probability_of_improvement(x, x) == 0.5  # identical: every tie counts 1/2
+    # one pair of four higher, one tie: (1 + 0.5) / 4
+    assert stats.probability_of_improvement([1.0, 0.5], [0.5, 2.0]) == pytest.approx(0.375)
+    imp = stats.improvement(x, y)
+    assert imp.available and (imp.p, imp.low, imp.high) == (1.0, 1.0, 1.0)
+    same = stats.improvement(x, x)
+    assert same.p == 0.5 and same.low < 0.5 < same.high
+    few = stats.improvement(x, y[:2])
+    assert not few.available and few.text() == "n/a (needs >= 5 seeds each; here 5 and 2)"
+
+
+def test_auc_over_the_common_window():
+    assert stats.auc_window([np.array([1000, 2000, 3000]), np.array([1500, 4000]), np.array([9.0])]) == (
+        1500,
+        3000,
+    )
+    assert stats.normalised_auc([0, 10], [0.0, 1.0], 0, 10) == pytest.approx(0.5)
+    assert stats.normalised_auc([0, 5, 10], [0.0, 1.0, 1.0], 0, 10) == pytest.approx(0.75)
+    assert stats.normalised_auc([0, 10], [0.0, 1.0], 5, 10) == pytest.approx(0.75)
+    assert np.isnan(stats.normalised_auc([0, 5], [0.0, 1.0], 0, 10))  # never extrapolated
+
+
+def test_headline_table_final_auc_and_ci_only_from_five_seeds(honest):
+    assert honest["rc"] == 0
+    frame = honest["frame"]
+    assert not [c for c in frame.columns if "best" in c or "max" in c]  # no best-over-evaluations figure
+    cp = frame.loc["algorithm=copilot"]
+    finals = [v[-1] for v in HONEST_SUCCESS["copilot"]]  # the stale 4000 row repeats these
+    lo, hi = _boot_ci(finals)
+    assert cp["success_final_estimator"] == "IQM" and cp["success_final_interval"] == "95% CI"
+    assert cp["success_final"] == pytest.approx(stats.iqm(np.array(finals)))
+    assert (cp["success_final_low"], cp["success_final_high"]) == (pytest.approx(lo), pytest.approx(hi))
+    assert cp["success_final_env_steps"] == 3000  # the last fresh evaluation, not the stale row
+    assert (cp["success_auc_from"], cp["success_auc_to"]) == (1000, 3000)
+    aucs = [_auc(v) for v in HONEST_SUCCESS["copilot"]]
+    assert cp["success_auc"] == pytest.approx(stats.iqm(np.array(aucs)))
+    ppo = frame.loc["algorithm=ppo"]
+    assert ppo["success_final_estimator"] == "mean" and ppo["success_final_interval"] == "range"
+    assert ppo["success_auc"] == pytest.approx(np.mean([_auc(v) for v in HONEST_SUCCESS["ppo"]]))
+    md = (honest["out"] / "summary.md").read_text()
+    assert f"IQM {cp['success_final']:.3f} [95% CI {lo:.3f}, {hi:.3f}]" in md
+    assert "mean 0.125, range over 2 seeds: [0.100, 0.150]" in md
+
+
+def test_curves_have_a_band_only_from_five_seeds(honest):
+    from analysis.aggregate import summarise
+    from analysis.load import load_sweep
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    configs, _ = summarise(load_sweep(honest["uri"], HONEST), reps=200)
+    curves = {c.algorithm: c.metrics[EVAL_SUCCESS].curve for c in configs}
+    assert curves["copilot"].has_ci and not curves["ppo"].has_ci
+    assert len(curves["ppo"].seed_curves) == 2  # drawn as thin lines instead of a band
+    np.testing.assert_allclose(curves["ppo"].center[0], 0.0)
+    assert (honest["out"] / "success_by_method.png").stat().st_size > 10_000
+
+
+def test_privileges_and_budgets_beside_every_result(honest):
+    frame = honest["frame"]
+    cp, sac, ppo = (frame.loc[f"algorithm={a}"] for a in ("copilot", "sac", "ppo"))
+    assert cp["privileges"] == "collision_checks, map_queries, reset_to_state"
+    assert sac["privileges"] == "none" and ppo["privileges"] == "-"
+    # final cumulative counts, mean over seeds: 100 * (1..5), 1..5, 10 * (1..5)
+    assert (cp["collision_checks"], cp["resets"], cp["map_queries"]) == (300, 3, 30)
+    assert (sac["collision_checks"], sac["resets"], sac["map_queries"]) == (0, 0, 0)
+    assert np.isnan(ppo["collision_checks"]) and cp["env_steps"] == 4000
+    md = (honest["out"] / "summary.md").read_text()
+    assert (
+        "| algorithm=copilot | 5 | collision_checks, map_queries, reset_to_state | 4,000 | 300 | 3 | 30 |"
+        in md
+    )
+    assert "| algorithm=sac | 5 | none | 4,000 | 0 | 0 | 0 |" in md
+    assert "| algorithm=ppo | 2 | - | 4,000 | - | - | - |" in md
+    report = (honest["out"] / "report.md").read_text()
+    caption = (
+        "Privileges ('-': runs older than the privileges tag): algorithm=copilot: collision_checks, "
+        "map_queries, reset_to_state; algorithm=ppo: -; algorithm=sac: none."
+    )
+    for figure in ("final_success_by_method.png", "success_by_method.png"):
+        assert f"]({figure})\n\n{caption}" in report
+
+
+def test_probability_of_improvement_in_the_report(honest):
+    """CO-PILOT's default against the best other method by final success (SAC, 5 seeds; PPO is worse)."""
+    report = (honest["out"] / "report.md").read_text()
+    section = report.split("## Probability of improvement over the best other method")[1].split("## ")[0]
+    assert (
+        "| algorithm=copilot | algorithm=sac | 1.00 [95% CI 1.00, 1.00] | 1.00 [95% CI 1.00, 1.00] |"
+        in section
+    )
+    assert report.index("## Summary") < report.index("## Probability of improvement")
+    imp = pd.read_csv(honest["out"] / "improvement.csv")
+    assert imp.loc[0, "p_final"] == 1.0 and imp.loc[0, "p_auc"] == 1.0
+
+
+def test_provenance_block_and_metrics_export(honest, store):
+    from analysis.report import command_line
+
+    report = (honest["out"] / "report.md").read_text()
+    head = report.split("## Missing or incomplete")[0]
+    assert head.index("## Provenance") < head.index("git commits")
+    assert "git commits: 1111111aaaaaaa, 2222222bbbbbbb" in head
+    assert "WARNING: the runs come from 2 different commits, not from one" in head
+    assert "2 of 12 runs carry no git_commit tag" in head
+    assert honest["uri"] in head and f"experiment: {HONEST}" in head
+    assert f"runs:/{honest['parent']}/spec.resolved.yaml" in head
+    assert f"command: {command_line(honest['argv'])}" in head
+    assert command_line(honest["argv"]).startswith("python -m analysis.report honest-sweep --tracking-uri")
+    html_head = (honest["out"] / "report.html").read_text().split("Missing or incomplete")[0]
+    assert "Provenance" in html_head and "1111111aaaaaaa" in html_head
+    # the single-commit store: its commit, no warning
+    main_report = (store["out"] / "report.md").read_text()
+    assert "git commit: abcdef1234567" in main_report and "WARNING" not in main_report
+    # every run's metrics: copilot/, paths/ and the env steps, every logged row (stale ones too)
+    csv = pd.read_csv(honest["out"] / "metrics.csv.gz")
+    assert list(csv.columns) == ["run", "config", "seed", "metric", "env_steps", "value"]
+    assert not csv.metric.str.startswith("timers/").any()
+    rows = csv[(csv.run == "copilot-seed4") & (csv.metric == "copilot/eval/success")]
+    assert list(rows.env_steps) == FRESH_STEPS and set(rows.config) == {"algorithm=copilot"}
+    assert rows.value.iloc[-1] == pytest.approx(HONEST_SUCCESS["copilot"][4][-1])
+    assert {"copilot/eval/fresh", "copilot/privileges/resets", ENV_STEPS} <= set(csv.metric)
+    assert (store["out"] / "metrics.csv.gz").is_file()

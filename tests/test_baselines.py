@@ -145,7 +145,7 @@ def test_bad_baseline_settings_are_refused_before_anything_runs(tmp_path, kind, 
         "algorithm": kind,
         "config": {setting: value},
         "seeds": [0],
-        "stop": {"env_steps": 100},
+        "stop": {"env_steps": 100, "min_evaluations": 1},
     }
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(spec))
@@ -170,16 +170,17 @@ def test_a_baselines_spec_file_runs_every_algorithm_into_one_experiment(ray_sess
         "resources": {"max_concurrent_trials": 2, "num_env_runners": 0},
         "tracking": {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/baselines.db"},
     }
-    agent = {"tau_max": 20, "task_batch_size": 4, "eval_interval": 1, "eval_num_tasks": 10}
+    # one experiment is a comparison: one env-step cadence (every iteration passes a multiple of 1 step)
+    agent = {"tau_max": 20, "task_batch_size": 4, "eval_every_env_steps": 1, "eval_num_tasks": 10}
     learning = {"num_steps_sampled_before_learning_starts": 100}
     parts = [
-        {"name": "b_sac", "algorithm": "sac", "config": {**agent, **learning}, "stop": {"iterations": 2}},
-        {"name": "b_her", "algorithm": "her", "config": {**agent, **learning}, "stop": {"iterations": 2}},
+        {"name": "b_sac", "algorithm": "sac", "config": {**agent, **learning}, "stop": {"iterations": 2, "min_evaluations": 1}},
+        {"name": "b_her", "algorithm": "her", "config": {**agent, **learning}, "stop": {"iterations": 2, "min_evaluations": 1}},
         {
             "name": "b_sorb",
             "algorithm": "sorb",
             "config": {**agent, **learning, "sorb.pretrain_env_steps": 0, "sorb.graph_size": 50},
-            "stop": {"iterations": 2},
+            "stop": {"iterations": 2, "min_evaluations": 1},
         },
         {
             "name": "b_ppo",
@@ -190,7 +191,7 @@ def test_a_baselines_spec_file_runs_every_algorithm_into_one_experiment(ray_sess
                 "minibatch_size": 100,
                 "num_epochs": 1,
             },
-            "stop": {"iterations": 2},
+            "stop": {"iterations": 2, "min_evaluations": 1},
         },
     ]
     path = tmp_path / "baselines.yaml"

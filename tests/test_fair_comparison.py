@@ -27,7 +27,7 @@ def part(name, algorithm="her", **changes) -> dict:
         "algorithm": algorithm,
         "config": {"eval_every_env_steps": 1000},
         "seeds": [0],
-        "stop": {"env_steps": 5000},
+        "stop": {"env_steps": 5000, "min_evaluations": 1},
     }
     data.update(changes)
     return data
@@ -112,8 +112,8 @@ def test_parts_of_one_experiment_must_share_budget_cadence_and_tasks(tmp_path):
         write(
             tmp_path,
             part("a"),
-            part("b", "sac", stop={"env_steps": 9000}),
-            part("c", "ppo", config={"eval_interval": 3}),
+            part("b", "sac", stop={"env_steps": 9000, "min_evaluations": 1}),
+            part("c", "ppo", config={"eval_interval": 3}, stop={"env_steps": 5000, "min_evaluations": 0}),
         )
     )
     assert "experiment 'cmp': stop.env_steps differs between its parts (a: 5000, b: 9000, c: 5000)" in text
@@ -162,7 +162,7 @@ def test_the_shipped_fair_comparison_is_valid_and_reads_stage_one_from_the_store
     specs = load_specs(ROOT / "sweeps" / "fair_maze.yaml")
     tuning = [s for s in specs if s.search]
     final = [s for s in specs if s.best_of is not None]
-    assert len(tuning) == len(final) == 6 and len(specs) == 12
+    assert len(tuning) == 6 and len(final) == 7 and len(specs) == 13  # stage 2 adds the privileged restart row
     assert {s.experiment for s in tuning} == {"fair-maze-tuning"} and {s.experiment for s in final} == {"fair-maze"}
     for s in specs:
         assert not keys.is_test_metric(s.searcher.metric or s.best_of.metric)
@@ -253,7 +253,7 @@ def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session,
         "algorithm": "her",
         "config": {"tau_max": 20, "task_batch_size": 4, "eval_every_env_steps": 80, "eval_num_tasks": 10,
                    "num_steps_sampled_before_learning_starts": 100},
-        "stop": {"env_steps": 160},
+        "stop": {"env_steps": 160, "min_evaluations": 1},
         "resources": {"max_concurrent_trials": 2, "num_env_runners": 0},
         "tracking": {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/fair.db"},
     }

@@ -193,7 +193,7 @@ def test_bad_settings_are_refused_naming_the_key_and_the_value(tmp_path, setting
         "algorithm": "hrl",
         "config": {setting: value},
         "seeds": [0],
-        "stop": {"env_steps": 100},
+        "stop": {"env_steps": 100, "min_evaluations": 1},
     }
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(spec))
@@ -318,7 +318,7 @@ def test_a_sweep_runs_it_through_tune_into_mlflow(ray_session, tmp_path, capsys)
             "high.updates_per_transition": 1.0,
         },
         "seeds": [0],
-        "stop": {"iterations": 2},
+        "stop": {"iterations": 2, "min_evaluations": 1},
         "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},
         "tracking": {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/hrl.db"},
     }

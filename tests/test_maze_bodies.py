@@ -144,7 +144,7 @@ def test_a_spec_on_a_body_maze_builds_a_copilot_config(env_id):
             "name": "body",
             "env": {"id": env_id, "config": {"layout": "four-rooms"}},
             "config": {"tree_depth": 2},
-            "stop": {"env_steps": 100},
+            "stop": {"env_steps": 100, "min_evaluations": 1},
         }
     )
     config = build_algorithm_config({"seed": 0}, spec)

@@ -31,7 +31,7 @@ def spec_with(config: dict) -> dict:
         "name": "t",
         "env": {"id": "maze-point", "config": {"layout": "empty"}},
         "config": config,
-        "stop": {"env_steps": 100},
+        "stop": {"env_steps": 100, "min_evaluations": 0},
     }
 
 

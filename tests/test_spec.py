@@ -37,7 +37,7 @@ BASE = {
     "config": {"tree_depth": 2},
     "search": {"repetitions": {"grid": [1, 2]}},
     "seeds": [0, 1],
-    "stop": {"env_steps": 1000},
+    "stop": {"env_steps": 10000},
 }
 
 
@@ -118,12 +118,12 @@ def test_defaults_experiment_tracking_and_cpus(tmp_path, monkeypatch):
     assert spec.tracking.uri.startswith("sqlite:////")  # absolute path
     assert spec.resources.cpus_per_trial == 3
     assert spec.searcher.type == "grid"
-    assert tune_stop(spec) == {keys.ENV_STEPS: 1000}
+    assert tune_stop(spec) == {keys.ENV_STEPS: 10000}
 
 
 def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
     path = tmp_path / "s.yaml"
-    data = spec_with(config={"planner.lr": "PLACEHOLDER"})
+    data = spec_with(config={"tree_depth": 2, "planner.lr": "PLACEHOLDER"})
     path.write_text(yaml.safe_dump(data).replace("PLACEHOLDER", "1e-3"))
     assert load_spec(path).config["planner.lr"] == 1e-3
 

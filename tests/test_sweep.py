@@ -48,7 +48,7 @@ SWEEPS = sorted((ROOT / "sweeps").glob("*.yaml"))
 def _smoke_copy(tmp_path: Path, env_steps: int = 130) -> Path:
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
     data["tracking"] = {"storage": str(tmp_path / "results")}
-    data["stop"] = {"env_steps": env_steps}
+    data["stop"] = {"env_steps": env_steps, "min_evaluations": 1}  # a smoke run: it only has to run
     path = tmp_path / "smoke.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
@@ -70,7 +70,7 @@ def test_cli_bad_spec_exits_2_naming_the_key_without_ray(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text(
         "name: bad\nenv: {id: maze-point, config: {layout: u-maze}}\n"
-        "search: {tree_depth: {grid: [1, 99]}}\nstop: {env_steps: 100}\n"
+        "search: {tree_depth: {grid: [1, 99]}}\nstop: {env_steps: 100, min_evaluations: 1}\n"
     )
     wrapper = (
         "import runpy, sys\n"
@@ -323,6 +323,6 @@ def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
     table = summary_table([row("env.id=maze-point", 0, 0.7, 3.0), row("env.id=maze-point", 1, 0.9, 2.0),
                            row("env.id=maze-rigid", 0, 0.0, nan)])  # fmt: skip
     header, _, point, rigid = table.splitlines()
-    assert "path success" in header and "length / RRT*" in header and "success_planned" not in header
+    assert "path success" in header and "length / RRT*" in header and "planned" not in header
     assert "0.80 ± 0.14" in point and "2.50 ± 0.71" in point
     assert rigid.split("|")[4].strip() == "-"  # no successful path at the end: no length ratio

@@ -63,7 +63,7 @@ def test_sweep_and_report_through_a_tracking_server(ray_session, tmp_path, mlflo
 
     url, artifacts = mlflow_server
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
-    data.update(tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130})
+    data.update(tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130, "min_evaluations": 1})
     data["search"] = {"tree_depth": {"grid": [1]}}
     path = tmp_path / "smoke.yaml"
     path.write_text(yaml.safe_dump(data))

@@ -10,6 +10,8 @@ starts) and provide:
                                           benchmarks' --set accept (copilot_ray.settings.Setting)
     METRICS: tuple[str, ...]              what it logs that a sweep may optimise (`<k>`: a tree layer)
     combination_problems(values)          optional: [(keys, value, why)] for values that clash together
+    max_iteration_env_steps(values)       optional: the most env steps one iteration can take (--check's
+                                          evaluations per trial); none for an algorithm without env steps
     SEARCH_SPACE: dict[str, dict]         optional: what a comparison tunes (`search: declared` in a spec),
                                           in the spec's domain syntax, every default inside its range
     PRIVILEGES: tuple[str, ...]           optional: what the method always uses that agents learning from
@@ -27,7 +29,8 @@ from __future__ import annotations
 
 import difflib
 import importlib
-from collections.abc import Callable, Mapping
+import re
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -108,6 +111,7 @@ class AlgorithmEntry:
     trial_class_path: str  # "module:Class", imported by trial_class only (a sweep's trainable)
     always_privileges: tuple[str, ...] = ()
     search_space: Mapping[str, Any] = field(default_factory=dict)  # raw domains (spec syntax)
+    max_iteration_env_steps: Callable[[Mapping[str, Any]], int] | None = None
 
     def privileges(self, values: Mapping[str, Any]) -> tuple[str, ...]:
         """The privileges a run uses at the effective setting `values` (copilot_ray.privileges)."""
@@ -120,6 +124,23 @@ class AlgorithmEntry:
     def trial_class(self) -> type:
         """The Tune trainable a sweep runs (imports Ray)."""
         return _load(self.trial_class_path)
+
+
+# `<k>` in an algorithm's METRICS is a tree layer: 0..10, the deepest tree any setting allows.
+MAX_LAYER = 10
+
+
+def metric_known(metric: str, patterns: Iterable[str]) -> bool:
+    """Whether `metric` is one of an algorithm's METRICS (`<k>` matches a tree layer 0..MAX_LAYER)."""
+    for pattern in patterns:
+        if "<k>" in pattern:
+            regex = re.escape(pattern).replace(re.escape("<k>"), r"(\d+)")
+            m = re.fullmatch(regex, metric)
+            if m and int(m.group(1)) <= MAX_LAYER:
+                return True
+        elif metric == pattern:
+            return True
+    return False
 
 
 def _load(path: str) -> Any:
@@ -156,4 +177,5 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         trial_class_path=trial_class,
         always_privileges=tuple(getattr(module, "PRIVILEGES", ())),
         search_space=dict(getattr(module, "SEARCH_SPACE", {})),
+        max_iteration_env_steps=getattr(module, "max_iteration_env_steps", None),
     )

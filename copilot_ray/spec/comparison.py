@@ -18,13 +18,13 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from copilot_ray.algorithms.registry import get_algorithm
+from copilot_ray.algorithms.registry import get_algorithm, metric_known
 from copilot_ray.spec.errors import did_you_mean
 
-if TYPE_CHECKING:  # annotations only: models imports this module's caller
-    from copilot_ray.spec.models import SweepSpec
+# (a spec is a copilot_ray.spec.models.SweepSpec; not imported: models imports this module)
+SweepSpec = Any
 
 CADENCE = "eval_every_env_steps"
 
@@ -62,8 +62,6 @@ def link_stages(specs: Sequence[SweepSpec]) -> list[str]:
             )
         if not tuned.search:
             problems.append(f"{where}.sweep: {b.sweep!r} is invalid: it searches nothing to choose from")
-        from copilot_ray.spec.models import metric_known  # (models imports this module)
-
         if not metric_known(b.metric, get_algorithm(tuned.algorithm).metrics):
             problems.append(f"{where}.metric: {b.metric!r} is invalid: {tuned.algorithm} does not log it")
     return problems

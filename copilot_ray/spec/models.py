@@ -6,7 +6,7 @@ import copy
 import itertools
 import math
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -20,6 +20,7 @@ from copilot_ray.algorithms.registry import (
     UnknownAlgorithmError,
     algorithm_names,
     get_algorithm,
+    metric_known,
 )
 from copilot_ray.envs import env_ids, make
 from copilot_ray.envs.maze.layouts import LayoutError
@@ -27,10 +28,9 @@ from copilot_ray.settings import Setting, is_int, is_number
 from copilot_ray.settings import problems as setting_problems
 from copilot_ray.spec.comparison import comparison_problems, link_stages
 from copilot_ray.spec.errors import Issue, Issues, SpecError, did_you_mean, short
+from copilot_ray.spec.estimate import MIN_EVALUATIONS, too_few_evaluations
 from copilot_ray.spec.yaml_loader import read_yaml_documents, read_yaml_file
-
-# `<k>` in an algorithm's METRICS is a tree layer: 0..10, the deepest tree any setting allows.
-MAX_LAYER = 10
+from copilot_ray.store import tracking_uri_problem
 
 
 class _Model(BaseModel):
@@ -239,8 +239,13 @@ class SchedulerSpec(_Model):
 
 
 class StopSpec(_Model):
+    """When a trial ends. `min_evaluations` (default MIN_EVALUATIONS): the fewest evaluations a trial
+    must be sure to get before it does (spec/estimate.py); lower it only for smoke runs, where a trial
+    only has to run."""
+
     env_steps: int | None = None
     iterations: int | None = None
+    min_evaluations: int = MIN_EVALUATIONS
 
     @model_validator(mode="after")
     def _one(self) -> StopSpec:
@@ -251,6 +256,8 @@ class StopSpec(_Model):
             for k in ("env_steps", "iterations")
             if getattr(self, k) is not None and getattr(self, k) < 1
         ]
+        if self.min_evaluations < 0:
+            issues.append(Issue("min_evaluations", self.min_evaluations, "must be an integer >= 0"))
         if issues:
             raise Issues(issues)
         return self
@@ -307,6 +314,15 @@ class ResourcesSpec(_Model):
 class TrackingSpec(_Model):
     uri: str | None = None
     storage: str = "results/"
+    # RLlib's own connector and env-runner timers (~100 metrics per trial): left out of MLflow unless
+    # asked for, so that the runs page shows what the experiment measures.
+    rllib_timers: bool = False
+
+    @model_validator(mode="after")
+    def _known_store(self) -> TrackingSpec:
+        if self.uri is not None and (why := tracking_uri_problem(self.uri)) is not None:
+            raise Issue("uri", self.uri, why)
+        return self
 
 
 # `search: declared`: the algorithm's own search space (its settings module's SEARCH_SPACE).
@@ -399,6 +415,10 @@ class SweepSpec(_Model):
         issues += self._check_best_of(entry.settings)
         if not issues:
             issues += self._check_combinations(entry)
+        if not issues:
+            where = "stop.env_steps" if self.stop.env_steps is not None else "stop.iterations"
+            budget = self.stop.env_steps if self.stop.env_steps is not None else self.stop.iterations
+            issues += [Issue(where, budget, why) for why in too_few_evaluations(self)]
         storage = Path(self.tracking.storage).expanduser().resolve()
         self.tracking.storage = str(storage)
         if self.tracking.uri is None:
@@ -653,6 +673,10 @@ class SweepSpec(_Model):
     def has_conditional_params(self) -> bool:
         return any(ps.when for _, ps in _all_params(self.search))
 
+    def sampled_points(self) -> list[dict[str, Any]]:
+        """A few flat points of a searched space (every conditional branch, ranges at both ends)."""
+        return _representative_points(self.search)
+
     def grid_points(self) -> list[dict[str, Any]]:
         keys = list(self.search)
         values = [self.search[k].values for k in keys]
@@ -874,16 +898,3 @@ def rule_problem(key: str, setting: Setting, value: Any) -> str | None:
     """ "<key> must be <rule>" when `value` breaks the setting's rule, else None."""
     why = setting.problem(value)
     return None if why is None else f"{key} {why}"
-
-
-def metric_known(metric: str, patterns: Iterable[str]) -> bool:
-    """Whether `metric` is one of an algorithm's METRICS (`<k>` matches a tree layer 0..MAX_LAYER)."""
-    for pattern in patterns:
-        if "<k>" in pattern:
-            regex = re.escape(pattern).replace(re.escape("<k>"), r"(\d+)")
-            m = re.fullmatch(regex, metric)
-            if m and int(m.group(1)) <= MAX_LAYER:
-                return True
-        elif metric == pattern:
-            return True
-    return False

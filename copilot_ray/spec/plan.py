@@ -6,20 +6,31 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from copilot_ray import keys
+from copilot_ray.spec.estimate import cpu_warning, trial_estimates, wall_time_line
 
 if TYPE_CHECKING:  # annotations only: models imports this module
     from copilot_ray.spec.models import ParamSearch, SweepSpec
 
 
-def format_plan(spec: SweepSpec) -> str:
-    """What runs (a table of grid points, or the sampled space), how many trials, the budget."""
+def format_plan(
+    spec: SweepSpec,
+    tracking_uri: str | None = None,
+    cpus_available: int | None = None,
+    where: str = "this machine",
+) -> str:
+    """What runs (a table of grid points, or the sampled space), how many trials, the budget, the
+    evaluations a trial gets and the wall time to expect; `tracking_uri`: the store the run will use
+    (a --tracking-uri override), `cpus_available`: the machine's or cluster's CPUs (a warning when the
+    plan asks for more)."""
     lines = [
         f"sweep {spec.name!r} ({spec.source}): {spec.algorithm} on {', '.join(spec.env.ids)} "
         f"{spec.env.config or ''}"
     ]
     if spec.description:
         lines.append(f"  {spec.description.strip()}")
-    lines.append(f"  MLflow experiment {spec.experiment!r} at {spec.tracking.uri}")
+    uri = tracking_uri or spec.tracking.uri
+    given = " (--tracking-uri)" if tracking_uri else ""
+    lines.append(f"  MLflow experiment {spec.experiment!r} at {uri}{given}")
     if spec.config:
         lines.append("  fixed: " + ", ".join(f"{k}={v!r}" for k, v in spec.config.items()))
     for name, overrides in spec.variants.items():
@@ -87,6 +98,12 @@ def format_plan(spec: SweepSpec) -> str:
     lines.append(
         f"  a checkpoint every {ft.checkpoint_every} iteration(s); a failed trial is retried from it {retries}"
     )
+    for est in trial_estimates(spec):
+        evals = "" if est.min_evaluations is None else f"; evaluations per trial >= {est.min_evaluations}"
+        lines.append(f"  {est.label}: env steps per iteration <= {est.max_iteration_env_steps:,}{evals}")
+    lines.append(wall_time_line(spec))
+    if warning := cpu_warning(spec, cpus_available, where):
+        lines.append(warning)
     return "\n".join(lines)
 
 

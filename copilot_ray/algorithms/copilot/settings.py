@@ -584,6 +584,23 @@ def alpha_schedule_from(values: Mapping[str, Any]) -> Any:
     return {**base.to_dict(), **dotted}
 
 
+def effective_values(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Every top-level setting a run of flat `values` uses: defaults, then the preset, then `values`."""
+    out = {key: s.default for key, s in SETTINGS.items() if "." not in key}
+    out.update({k: v for k, v in PRESETS.get(values.get("preset") or "default", {}).items() if "." not in k})
+    out.update({k: v for k, v in values.items() if "." not in k})
+    return out
+
+
+def max_iteration_env_steps(values: Mapping[str, Any]) -> int:
+    """The most env steps one iteration can take (every sub-task of every tree runs to its limit):
+    task_batch_size x b x the sub-tasks' step limits summed over the layers K..0."""
+    v = effective_values(values)
+    depth, tau = int(v["tree_depth"]), int(v["tau_max"])
+    per_tree = sum(2**k * (tau * 2 ** (depth - k) if v["step_limit"] == "scaled" else tau) for k in range(depth + 1))
+    return int(v["task_batch_size"]) * int(v["repetitions"]) * per_tree
+
+
 def combination_problems(values: Mapping[str, Any]) -> list[tuple[tuple[str, ...], Any, str]]:
     """Values valid one by one that clash together: (the keys involved, their values, why)."""
     out: list[tuple[tuple[str, ...], Any, str]] = []

@@ -149,6 +149,12 @@ METRICS: tuple[str, ...] = (
 )
 
 
+def max_iteration_env_steps(values: dict[str, Any]) -> int:
+    """One iteration: batches of episodes until env_steps_per_iteration, the last batch whole."""
+    get = lambda key: values.get(key, SETTINGS[key].default)  # noqa: E731
+    return int(get("env_steps_per_iteration")) + int(get("task_batch_size")) * int(get("tau_max"))
+
+
 def combination_problems(values: dict[str, Any]) -> list[tuple[tuple[str, ...], Any, str]]:
     """A sub-goal period longer than an episode is one proposal per episode: refused as a typo."""
     c = values.get("hrl.c", SETTINGS["hrl.c"].default)

@@ -44,6 +44,11 @@ SEARCH_SPACE: dict[str, dict] = {
 METRICS = sac_settings.METRICS  # the same figures as the SAC baseline's
 
 
+def max_iteration_env_steps(values) -> int:
+    """One iteration: one PPO batch of env steps."""
+    return int(values.get("train_batch_size_per_learner", SETTINGS["train_batch_size_per_learner"].default))
+
+
 def combination_problems(values):
     """A minibatch larger than the batch cannot be drawn."""
     batch = values.get("train_batch_size_per_learner", 4000)

@@ -71,6 +71,12 @@ METRICS: tuple[str, ...] = (
 )
 
 
+def max_iteration_env_steps(values) -> int:
+    """One iteration: an episode of at most tau_max steps on each of task_batch_size training tasks."""
+    get = lambda key: values.get(key, SETTINGS[key].default)  # noqa: E731
+    return int(get("task_batch_size")) * int(get("tau_max"))
+
+
 def combination_problems(values):
     """The update-to-data ratio is set one way only (as for CO-PILOT)."""
     return copilot_settings.combination_problems(values)

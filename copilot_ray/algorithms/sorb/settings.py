@@ -14,7 +14,12 @@ from dataclasses import replace
 
 from copilot_ray import keys
 from copilot_ray.algorithms.sac.her_settings import SEARCH_SPACE as HER_SEARCH_SPACE
-from copilot_ray.algorithms.sac.settings import AGENT, HINDSIGHT, combination_problems
+from copilot_ray.algorithms.sac.settings import (
+    AGENT,
+    HINDSIGHT,
+    combination_problems,
+    max_iteration_env_steps,
+)
 from copilot_ray.settings import int_setting
 
 SEARCH = [
@@ -74,4 +79,4 @@ METRICS: tuple[str, ...] = (
 # HER's space (SoRB trains HER's agent) plus the search's edge cutoff.
 SEARCH_SPACE: dict[str, dict] = {**HER_SEARCH_SPACE, "sorb.max_edge_steps": {"categorical": [25, 50, 100]}}
 
-__all__ = ["METRICS", "SEARCH_SPACE", "SETTINGS", "combination_problems"]
+__all__ = ["METRICS", "SEARCH_SPACE", "SETTINGS", "combination_problems", "max_iteration_env_steps"]

@@ -1,0 +1,172 @@
+"""What a sweep will cost and whether its trials will be evaluated: the numbers `--check` prints.
+
+* Env steps per iteration: the most one iteration can take (every sub-task or episode to its step
+  limit: the algorithm's `max_iteration_env_steps`), per configuration.
+* Evaluations per trial: the fewest a trial gets before its env-step budget ends, from that bound and
+  the evaluation cadence (`eval_every_env_steps`, else `eval_interval` iterations). A plan in which a
+  trial could end with fewer than `stop.min_evaluations` (default MIN_EVALUATIONS) is refused: its curve
+  and its final figure would be one or two noisy points (or none).
+* Wall time: trials x budget / a measured env-steps-per-second figure (`copilot_ray/
+  measured_throughput.json`, written by `benchmarks/throughput.py --write`), in waves of
+  `max_concurrent_trials`.
+
+Standard library only (no Ray): `--check` and the spec's validation use it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from copilot_ray.algorithms.registry import get_algorithm
+
+# (a spec is a copilot_ray.spec.models.SweepSpec; not imported: models imports this module)
+SweepSpec = Any
+
+MIN_EVALUATIONS = 3
+THROUGHPUT_FILE = Path(__file__).resolve().parents[1] / "measured_throughput.json"
+
+
+@dataclass(frozen=True)
+class TrialEstimate:
+    label: str  # the configuration (grid point or a corner of the sampled space)
+    max_iteration_env_steps: int
+    min_evaluations: int | None  # None: no env-step budget to count against
+    why: str  # how min_evaluations follows from the cadence
+
+
+def _points(spec: SweepSpec) -> list[dict[str, Any]]:
+    if spec.searcher.type == "grid":
+        return spec.grid_points() or [{}]
+    return spec.sampled_points() or [{}]
+
+
+def _setting(entry, merged: dict[str, Any], key: str) -> Any:
+    return merged.get(key, entry.settings[key].default if key in entry.settings else None)
+
+
+def trial_estimates(spec: SweepSpec) -> list[TrialEstimate]:
+    """One estimate per configuration (grid) or per corner of the searched space (optuna); [] for an
+    algorithm that takes no env steps (the planner-only baselines)."""
+    entry = get_algorithm(spec.algorithm)
+    if entry.max_iteration_env_steps is None:
+        return []
+    out = []
+    for point in _points(spec):
+        merged = spec.merged(point)
+        per_iteration = int(entry.max_iteration_env_steps(merged))
+        cadence = int(_setting(entry, merged, "eval_every_env_steps") or 0)
+        interval = int(_setting(entry, merged, "eval_interval") or 0)
+        label = ", ".join(f"{k}={v}" for k, v in point.items() if k != "seed") or "every trial"
+        budget, iterations = spec.stop.env_steps, spec.stop.iterations
+        if budget is None:  # stops by iterations only
+            evals = None if not interval else iterations // interval
+            why = f"{iterations} iterations / eval_interval {interval}"
+            if cadence:
+                evals, why = None, "by env steps, with no env-step budget to count against"
+        elif cadence:
+            evals = budget // max(cadence, per_iteration)
+            why = f"{budget:,} env steps / max(eval_every_env_steps {cadence:,}, iteration {per_iteration:,})"
+        else:
+            done = math.ceil(budget / per_iteration)
+            if iterations is not None:
+                done = min(done, iterations)
+            evals = done // interval if interval else 0
+            why = f"at least {done} iteration(s) of at most {per_iteration:,} env steps / eval_interval {interval}"
+        out.append(TrialEstimate(label, per_iteration, evals, why))
+    return out
+
+
+def too_few_evaluations(spec: SweepSpec) -> list[str]:
+    """Why the plan's trials could end with fewer than `stop.min_evaluations` evaluations (one line each)."""
+    need = spec.stop.min_evaluations
+    out = []
+    for est in trial_estimates(spec):
+        if est.min_evaluations is not None and est.min_evaluations < need:
+            if spec.stop.env_steps is None:
+                fix = "more iterations or a smaller eval_interval"
+            else:
+                fix = (
+                    f"set eval_every_env_steps (e.g. {max(1, spec.stop.env_steps // 10):,}), a larger budget "
+                    "or smaller iterations (task_batch_size, repetitions)"
+                )
+            out.append(
+                f"{est.label}: a trial may end with {est.min_evaluations} evaluation(s) ({est.why}); it needs "
+                f">= {need} for a curve and a final figure: {fix}; for a smoke run, lower stop.min_evaluations"
+            )
+    return out
+
+
+def measured_rate(algorithm: str, concurrent: int) -> tuple[float, str] | None:
+    """(env steps per second of one trial, where the figure comes from), or None without one."""
+    try:
+        data = json.loads(THROUGHPUT_FILE.read_text())
+    except (OSError, ValueError):
+        return None
+    rates = data.get("env_steps_per_s", {}).get(algorithm)
+    if not rates:
+        return None
+    rate = rates["lone"] if concurrent <= 1 else rates["side_by_side"]
+    return float(rate), f"{THROUGHPUT_FILE.name}: {data.get('machine', '?')}; {data.get('source', '?')}"
+
+
+def wall_seconds(spec: SweepSpec) -> float | None:
+    """The plan's estimated wall seconds, or None without a budget or a measured rate."""
+    budget = spec.stop.env_steps
+    if budget is None or get_algorithm(spec.algorithm).max_iteration_env_steps is None:
+        return None
+    concurrent = spec.resources.max_concurrent_trials
+    found = measured_rate(spec.algorithm, concurrent)
+    if found is None:
+        return None
+    return math.ceil(len(spec.trial_plan()) / concurrent) * budget / found[0]
+
+
+def total_wall_time_line(specs: list[SweepSpec]) -> str:
+    """The parts of a file run one after another: the sum of their estimates."""
+    known = [w for w in (wall_seconds(s) for s in specs) if w is not None]
+    missing = len(specs) - len(known)
+    tail = f" ({missing} part(s) without an estimate not counted)" if missing else ""
+    return f"all {len(specs)} parts, one after another: about {_duration(sum(known))} in all{tail}"
+
+
+def wall_time_line(spec: SweepSpec) -> str:
+    """The plan's estimated wall time, and where the env-steps-per-second figure comes from."""
+    budget = spec.stop.env_steps
+    if budget is None or get_algorithm(spec.algorithm).max_iteration_env_steps is None:
+        return "  wall time: not estimated (no env-step budget to scale a measured rate by)"
+    concurrent = spec.resources.max_concurrent_trials
+    found = measured_rate(spec.algorithm, concurrent)
+    if found is None:
+        return f"  wall time: not estimated (no measured env-steps/s for {spec.algorithm} in {THROUGHPUT_FILE.name})"
+    rate, source = found
+    waves = math.ceil(len(spec.trial_plan()) / concurrent)
+    seconds = waves * budget / rate
+    return (
+        f"  wall time: about {_duration(seconds)} ({waves} wave(s) x {budget:,} env steps at ~{rate:.0f} env "
+        f"steps/s per trial{' side by side' if concurrent > 1 else ''}; measured on maze-point, other envs "
+        f"differ; {source})"
+    )
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def cpu_warning(spec: SweepSpec, available: int | None, where: str) -> str | None:
+    """A warning when the plan asks for more CPUs at once than `available` (the machine or cluster)."""
+    asked = spec.resources.max_concurrent_trials * (spec.resources.cpus_per_trial or 1)
+    if available is None or asked <= available:
+        return None
+    return (
+        f"  warning: {spec.resources.max_concurrent_trials} trial(s) at a time x "
+        f"{spec.resources.cpus_per_trial} CPU(s) = {asked} CPUs, but {where} has {available}: trials will "
+        "wait for CPUs (lower resources.max_concurrent_trials or num_env_runners, or run on a cluster)"
+    )

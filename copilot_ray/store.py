@@ -1,0 +1,38 @@
+"""Where MLflow keeps runs: the embedded default store, and which tracking URIs are accepted.
+
+Checked before anything starts (a spec's `tracking.uri`, `--tracking-uri` of `sweep` and `train`), so a
+typo is one clear line instead of an MLflow traceback after Ray is up. Standard library only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+# MLflow's tracking stores: an embedded SQLite file, a tracking server, or a database it writes to.
+SCHEMES = ("sqlite", "http", "https", "postgresql", "mysql", "mssql", "databricks")
+ACCEPTED = "sqlite:///<file>, http(s)://<server>[:port] or a database URL (postgresql://, mysql://, mssql://)"
+
+
+def default_tracking_uri(directory: str | Path = ".") -> str:
+    """An embedded SQLite store (MLflow 3 refuses the plain ./mlruns file store by default)."""
+    return f"sqlite:///{(Path(directory) / 'mlflow.db').resolve()}"
+
+
+def tracking_uri_problem(uri: str) -> str | None:
+    """Why `uri` cannot be an MLflow tracking store, or None when it can."""
+    if not isinstance(uri, str) or not uri.strip():
+        return f"must be a tracking URI: {ACCEPTED}"
+    scheme, sep, rest = uri.partition("://")
+    if not sep:
+        return f"has no scheme; use {ACCEPTED}"
+    if scheme.split("+")[0] not in SCHEMES:  # postgresql+psycopg2://... is SQLAlchemy's dialect form
+        return f"{scheme}:// is not a store MLflow can track to; use {ACCEPTED}"
+    if scheme == "sqlite":
+        if not rest.startswith("/") or rest == "/":
+            return "a SQLite store is sqlite:///<file> (three slashes, then the file's path)"
+        path = Path(rest[1:])  # sqlite:///rel/file or sqlite:////abs/file
+        if path.is_dir():
+            return f"{path} is a folder; name the database file in it (e.g. {path / 'mlflow.db'})"
+    elif scheme in ("http", "https") and not rest.split("/")[0]:
+        return f"names no server; use {scheme}://<host>[:port]"
+    return None
