@@ -50,6 +50,7 @@ from copilot_ray.keys import (
     ENV_TAG,
     EVAL_FRESH,
     EVAL_SUCCESS,
+    EVAL_SUCCESS_AUC,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
     PATHS_PREFIX,
@@ -143,6 +144,7 @@ class SweepOutcome:
 # planners' (Fig. 4b/4c, test tasks: they have no validation figure).
 SUMMARY_METRICS = {
     validation_key(EVAL_SUCCESS): "validation success",
+    validation_key(EVAL_SUCCESS_AUC): "validation AUC",
     validation_key(SUCCESS_PLANNED): "validation planned",
     validation_key(SUCCESS_DIRECT): "validation direct",
     PATH_SUCCESS: "path success",
@@ -195,6 +197,31 @@ def rows_from_grid(grid) -> list[TrialRow]:
             )
         )
     return rows
+
+
+def summary_metrics(rows: Sequence[TrialRow]) -> dict[str, float]:
+    """The parent run's metrics: per configuration, the mean over its seeds of each summary figure
+    (`summary/<configuration>/<figure>`), and the best configuration's of each (`summary/best/...`)."""
+    groups: dict[str, list[TrialRow]] = {}
+    for row in rows:
+        groups.setdefault(row.config_key, []).append(row)
+    out: dict[str, float] = {}
+    for key, label in SUMMARY_METRICS.items():
+        name = label.replace(" / ", "_per_").replace(" ", "_").replace("*", "")
+        means = {}
+        for config, group in groups.items():
+            values = [v for r in group if not math.isnan(v := r.figures.get(key, math.nan))]
+            if values:
+                means[config] = sum(values) / len(values)
+                out[f"summary/{_metric_name(config)}/{name}"] = means[config]
+        if means and key != PATH_LENGTH_VS_RRT:  # (a shorter path is better: no "best" of a ratio)
+            out[f"summary/best/{name}"] = max(means.values())
+    return out
+
+
+def _metric_name(text: str) -> str:
+    """`text` in the characters MLflow allows in a metric name."""
+    return "".join(c if c.isalnum() or c in "_-. :/" else "_" for c in text)[:200]
 
 
 def _mean_std(values: Sequence[float]) -> str:
@@ -460,7 +487,7 @@ def report_sweep(
         "mean ± sample std over seeds.\n\n"
     )
     mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
-    tracking.end_sweep_run(uri, parent_id, mlflow_status, header + summary + "\n")
+    tracking.end_sweep_run(uri, parent_id, mlflow_status, header + summary + "\n", summary_metrics(rows))
     _say("")
     _say(summary)
     _say("")

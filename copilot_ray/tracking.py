@@ -264,10 +264,25 @@ def open_sweep_run(
     return exp_id, run_id, False
 
 
-def end_sweep_run(tracking_uri: str, run_id: str, status: str, summary_md: str | None = None) -> None:
+def end_sweep_run(
+    tracking_uri: str,
+    run_id: str,
+    status: str,
+    summary_md: str | None = None,
+    summary_metrics: Mapping[str, float] | None = None,
+) -> None:
+    """Closes the sweep's parent run with its summary: the table as an artifact, and per configuration
+    its figures as metrics (so the parent row in MLflow's runs list shows the sweep's outcome)."""
     client = _client(tracking_uri)
     if summary_md is not None:
         client.log_text(run_id, summary_md, SUMMARY_ARTIFACT)
+    if summary_metrics:
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        items = [Metric(k, float(v), now, 0) for k, v in summary_metrics.items()]
+        for i in range(0, len(items), 500):
+            client.log_batch(run_id, metrics=items[i : i + 500])
     client.set_terminated(run_id, status=status)
 
 

@@ -722,3 +722,25 @@ def test_fault_tolerance_is_checked_and_planned():
         "<spec>: fault_tolerance.checkpoint_every: 0 is invalid: must be an integer >= 1",
         "<spec>: fault_tolerance.max_failures: -2 is invalid: must be >= 0, or -1 for no limit",
     ]
+
+
+def test_a_spec_with_mistakes_in_several_sections_gets_them_all_in_one_report():
+    """Section checks (stop, resources, tracking) and the checks across sections (config keys against
+    the algorithm, the searcher's metric) used to stop at the first failing pass."""
+    data = spec_with(
+        config={"tree_deph": 3, "eval_num_tasks": 0},
+        stop={"env_steps": -5},
+        tracking={"uri": "ftp://x"},
+        searcher={"type": "grid", "metric": "copilot/eval/success", "mode": "max"},
+        resources={"max_concurrent_trials": 0},
+    )
+    text = rejected(data)
+    for expected in (
+        "stop.env_steps: -5 is invalid",
+        "resources.max_concurrent_trials: 0 is invalid",
+        "tracking.uri: 'ftp://x' is invalid",
+        "config.tree_deph: unknown key; did you mean 'tree_depth'?",
+        "config.eval_num_tasks: 0 is invalid",
+        "searcher.metric: 'copilot/eval/success' is invalid: is a test-set metric",
+    ):
+        assert expected in text, expected

@@ -804,10 +804,37 @@ def parse_spec(data: Any, source: str = "<spec>") -> SweepSpec:
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as err:
-        raise SpecError(_format_validation_error(err, source)) from None
+        lines = _format_validation_error(err, source)
+        raise SpecError(lines + _across_sections(data, err, source, lines)) from None
     spec._source = source
     spec._document = copy.deepcopy(data)
     return spec
+
+
+# Stand-ins for required sections that failed on their own, so that the checks across sections still run.
+_STAND_INS = {"name": "spec", "stop": {"env_steps": 10**9, "min_evaluations": 0}}
+
+
+def _across_sections(data: dict, err: ValidationError, source: str, seen: list[str]) -> list[str]:
+    """The checks across sections (keys against the algorithm's settings, the searcher's metric, ...),
+    which pydantic skips once a section fails on its own: run again with the failed sections set aside
+    (defaults, or stand-ins for required ones), keeping what they find about the other sections. So a
+    spec with mistakes in several sections gets them all in one report."""
+    failed = {str(e["loc"][0]) for e in err.errors() if e["loc"]}
+    if not failed or failed - set(SweepSpec.model_fields) or "env" in failed or "algorithm" in failed:
+        return []
+    rest = {k: v for k, v in data.items() if k not in failed}
+    rest.update({k: v for k, v in _STAND_INS.items() if k in failed})
+    try:
+        SweepSpec.model_validate(rest)
+    except ValidationError as again:
+        prefixes = tuple(f"{source}: {k}" for k in failed)
+        return [
+            line
+            for line in _format_validation_error(again, source)
+            if line not in seen and not line.startswith(prefixes)
+        ]
+    return []
 
 
 def load_specs(path: str | Path) -> list[SweepSpec]:
