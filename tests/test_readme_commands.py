@@ -1,0 +1,110 @@
+"""Every command the README shows still works: specs load, flags parse and pass their checks, a report
+command names an experiment that a shipped spec writes into the store it points at, and a benchmark's
+flags are flags of that benchmark. (The commands themselves run elsewhere: the quick start in CI, the
+sweeps for hours.) Nothing here starts Ray."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text()
+
+
+def _commands() -> list[str]:
+    """Commands in the README's code blocks (4-space indented) and inline code, continuations joined."""
+    lines, out, pending = README.splitlines(), [], ""
+    for line in lines:
+        if line.startswith("    ") and not line.strip().startswith("#"):
+            text = pending + line.strip()
+            if text.endswith("\\"):
+                pending = text[:-1] + " "
+                continue
+            pending = ""
+            out.append(text.split("  #")[0].strip())
+    out += re.findall(r"`((?:PYTHONPATH=\. )?\.venv/bin/python [^`]+)`", README)
+    return [c for c in out if "python" in c]
+
+
+def _args(command: str, marker: str) -> list[str]:
+    return shlex.split(command.split(marker, 1)[1].replace("$PWD", str(ROOT)))
+
+
+COMMANDS = _commands()
+SWEEPS = [c for c in COMMANDS if "-m copilot_ray.sweep " in c]
+REPORTS = [c for c in COMMANDS if "-m analysis.report " in c]
+TRAINS = [c for c in COMMANDS if "-m copilot_ray.train" in c]
+BENCHMARKS = [c for c in COMMANDS if "benchmarks/" in c and "<" not in c]
+
+
+def test_the_readme_shows_each_kind_of_command():
+    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS
+
+
+@pytest.mark.parametrize("command", SWEEPS)
+def test_sweep_commands_name_a_valid_spec_and_flags(command):
+    from copilot_ray.spec import load_specs
+    from copilot_ray.store import tracking_uri_problem
+    from copilot_ray.sweep import parse_args
+
+    args = parse_args(_args(command, "-m copilot_ray.sweep "))
+    assert load_specs(ROOT / args.spec)
+    assert args.tracking_uri is None or tracking_uri_problem(args.tracking_uri) is None
+
+
+def _shipped_stores() -> dict[tuple[str, str], str]:
+    """(experiment, store URI as run from the repository's root) -> the spec file that writes it."""
+    import os
+
+    from copilot_ray.spec import load_specs
+
+    out = {}
+    cwd = os.getcwd()
+    os.chdir(ROOT)  # relative storage and sqlite paths resolve against where the sweep is started
+    try:
+        for path in sorted((ROOT / "sweeps").glob("*.yaml")):
+            for spec in load_specs(path):
+                out[(spec.experiment, spec.tracking.uri)] = path.name
+    finally:
+        os.chdir(cwd)
+    return out
+
+
+@pytest.mark.parametrize("command", REPORTS)
+def test_report_commands_name_an_experiment_a_shipped_spec_writes_there(command):
+    args = _args(command, "-m analysis.report ")
+    experiment, uri = args[0], args[args.index("--tracking-uri") + 1] if "--tracking-uri" in args else None
+    stores = _shipped_stores()
+    experiments = {e for e, _ in stores}
+    assert experiment in experiments, f"{experiment!r} is no shipped spec's experiment: {sorted(experiments)}"
+    if uri is not None:
+        assert (experiment, uri) in stores, f"no shipped spec writes {experiment!r} into {uri}"
+
+
+@pytest.mark.parametrize("command", TRAINS)
+def test_train_commands_parse_and_pass_their_checks(command):
+    from copilot_ray import train
+    from copilot_ray.algorithms.registry import get_algorithm
+    from copilot_ray.settings import problems
+
+    argv = _args(command, "-m copilot_ray.train")
+    if "--help" in argv:
+        with pytest.raises(SystemExit) as done:
+            train.parse_args(argv)
+        assert done.value.code == 0
+        return
+    args = train.parse_args(argv)
+    assert train.run_problems(args) == []
+    assert problems(get_algorithm("copilot").settings, train.setting_values(args)) == []
+
+
+@pytest.mark.parametrize("command", BENCHMARKS)
+def test_benchmark_commands_use_flags_the_benchmark_has(command):
+    script = re.search(r"benchmarks/\w+\.py", command).group(0)
+    source = (ROOT / script).read_text()
+    for flag in re.findall(r"(?<!\S)--[a-z][a-z0-9-]*", command.split(script, 1)[1]):
+        assert f'"{flag}"' in source, f"{script} has no {flag}"
