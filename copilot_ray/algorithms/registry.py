@@ -75,6 +75,11 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.sgt_pg.config:SGTPGConfig",
         "copilot_ray.algorithms.sgt_pg.trial:SGTPGTrial",
     ),
+    "next": (
+        "copilot_ray.algorithms.next.settings",
+        "copilot_ray.algorithms.next.config:NEXTConfig",
+        "copilot_ray.algorithms.next.trial:NEXTTrial",
+    ),
     # HIRO-style two-level hierarchy (the paper's "hierarchical RL"): a Tune Trainable with its own env loop.
     "hrl": (
         "copilot_ray.algorithms.hrl.settings",
