@@ -18,6 +18,7 @@ import numpy as np
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     CURVE_METRICS,
+    ENV_TAG,
     EVAL_SUCCESS,
     PRESET_TAG,
     PRIVILEGE_COUNTS,
@@ -27,7 +28,16 @@ from copilot_ray.keys import (
 from copilot_ray.privileges import from_tag
 
 from . import stats
-from .load import CONFIG_KEY_AXIS, Sweep, Trial, natural_key
+from .load import (
+    CONFIG_KEY_AXIS,
+    Sweep,
+    Trial,
+    axis_name,
+    axis_value,
+    configurations,
+    is_env_axis,
+    natural_key,
+)
 
 THRESHOLDS = (0.5, 0.9)
 COPILOT = "copilot"  # the algorithm tag of CO-PILOT's runs
@@ -81,6 +91,14 @@ class ConfigSummary:
     # privilege counter key -> mean over seeds of its final (cumulative) count; NaN: not logged
     privilege_counts: dict[str, float] = field(default_factory=dict)
     privileges: str = UNKNOWN  # the names from the tag, "none", or "-" (runs older than the tag)
+    env: str = (
+        ""  # the env it ran on: its id and the env-config values that vary ("maze-point, layout=u-maze")
+    )
+    method: str = ""  # the label without the env's axes, led by the algorithm ("copilot (variant=continue)")
+
+    @property
+    def env_id(self) -> str:
+        return self.all_trials[0].env_id
 
     @property
     def n_seeds(self) -> int:
@@ -133,13 +151,34 @@ class Missing:
 
 
 def config_label(trial: Trial, axes: list[str]) -> str:
-    if not axes:
-        return trial.config_key
-    if axes == [CONFIG_KEY_AXIS]:
-        return trial.config_key
-    # An axis the trial's algorithm does not have (K of a baseline; "None" or empty) is left out.
-    parts = [f"{a}={trial.tags[a]}" for a in axes if trial.tags.get(a, "None") not in ("None", "")]
-    return ", ".join(parts) or trial.config_key
+    """What the varying axes say about a trial's configuration: "layout=u-maze, variant=continue"; the config
+    key itself for the config-key axis."""
+    return ", ".join(_label_parts(trial, axes)) or trial.config_key
+
+
+def _label_parts(trial: Trial, axes: list[str]) -> list[str]:
+    parts = []
+    for a in axes:
+        value = axis_value(trial, a)
+        if a == CONFIG_KEY_AXIS:
+            parts.append(value)
+        # An axis the trial's algorithm does not have (K of a baseline; "None" or empty) is left out.
+        elif value not in ("None", ""):
+            parts.append(f"{axis_name(a)}={value}")
+    return parts
+
+
+def env_label(trial: Trial, axes: list[str]) -> str:
+    """The env a trial ran on: its id and the env-config values that vary between configurations."""
+    env_config = [a for a in axes if is_env_axis(a) and a != ENV_TAG]
+    return ", ".join([trial.env_id or "?", *_label_parts(trial, env_config)])
+
+
+def method_label(trial: Trial, axes: list[str]) -> str:
+    """The label without the env's axes, led by the algorithm: "rrt_star", "copilot (variant=continue)"."""
+    rest = _label_parts(trial, [a for a in axes if not is_env_axis(a) and a != ALGORITHM_TAG])
+    algorithm = trial.tags.get(ALGORITHM_TAG, "") or "?"
+    return f"{algorithm} ({', '.join(rest)})" if rest else algorithm
 
 
 def summarise(
@@ -147,12 +186,8 @@ def summarise(
 ) -> tuple[list[ConfigSummary], Missing]:
     axes = sweep.axes()
     missing = Missing()
-    by_key: dict[str, list[Trial]] = {}
-    # Several algorithms (a several-spec file) may share config keys ("env.id=maze-point"): tell them apart.
-    several = len({t.tags.get(ALGORITHM_TAG, "") for t in sweep.trials}) > 1
+    by_key = _keyed(configurations(sweep.trials), axes)
     for t in sweep.trials:
-        key = f"{t.tags.get(ALGORITHM_TAG, '?')}: {t.config_key}" if several else t.config_key
-        by_key.setdefault(key, []).append(t)
         if not t.usable:
             missing.failed.append(t)
         else:
@@ -198,16 +233,41 @@ def summarise(
                 env_steps=_mean([t.env_steps for t in use]),
                 privilege_counts={k: _mean([t.latest.get(k, np.nan) for t in use]) for k in PRIVILEGE_COUNTS},
                 privileges=privileges_label(trials),
+                env=env_label(trials[0], axes),
+                method=method_label(trials[0], axes),
             )
         )
     configs.sort(key=lambda c: _config_order(c, axes))
     return configs, missing
 
 
+def _keyed(groups: dict[tuple, list[Trial]], axes: list[str]) -> dict[str, list[Trial]]:
+    """Each configuration under a unique key: its config key; led by the algorithm when several share
+    config keys (a several-spec file: "env.id=maze-point"); followed by its label when that is still not
+    unique (one config key on two layouts, or in two sweeps)."""
+    several = len({g[0].tags.get(ALGORITHM_TAG, "") for g in groups.values()}) > 1
+
+    def base(t: Trial) -> str:
+        return f"{t.tags.get(ALGORITHM_TAG, '?')}: {t.config_key}" if several else t.config_key
+
+    counts: dict[str, int] = {}
+    for g in groups.values():
+        counts[base(g[0])] = counts.get(base(g[0]), 0) + 1
+    out: dict[str, list[Trial]] = {}
+    for g in groups.values():
+        key = base(g[0])
+        if counts[key] > 1:
+            key = f"{key} [{config_label(g[0], axes)}]"
+        while key in out:  # labels that still collide (no axis tells them apart): numbered
+            key += "'"
+        out[key] = g
+    return out
+
+
 def _config_order(c: ConfigSummary, axes: list[str]):
     # Numeric axes (K, b) sort numerically so Fig. 2b reads K = 1, 2, ..., 10, not 1, 10, 2.
     t = c.all_trials[0]
-    return tuple(natural_key(t.tags.get(a, "") if a != CONFIG_KEY_AXIS else c.key) for a in axes) + (c.key,)
+    return tuple(natural_key(axis_value(t, a) if a != CONFIG_KEY_AXIS else c.key) for a in axes) + (c.key,)
 
 
 def _mean(values) -> float:

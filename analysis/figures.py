@@ -3,10 +3,17 @@ the axis is K), and the evolution of one task's sub-goal tree over training (pap
 
 Intervals follow `stats.MIN_SEEDS_FOR_CI`: from 5 seeds on, the IQM with a shaded 95 % bootstrap band
 (curves) or error bars (bars); with fewer, the mean with each seed drawn (thin lines, dots: their range)
-and no band, so that two seeds never look like a confident estimate."""
+and no band, so that two seeds never look like a confident estimate.
+
+What has no data is not drawn: a panel no configuration has data for, a configuration without the metric
+(never a bar of 0), a figure with nothing in it (the function returns None); each says why in `notes`, which
+the report prints. Titles are wrapped to the figure's width (`_suptitle`), env-step axes read 20k / 1.5M
+(`steps_axis`), and the caller names the paper's figure only where the env is the paper's (`report`).
+"""
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -75,18 +82,73 @@ def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
     return [c for c in configs if id(c) in keep], len(configs) - MAX_CURVES
 
 
+def wrap(text: str, width_in: float, fontsize: float) -> str:
+    """`text` broken into lines that fit `width_in` inches at `fontsize` points (each line of it apart)."""
+    chars = max(16, int(width_in * 72 / (0.6 * fontsize)))
+    return "\n".join(textwrap.fill(line, chars) for line in text.split("\n"))
+
+
+def _suptitle(fig, text: str, fontsize: float = 10) -> None:
+    """The figure's title, wrapped to its width (with a constrained or tight layout it never clips)."""
+    fig.suptitle(wrap(text, fig.get_figwidth() * 0.95, fontsize), fontsize=fontsize)
+
+
+def _steps_label(x: float, _pos=None) -> str:
+    for scale, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if abs(x) >= scale:
+            return f"{x / scale:.3g}{unit}"
+    return f"{x:.3g}"
+
+
+def steps_axis(ax, log: bool = False) -> None:
+    """An env-step x axis: ticks read 20k, 1.5M (no "1e4" offset), at most 6 of them, never crowded."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
+
+    if log:
+        ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(numticks=6))
+        ax.xaxis.set_minor_formatter(NullFormatter())  # "2x10^4 3x10^4 ..." between decades overlap
+    else:
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=6, min_n_ticks=3))
+    ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
+
+
+def _has_curve(c: ConfigSummary, metric: str) -> bool:
+    return metric in c.metrics and c.metrics[metric].curve is not None
+
+
 def success_curves(
-    configs: list[ConfigSummary], axis_name: str, path: Path, metrics: tuple[str, ...] = PLANNED_AND_DIRECT
-) -> Path:
-    """One panel per metric (planned and direct; `BY_METHOD`: the common success, paper Fig. 4a), one
-    colour per configuration: IQM over seeds and its 95 % bootstrap band from 5 seeds on, else the mean
-    and each seed as a thin line (no band). Solid where every seed of the configuration has data, dashed
-    where only some do (seeds are never extrapolated past their last evaluation)."""
+    configs: list[ConfigSummary],
+    axis_name: str,
+    path: Path,
+    metrics: tuple[str, ...] = PLANNED_AND_DIRECT,
+    title: str = "Success against environment steps",
+    notes: list[str] | None = None,
+) -> Path | None:
+    """One panel per metric that some configuration has (planned and direct; `BY_METHOD`: the common
+    success), one colour per configuration: IQM over seeds and its 95 % bootstrap band from 5 seeds on,
+    else the mean and each seed as a thin line (no band). Solid where every seed of the configuration has
+    data, dashed where only some do (seeds are never extrapolated past their last evaluation). None (and
+    a note) when no configuration has any of `metrics`."""
+    notes = [] if notes is None else notes
     shown, dropped = _select(configs)
+    drawn = [m for m in metrics if any(_has_curve(c, m) for c in shown)]
+    if not drawn:
+        notes.append(f"{path.name}: not drawn: no configuration logged {_leaves(metrics)}.")
+        return None
+    for m in metrics:
+        if m not in drawn:
+            notes.append(f"{path.name}: no {_leaf(m)} panel: no configuration logged {m}.")
+    blank = [c.label for c in shown if not any(_has_curve(c, m) for m in drawn)]
+    if blank:
+        notes.append(f"{path.name}: not drawn (no evaluation of {_leaves(drawn)}): {'; '.join(blank)}.")
+    shown = [c for c in shown if c.label not in blank]
     colors = _colors(len(shown))
-    fig, axes = plt.subplots(1, len(metrics), figsize=(6 * len(metrics) + 1, 4.5), sharey=True, squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(drawn), figsize=(5.2 * len(drawn) + 3.2, 4.6), sharey=True, squeeze=False, layout="constrained"
+    )
     axes = axes[0]
-    for ax, metric in zip(axes, metrics, strict=True):
+    for ax, metric in zip(axes, drawn, strict=True):
         for c, color in zip(shown, colors, strict=True):
             m = c.metrics.get(metric)
             if m is None or m.curve is None:
@@ -112,30 +174,43 @@ def success_curves(
                 alpha=0.7,
             )
             ax.plot(cv.grid, np.where(full, cv.center, np.nan), color=color, linewidth=2, label=label)
-        ax.set_title(f"{metric.split('/')[-1]}: {TITLES[metric]}", fontsize=10)
+        ax.set_title(wrap(f"{_leaf(metric)}: {TITLES[metric]}", 5.0, 9), fontsize=9)
         ax.set_xlabel("environment steps")
         ylabel, ylim = Y_AXES.get(metric, SUCCESS_AXIS)
         if ylim is not None:
             ax.set_ylim(*ylim)
         ax.grid(alpha=0.3)
-        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
-    axes[0].set_ylabel(Y_AXES.get(metrics[0], SUCCESS_AXIS)[0])
-    handles, labels = axes[0].get_legend_handles_labels()
-    if not handles:
-        handles, labels = axes[1].get_legend_handles_labels()
-    if handles:
+        steps_axis(ax)
+    axes[0].set_ylabel(Y_AXES.get(drawn[0], SUCCESS_AXIS)[0])
+    handles, labels = {}, []
+    for ax in axes:  # every configuration once, whichever panel it appears in
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in handles:
+                handles[lab] = h
+                labels.append(lab)
+    if labels:
         fig.legend(
-            handles, labels, loc="center left", bbox_to_anchor=(0.83, 0.5), fontsize=8, title=axis_name
+            [handles[lab] for lab in labels],
+            [wrap(lab, 3.0, 8) for lab in labels],
+            loc="outside right center",
+            fontsize=8,
+            title=axis_name,
         )
     note = INTERVAL_NOTE + "; dashed: not all seeds have reached this step"
     if dropped:
         note += f"; {dropped} more configurations not drawn"
-    what = {RETURN: "Return", MASTERED: "Mastered track distributions"}.get(metrics, "Success")
-    fig.suptitle(f"{what} against environment steps, by {axis_name}\n{note}", fontsize=10)
-    fig.tight_layout(rect=(0, 0, 0.83 if handles else 1, 1))
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")  # long legend labels sit right of the axes
+    _suptitle(fig, f"{title}, by {axis_name}\n{note}")
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return path
+
+
+def _leaf(metric: str) -> str:
+    return metric.split("/")[-1]
+
+
+def _leaves(metrics) -> str:
+    return " / ".join(_leaf(m) for m in metrics)
 
 
 def seeds_label(n: int) -> str:
@@ -162,50 +237,75 @@ def _point(ax, cv: CurveSummary, color, label: str) -> None:
         ax.plot(steps[:1], values[:1], ".", color=color, alpha=0.6)
 
 
+BAR_FONT = 8  # the bars' tick labels
+
+
 def final_success(
-    configs: list[ConfigSummary], axis_name: str, path: Path, metrics: tuple[str, ...] = PLANNED_AND_DIRECT
-) -> Path:
-    """Grouped bars (one per metric: planned and direct, or `BY_METHOD`'s common success, paper
-    Fig. 2a) of final success, each seed as a dot: the IQM with its 95 % CI from 5 seeds on, else the
-    mean without error bars (the dots are the range)."""
+    configs: list[ConfigSummary],
+    axis_name: str,
+    path: Path,
+    metrics: tuple[str, ...] = PLANNED_AND_DIRECT,
+    paper: str = "",
+    notes: list[str] | None = None,
+) -> Path | None:
+    """Grouped bars (one per metric some configuration has: planned and direct, or `BY_METHOD`'s common
+    success) of final success, each seed as a dot: the IQM with its 95 % CI from 5 seeds on, else the
+    mean without error bars (the dots are the range). A configuration without the metric has no bar
+    (never a bar of 0). `paper`: the paper's figure this is (the caller knows the env), or ""."""
+    notes = [] if notes is None else notes
     shown, dropped = _select(configs)
+    drawn = [m for m in metrics if any(m in c.metrics for c in shown)]
+    if not drawn:
+        notes.append(f"{path.name}: not drawn: no configuration logged {_leaves(metrics)}.")
+        return None
+    for m in metrics:
+        if m not in drawn:
+            notes.append(f"{path.name}: no {_leaf(m)} bars: no configuration logged {m}.")
+    blank = [c.label for c in shown if not any(m in c.metrics for m in drawn)]
+    if blank:
+        notes.append(f"{path.name}: no bars (no evaluation of {_leaves(drawn)}): {'; '.join(blank)}.")
+    shown = [c for c in shown if c.label not in blank]
+    # Tick labels: one line per axis value, so that they stack instead of running into each other.
+    ticks = [c.label.replace(", ", "\n") + f"\n(n = {c.n_seeds})" for c in shown]
+    longest = max(len(line) for t in ticks for line in t.split("\n"))
+    per_bar = max(0.9, 0.62 * BAR_FONT / 72 * longest + 0.25)  # inches a label needs
+    width = per_bar * len(shown) + 2.2
+    crowded = width > 20  # too many to stand side by side: slanted
     x = np.arange(len(shown))
-    width = 0.76 / len(metrics)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(shown) + 3), 4.5))
+    bar = 0.76 / len(drawn)
+    fig, ax = plt.subplots(figsize=(min(max(6.0, width), 20), 4.8), layout="constrained")
     palette = ("tab:blue", "tab:orange", "tab:green")
-    for i, metric in enumerate(metrics):
-        offset, color = (i - (len(metrics) - 1) / 2) * width, palette[i % len(palette)]
-        vals = np.array([c.metrics[metric].final.point if metric in c.metrics else np.nan for c in shown])
-        ax.bar(x + offset, np.nan_to_num(vals), width, color=color, alpha=0.8, label=metric.split("/")[-1])
-        with_ci = [j for j, c in enumerate(shown) if metric in c.metrics and c.metrics[metric].final.has_ci]
+    for i, metric in enumerate(drawn):
+        offset, color = (i - (len(drawn) - 1) / 2) * bar, palette[i % len(palette)]
+        have = [j for j, c in enumerate(shown) if metric in c.metrics]
+        vals = [shown[j].metrics[metric].final.point for j in have]
+        ax.bar(x[have] + offset, vals, bar, color=color, alpha=0.8, label=_leaf(metric))
+        with_ci = [j for j in have if shown[j].metrics[metric].final.has_ci]
         if with_ci:  # error bars only where they are a CI
             finals = [shown[j].metrics[metric].final for j in with_ci]
             err = np.clip([[f.point - f.low for f in finals], [f.high - f.point for f in finals]], 0, None)
             points = [f.point for f in finals]
             ax.errorbar(x[with_ci] + offset, points, yerr=err, fmt="none", ecolor="black", capsize=4)
-        for j, c in enumerate(shown):
-            seeds = [t.curves[metric][1][-1] for t in c.trials if metric in t.curves]
+        for j in have:
+            seeds = [t.curves[metric][1][-1] for t in shown[j].trials if metric in t.curves]
             # dots beside the error bar, not on it, so both stay readable
-            ax.scatter(np.full(len(seeds), x[j] + offset + width * 0.3), seeds, s=10, color="black", zorder=3)
+            ax.scatter(np.full(len(seeds), x[j] + offset + bar * 0.3), seeds, s=10, color="black", zorder=3)
     ax.set_xticks(
-        x,
-        [f"{c.label}\n(n = {c.n_seeds})" for c in shown],
-        rotation=30 if len(shown) > 6 else 0,
-        ha="right" if len(shown) > 6 else "center",
+        x, ticks, fontsize=BAR_FONT, rotation=30 if crowded else 0, ha="right" if crowded else "center"
     )
+    ax.set_xlim(-0.6, len(shown) - 0.4)
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("final success rate (last evaluation)")
     ax.set_xlabel(axis_name)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)
-    paper = " (paper Fig. 2b)" if axis_name == "K" else " (paper Fig. 2a)" if metrics == BY_METHOD else ""
     extra = f"; {dropped} more configurations not drawn" if dropped else ""
-    ax.set_title(
-        f"Final success by {axis_name}{paper}\nn >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM, 95% bootstrap CI; "
-        f"fewer: mean, no CI\ndots: seeds (their range){extra}",
-        fontsize=10,
+    _suptitle(
+        fig,
+        f"Final test success by {axis_name}{f' ({paper})' if paper else ''}\n"
+        f"n >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM, 95% bootstrap CI; fewer: mean, no CI; "
+        f"dots: seeds (their range){extra}",
     )
-    fig.tight_layout()
     fig.savefig(path, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return path
@@ -234,8 +334,9 @@ def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str,
         1, max(int(s.subtask_steps[task, k, : 2**k].max(initial=0)) for s in snapshots for k in layers)
     )
     rows, cols = len(layers), len(snapshots)
-    fig = plt.figure(figsize=(2.6 * cols + 0.6, 3.4 * rows + 0.8))
-    gs = fig.add_gridspec(2 * rows, cols, height_ratios=[1, 3] * rows, hspace=0.35, wspace=0.1)
+    # constrained: the title's lines, the column titles and the panels each get their own room
+    fig = plt.figure(figsize=(2.6 * cols + 0.6, 3.4 * rows + 1.2), layout="constrained")
+    gs = fig.add_gridspec(2 * rows, cols, height_ratios=[1, 3] * rows)
     for r, k in enumerate(layers):
         for c, snap in enumerate(snapshots):
             steps = snap.subtask_steps[task, k, : 2**k]
@@ -265,7 +366,8 @@ def subgoal_tree_evolution(snapshots: list[TreeSnapshot], task: int, title: str,
             ax_m.set_yticks([])
             if c == 0:
                 ax_m.set_ylabel(f"layer {k}\n({2**k} sub-tasks)", fontsize=9)
-    fig.suptitle(
+    _suptitle(
+        fig,
         f"{title}\nsub-goal paths of test task {task} (start: red, goal: blue); "
         "bars: agent steps per sub-task (grey: not reached)",
         fontsize=9,
@@ -349,41 +451,71 @@ def depth_of(trial) -> int:
     return max(layers, default=0)
 
 
-def diagnostics(configs: list[ConfigSummary], path: Path) -> Path | None:
+def diagnostics(configs: list[ConfigSummary], path: Path, notes: list[str] | None = None) -> Path | None:
     """Why runs (do not) learn: the `copilot/diag/...` curves and their evaluation counterparts against
-    env steps. Returns None when no run logged diagnostics."""
+    env steps, one panel per question some run has data for (the others are named in `notes`). Returns
+    None when no run logged diagnostics."""
+    notes = [] if notes is None else notes
     shown, _ = _select(configs)
     trials = [(c, t) for c in shown for t in c.trials if depth_of(t) > 0 or DIAG_Q_MEAN in t.curves]
     if not trials:
         return None
-    colors = dict(zip([c.key for c in shown], _colors(len(shown)), strict=True))
-    cols = 4
-    rows = -(-len(_DIAG_PANELS) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows), squeeze=False)
-    for ax, (title, lines) in zip(axes.flat, _DIAG_PANELS, strict=False):
+
+    def keys(t, lines):
+        K = depth_of(t)
+        return [(metric.format(K=K, K2=max(K - 2, 1)), style) for metric, style, _ in lines]
+
+    panels = [
+        (title, lines)
+        for title, lines in _DIAG_PANELS
+        if any(k in t.curves for _, t in trials for k, _ in keys(t, lines))
+    ]
+    empty = [title for title, _ in _DIAG_PANELS if title not in {p[0] for p in panels}]
+    if empty:
+        notes.append(f"{path.name}: panels left out (no run logged their metrics): {'; '.join(empty)}.")
+    if not panels:
+        return None
+    drawn = [c for c in shown if any(c is d for d, _ in trials)]
+    colors = dict(zip([c.key for c in drawn], _colors(len(drawn)), strict=True))
+    cols = min(4, len(panels))
+    rows = -(-len(panels) // cols)
+    spare = len(panels) < rows * cols
+    fig, axes = plt.subplots(
+        rows,
+        cols,
+        figsize=(4.2 * cols + (0 if spare else 2.4), 3.4 * rows + 0.6),
+        squeeze=False,
+        layout="constrained",
+    )
+    for ax, (title, lines) in zip(axes.flat, panels, strict=False):
         for c, t in trials:
-            K = depth_of(t)
-            for metric, style, _ in lines:
-                key = metric.format(K=K, K2=max(K - 2, 1))
+            for key, style in keys(t, lines):
                 if key not in t.curves:
                     continue
                 steps, values = t.curves[key]
                 ax.plot(steps, values, style, color=colors[c.key], linewidth=1.3, alpha=0.85)
         for _, style, label in lines:  # the line styles' legend, in black
             ax.plot([], [], style, color="black", label=label)
-        ax.set_title(title, fontsize=9)
+        ax.set_title(wrap(title, 4.0, 9), fontsize=9)
         ax.set_xlabel("environment steps", fontsize=7)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
-        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
+        steps_axis(ax)
         ax.legend(fontsize=6, loc="best")
-    for ax in axes.flat[len(_DIAG_PANELS) :]:
+    for ax in axes.flat[len(panels) :]:
         ax.axis("off")
-    handles = [plt.Line2D([], [], color=colors[c.key], linewidth=2) for c in shown]
-    axes.flat[-1].legend(handles, [c.label for c in shown], fontsize=7, loc="center", title="configuration")
-    fig.suptitle("Diagnostics against environment steps (one line per seed)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    handles = [plt.Line2D([], [], color=colors[c.key], linewidth=2) for c in drawn]
+    spare = len(panels) < axes.size  # the configurations' legend in the grid's empty slot, else beside it
+    where = axes.flat[-1] if spare else fig
+    where.legend(
+        handles,
+        [wrap(c.label, 3.6 if spare else 2.2, 7) for c in drawn],
+        fontsize=7,
+        loc="center" if spare else "outside right center",
+        title="configuration",
+    )
+    _suptitle(fig, "Diagnostics against environment steps (one line per seed)")
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return path
 
@@ -397,7 +529,9 @@ def tau_hat_profiles(
     profiles = [(label, snaps) for label, snaps in profiles if snaps]
     if not profiles:
         return None
-    fig, axes = plt.subplots(1, len(profiles), figsize=(4.2 * len(profiles), 3.6), squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(profiles), figsize=(4.2 * len(profiles), 3.8), squeeze=False, layout="constrained"
+    )
     for ax, (label, snaps) in zip(axes[0], profiles, strict=True):
         top = max(float(np.max(s.tau_hat_length)) for s in snaps)
         ax.plot([0, top], [0, top], color="0.6", linewidth=1, label="Euclidean")
@@ -408,11 +542,10 @@ def tau_hat_profiles(
             ax.axvline(reachable, color="tab:red", linestyle=":", linewidth=1, label="one sub-task's reach")
         ax.set_xlabel("segment length")
         ax.set_ylabel("tau_hat (distance units)")
-        ax.set_title(label, fontsize=9)
+        ax.set_title(wrap(label, 4.0, 9), fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    fig.suptitle("Learned time cost against segment length over training", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    _suptitle(fig, "Learned time cost against segment length over training")
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return path

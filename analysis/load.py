@@ -3,8 +3,13 @@
 The layout read here is the sweep runner's contract (ARCHITECTURE.md, "Metrics", and `copilot_ray.sweep`): one
 parent run per sweep (tag `copilot.role=sweep`), one child run per trial (tags `mlflow.parentRunId`,
 `copilot.role=trial`, `copilot.config_key`, `seed`, the axis tags `algorithm`, `env`, `variant`, `preset`, `K`, `b`,
-`alpha_schedule`), success metrics logged with `step` = environment steps, and sub-goal tree snapshots as
-`copilot_trees/trees_iterNNNNNN.npz` artifacts.
+`alpha_schedule`; params `env.id`, `env.config.<key>` and every setting), success metrics logged with
+`step` = environment steps, and sub-goal tree snapshots as `copilot_trees/trees_iterNNNNNN.npz` artifacts.
+
+Configurations are not seeds (`configurations`): runs are one configuration only when algorithm, config key,
+env id, env config and every other logged param (the settings' effective values) agree; a seed that still
+repeats within one is split by the sweep (parent) run. An env-config value or a param that differs between
+configurations is an axis of the labels (`Sweep.axes`: ``layout=u-maze``).
 
 Evaluation curves keep only real evaluations: a sweep trial logs every iteration and repeats its last
 evaluation in between, marking the rows that evaluated with `copilot/eval/fresh` = 1 (`fresh_only`).
@@ -27,7 +32,9 @@ from copilot_ray.keys import (
     CONFIG_KEY_TAG,
     CURVE_METRICS,
     DIAG_PREFIX,
+    ENV_PARAM,
     ENV_STEPS,
+    ENV_TAG,
     EVAL_FRESH,
     EVAL_PREFIX,
     PARENT_TAG,
@@ -53,6 +60,14 @@ from copilot_ray.keys import (
 DIAGNOSTIC_PREFIXES = (DIAG_PREFIX, EVAL_PREFIX, AGENT_SUBTASK_SUCCESS_LAYER)
 # The pseudo-axis that labels configurations by their config key when no axis tag tells them apart.
 CONFIG_KEY_AXIS = "config_key"
+# Axes beyond the tags: an env-config key (ENV_CONFIG_PREFIX + key, shown as the key: "layout"), the sweep a
+# run belongs to and its parent run (when one configuration ran in two sweeps), a param ("param:" + name).
+ENV_CONFIG_PREFIX = "env.config."
+SWEEP_AXIS = "sweep"
+PARENT_AXIS = "sweep run"
+PARAM_AXIS_PREFIX = "param:"
+# Params that differ from run to run of one configuration (never part of its identity).
+PER_RUN_PARAMS = (SEED_PARAM, "checkpoint_dir")
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
 # KILLED one is listed as missing instead (its last numbers are where it broke, not where it ended).
 USABLE_STATUSES = ("FINISHED", "RUNNING")
@@ -83,6 +98,18 @@ class Trial:
     tree_artifacts: list[str] = field(default_factory=list)
     tracking_uri: str = ""  # the store it came from (report --also-from: several stores)
     latest: dict[str, float] = field(default_factory=dict)  # every metric's last logged value
+    # MLflow params: env.id, env.config.*, the settings' effective values, seed
+    params: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def env_id(self) -> str:
+        return self.params.get(ENV_PARAM) or self.tags.get(ENV_TAG, "")
+
+    @property
+    def env_config(self) -> dict[str, str]:
+        """`env.config.<key>` params: the env's config (e.g. its layout)."""
+        n = len(ENV_CONFIG_PREFIX)
+        return {k[n:]: v for k, v in self.params.items() if k.startswith(ENV_CONFIG_PREFIX)}
 
     @property
     def env_steps(self) -> float:
@@ -115,15 +142,104 @@ class Sweep:
     parents: list[tuple[str, str, str]] = field(default_factory=list)
 
     def axes(self) -> list[str]:
-        """The axis tags that take more than one value among the child runs; `config_key` when none of the
-        named ones does but the configurations still differ (e.g. an HPO sweep over planner knobs)."""
-        varying = [t for t in AXIS_TAGS if len({tr.tags.get(t, "") for tr in self.trials}) > 1]
-        keys = {tr.config_key for tr in self.trials}
-        labels = {tuple(tr.tags.get(t, "") for t in varying) for tr in self.trials}
-        # The named axes must tell the configurations apart (a K x lr grid varies an untagged knob too).
-        if len(keys) > 1 and len(labels) < len(keys):
-            varying = [CONFIG_KEY_AXIS]
-        return varying
+        """What the configuration labels name (`axis_value`): the axis tags and env-config keys that take more
+        than one value among the child runs (an env-config key right after `env`); when those do not tell
+        the configurations (`configurations`) apart, the algorithm (if it varies), the config key and the
+        env-config axes, then the sweep, its run and the params that differ, until they do (e.g. an HPO
+        sweep over planner knobs, or one config key run in two sweeps on two layouts)."""
+        trials = self.trials
+        groups = list(configurations(trials).values())
+
+        def varies(axis: str) -> bool:
+            return len({axis_value(t, axis) for t in trials}) > 1
+
+        def separates(axes: list[str]) -> bool:
+            return len({tuple(axis_value(g[0], a) for a in axes) for g in groups}) == len(groups)
+
+        env_axes = [
+            ENV_CONFIG_PREFIX + k
+            for k in sorted({k for t in trials for k in t.env_config})
+            if varies(ENV_CONFIG_PREFIX + k)
+        ]
+        named: list[str] = []
+        for tag in AXIS_TAGS:
+            if varies(tag):
+                named.append(tag)
+            if tag == ENV_TAG:
+                named += env_axes
+        if len(groups) <= 1 or separates(named):
+            return named
+        axes = ([ALGORITHM_TAG] if varies(ALGORITHM_TAG) else []) + [CONFIG_KEY_AXIS] + env_axes
+        params = sorted({k for t in trials for k in t.params} - set(PER_RUN_PARAMS))
+        extra = [SWEEP_AXIS, PARENT_AXIS] + [
+            PARAM_AXIS_PREFIX + k for k in params if not k.startswith(ENV_CONFIG_PREFIX) and k != ENV_PARAM
+        ]
+        for axis in extra:
+            if separates(axes):
+                break
+            if varies(axis):
+                candidate = [*axes, axis]
+                if len({tuple(axis_value(g[0], a) for a in candidate) for g in groups}) > len(
+                    {tuple(axis_value(g[0], a) for a in axes) for g in groups}
+                ):
+                    axes = candidate
+        return axes
+
+
+def axis_value(trial: Trial, axis: str) -> str:
+    """A trial's value on one of `Sweep.axes` ("" when it has none)."""
+    if axis == CONFIG_KEY_AXIS:
+        return trial.config_key
+    if axis == SWEEP_AXIS:
+        return trial.tags.get(SWEEP_TAG, "")
+    if axis == PARENT_AXIS:
+        return trial.tags.get(PARENT_TAG, "")[:8]
+    if axis.startswith(ENV_CONFIG_PREFIX):
+        value = trial.params.get(axis, "")
+        # a layout file (the sweep resolves its path): its name says enough
+        return Path(value).stem if "/" in value else value
+    if axis.startswith(PARAM_AXIS_PREFIX):
+        return trial.params.get(axis[len(PARAM_AXIS_PREFIX) :], "")
+    return trial.tags.get(axis, "")
+
+
+def axis_name(axis: str) -> str:
+    """How an axis is named in labels and legends: an env-config key by its key ("layout")."""
+    for prefix in (ENV_CONFIG_PREFIX, PARAM_AXIS_PREFIX):
+        if axis.startswith(prefix):
+            return axis[len(prefix) :]
+    return axis
+
+
+def is_env_axis(axis: str) -> bool:
+    """The axes that say which environment a configuration ran on (the env id and its config)."""
+    return axis == ENV_TAG or axis.startswith(ENV_CONFIG_PREFIX)
+
+
+def configuration_id(trial: Trial) -> tuple:
+    """What makes two runs seeds of one configuration: the same algorithm, config key, env id, env config
+    and every other logged param (the settings at their effective values), the seed and per-run params
+    (`PER_RUN_PARAMS`) aside."""
+    params = tuple(sorted((k, v) for k, v in trial.params.items() if k not in PER_RUN_PARAMS))
+    return (trial.tags.get(ALGORITHM_TAG, ""), trial.config_key, trial.env_id, params)
+
+
+def configurations(trials: list[Trial]) -> dict[tuple, list[Trial]]:
+    """The runs grouped by `configuration_id`, in the order of `trials`. A group in which a seed repeats
+    holds two runs of one configuration (two sweeps, or one sweep run twice): it is split by the sweep
+    (parent) run, so that nothing is counted as a seed twice."""
+    groups: dict[tuple, list[Trial]] = {}
+    for t in trials:
+        groups.setdefault(configuration_id(t), []).append(t)
+    out: dict[tuple, list[Trial]] = {}
+    for key, group in groups.items():
+        seeds = [t.seed for t in group]
+        if len(set(seeds)) == len(seeds):
+            out[key] = group
+            continue
+        for t in group:
+            out.setdefault((*key, t.tags.get(PARENT_TAG) or t.tags.get(SWEEP_TAG, "")), []).append(t)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- store
@@ -306,6 +422,7 @@ def _trial(client, run) -> Trial:
         tags=tags,
         tracking_uri=str(client.tracking_uri),
         latest=dict(run.data.metrics),
+        params=dict(run.data.params),
     )
     wanted = set(CURVE_METRICS) | {
         k for k in run.data.metrics if k.startswith((*DIAGNOSTIC_PREFIXES, PATHS_PREFIX))

@@ -1,13 +1,14 @@
 """The planners' figures (the paper's Fig. 4b/4c): every run that logged ``paths/*`` (RRT*, SGT-PG,
-CO-PILOT's finest paths) in one table and one figure, per agent (env) and method (algorithm).
+CO-PILOT's finest paths) in one table and one figure, per env and configuration (never two configurations
+pooled as seeds: CO-PILOT's variants, or one variant on two layouts, are rows of their own).
 
-Table: per (algorithm, env), the mean over seeds of each metric's last value, with the seeds' range, and
+Table: per (env, method), the mean over seeds of each metric's last value, with the seeds' range, and
 the method's privileges (copilot_ray.privileges; "-": runs older than the tag).
-Figure: one column per env, rows success / length vs RRT* / collision checks vs RRT*, one line per method
-(mean over seeds at the env steps every seed reached), against env steps on a log axis: for the
-planner-only methods their collision checks (what they report as env steps), for CO-PILOT real env
-steps. RRT* plans each task once, so its "curve" is its running figures over the tasks planned so far and
-its last point is the reference every ratio divides by.
+Figure: one column per env, rows success / length vs RRT* / collision checks vs RRT* (a row no run has
+data for is left out: the ratios need an RRT* reference), one line per method (mean over seeds at the env
+steps every seed reached), against env steps: for the planner-only methods their collision checks (what
+they report as env steps), for CO-PILOT real env steps. RRT* plans each task once, so its "curve" is its
+running figures over the tasks planned so far and its last point is the reference every ratio divides by.
 """
 
 from __future__ import annotations
@@ -23,8 +24,6 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from copilot_ray.keys import (  # noqa: E402
-    ALGORITHM_TAG,
-    ENV_TAG,
     PATH_CHECKS_VS_RRT,
     PATH_COLLISION_CHECKS,
     PATH_LENGTH,
@@ -33,8 +32,10 @@ from copilot_ray.keys import (  # noqa: E402
     PATH_SUCCESS_VS_RRT,
 )
 
-from .aggregate import privileges_label  # noqa: E402
+from .aggregate import ConfigSummary, privileges_label  # noqa: E402
+from .figures import steps_axis, wrap  # noqa: E402
 from .load import Trial  # noqa: E402
+from .tables import Table  # noqa: E402
 
 COLUMNS = {
     PATH_SUCCESS: "success",
@@ -45,6 +46,7 @@ COLUMNS = {
     PATH_CHECKS_VS_RRT: "checks / RRT*",
 }
 PANELS = (PATH_SUCCESS, PATH_LENGTH_VS_RRT, PATH_CHECKS_VS_RRT)
+PLANNER_ONLY = {"rrt_star": "RRT*", "sgt_pg": "SGT-PG"}  # algorithm tag -> name; their env steps are checks
 PANEL_TITLES = {
     PATH_SUCCESS: "success (collision-free path to the goal)",
     PATH_LENGTH_VS_RRT: "path length / RRT*'s (tasks both solved)",
@@ -57,18 +59,27 @@ def path_trials(trials: list[Trial]) -> list[Trial]:
     return [t for t in trials if t.usable and PATH_SUCCESS in t.curves]
 
 
-def _groups(trials: list[Trial]) -> dict[tuple[str, str], list[Trial]]:
-    out: dict[tuple[str, str], list[Trial]] = {}
-    for t in trials:
-        out.setdefault((t.tags.get(ALGORITHM_TAG, "?"), t.tags.get(ENV_TAG, "?")), []).append(t)
-    return dict(sorted(out.items(), key=lambda kv: (kv[0][1], kv[0][0])))
+def _groups(configs: list[ConfigSummary]) -> dict[tuple[str, str], tuple[ConfigSummary, list[Trial]]]:
+    """(env, method) -> (configuration, its trials with paths), by env then method."""
+    out = {}
+    for c in configs:
+        trials = path_trials(c.trials)
+        if trials:
+            out[(c.env, c.method)] = (c, trials)
+    return dict(sorted(out.items()))
 
 
-def path_frame(trials: list[Trial]) -> pd.DataFrame:
-    """One row per (env, algorithm): seeds and each metric's last value, mean [min, max] over seeds."""
+def path_frame(configs: list[ConfigSummary]) -> pd.DataFrame:
+    """One row per (env, method): seeds and each metric's last value, mean [min, max] over seeds."""
     rows = []
-    for (algorithm, env), group in _groups(path_trials(trials)).items():
-        row: dict[str, object] = {"env": env, "algorithm": algorithm, "n_seeds": len(group)}
+    for (env, method), (c, group) in _groups(configs).items():
+        row: dict[str, object] = {
+            "env": env,
+            "algorithm": c.algorithm,
+            "method": method,
+            "configuration": c.label,
+            "n_seeds": len(group),
+        }
         for key, name in COLUMNS.items():
             finals = [_final(t, key) for t in group]
             finals = [v for v in finals if math.isfinite(v)]
@@ -89,19 +100,23 @@ def _final(trial: Trial, key: str) -> float:
     return float(values[-1]) if len(steps) and steps[-1] == last else math.nan
 
 
-def markdown(frame: pd.DataFrame) -> str:
-    """The table with mean [min, max] cells (a single seed: just its value)."""
-    names = list(COLUMNS.values())
-    header = ["env", "algorithm", "seeds", *names, "env steps (planners: checks)", "privileges"]
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+def table(frame: pd.DataFrame) -> Table:
+    """The table with mean [min, max] cells (a single seed: just its value); columns no row has a value
+    in (the ratios without an RRT* reference) are left out."""
+    names = [n for n in COLUMNS.values() if frame[n].notna().any()]
+    out = Table(["env", "method", "seeds", *names, "env steps (planners: checks)", "privileges"])
     for _, r in frame.iterrows():
-        cells = [str(r["env"]), str(r["algorithm"]), str(r["n_seeds"])]
+        cells = [str(r["env"]), str(r["method"]), str(r["n_seeds"])]
         for name in names:
             cells.append(_cell(r[name], r[f"{name} min"], r[f"{name} max"], big=name == "collision checks"))
         cells.append(f"{r['env steps']:,.0f}")
         cells.append(str(r["privileges"]))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        out.rows.append(cells)
+    return out
+
+
+def markdown(frame: pd.DataFrame) -> str:
+    return table(frame).markdown()
 
 
 def _cell(mean: float, low: float, high: float, big: bool = False) -> str:
@@ -111,35 +126,98 @@ def _cell(mean: float, low: float, high: float, big: bool = False) -> str:
     return fmt(mean) if low == high else f"{fmt(mean)} [{fmt(low)}, {fmt(high)}]"
 
 
+def _seed_curves(group: list[Trial], key: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    return [t.curves[key] for t in group if key in t.curves and len(t.curves[key][0])]
+
+
 def _mean_curve(group: list[Trial], key: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """Mean over seeds on the first seed's steps, up to where every seed has data (no extrapolation)."""
-    curves = [t.curves[key] for t in group if key in t.curves and len(t.curves[key][0])]
+    """Mean over seeds at the seeds' evaluated steps inside the window every seed covers (from the latest
+    first evaluation to the earliest last one: no seed is extrapolated); None without such a window."""
+    curves = _seed_curves(group, key)
     if not curves:
         return None
-    end = min(c[0][-1] for c in curves)
-    grid = curves[0][0][curves[0][0] <= end]
+    start, end = max(c[0][0] for c in curves), min(c[0][-1] for c in curves)
+    if start > end:
+        return None
+    grid = np.unique(np.concatenate([c[0][(c[0] >= start) & (c[0] <= end)] for c in curves]))
     values = np.mean([np.interp(grid, steps, vals) for steps, vals in curves], axis=0)
     return grid, values
 
 
-def path_figure(trials: list[Trial], path: Path) -> Path | None:
-    """Fig. 4a-c for each agent: success, length / RRT*'s and checks / RRT*'s against env steps."""
-    groups = _groups(path_trials(trials))
+def _seeds_label(method: str, groups, envs: list[str]) -> str:
+    """'copilot (variant=continue): 2 seeds', or the seeds per env when they differ."""
+    seeds = {env: len(groups[(env, method)][1]) for env in envs if (env, method) in groups}
+    if len(set(seeds.values())) == 1:
+        n = next(iter(seeds.values()))
+        return f"{method}: {n} seed{'s' if n > 1 else ''}"
+    return f"{method}: " + ", ".join(f"{n} on {env}" for env, n in seeds.items())
+
+
+def _ratio_axis(ax) -> None:
+    """A log y axis for ratios to RRT*'s that reads 0.5, 1, 2, 5 (not 2 x 10^0)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.set_yscale("log")
+    low, high = ax.get_ylim()
+    decades = np.log10(high / low) if low > 0 else 10.0
+    ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0) if decades <= 2.5 else (1.0,), numticks=8))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
+def path_figure(
+    configs: list[ConfigSummary], path: Path, paper: str = "", notes: list[str] | None = None
+) -> Path | None:
+    """Success, length / RRT*'s and checks / RRT*'s against env steps, one column per env; the rows no
+    method has data for are left out (and named in `notes`). `paper`: the paper's figure, or ""."""
+    notes = [] if notes is None else notes
+    groups = _groups(configs)
     if not groups:
         return None
-    envs = sorted({env for _, env in groups})
-    algorithms = sorted({algorithm for algorithm, _ in groups})
-    colors = dict(zip(algorithms, plt.get_cmap("tab10").colors, strict=False))
+    panels = [k for k in PANELS if any(_seed_curves(g, k) for _, g in groups.values())]
+    for k in PANELS:
+        if k not in panels:
+            notes.append(
+                f"{path.name}: no '{PANEL_TITLES[k]}' row: no run logged {k} (it needs RRT*'s reference)."
+            )
+    envs = sorted({env for env, _ in groups})
+    methods = sorted({method for _, method in groups})
+    # the planner-only methods report collision checks as their env steps
+    planners = sorted({c.algorithm for c, _ in groups.values() if c.algorithm in PLANNER_ONLY})
+    xlabel = (
+        f"env steps ({', '.join(PLANNER_ONLY[a] for a in planners)}: collision checks)"
+        if planners
+        else "env steps"
+    )
+    colors = dict(zip(methods, plt.get_cmap("tab10").colors, strict=False))
     fig, axes = plt.subplots(
-        len(PANELS), len(envs), figsize=(4.2 * len(envs), 3.0 * len(PANELS)), squeeze=False, sharex="col"
+        len(panels),
+        len(envs),
+        figsize=(4.4 * len(envs) + 0.8, 3.0 * len(panels) + 0.9),
+        squeeze=False,
+        sharex="col",
+        layout="constrained",
     )
     for col, env in enumerate(envs):
-        for row, key in enumerate(PANELS):
+        steps_seen = [t.curves[PATH_SUCCESS][0] for (e, _), (_, g) in groups.items() if e == env for t in g]
+        lo = min(float(s[s > 0].min()) for s in steps_seen if (s > 0).any()) if steps_seen else 1.0
+        hi = max(float(s.max()) for s in steps_seen) if steps_seen else 1.0
+        log = hi / max(lo, 1.0) > 30  # planners' checks and CO-PILOT's env steps: decades apart
+        for row, key in enumerate(panels):
             ax = axes[row][col]
-            for algorithm in algorithms:
-                group = groups.get((algorithm, env))
-                curve = _mean_curve(group, key) if group else None
-                if curve is None:
+            for method in methods:
+                entry = groups.get((env, method))
+                if entry is None or not _seed_curves(entry[1], key):
+                    continue
+                curve = _mean_curve(entry[1], key)
+                if curve is None:  # the seeds' evaluations do not overlap: each seed, no mean
+                    for steps, values in _seed_curves(entry[1], key):
+                        ax.plot(steps, values, marker="o", ms=3, lw=0.8, color=colors[method])
+                    if key == PATH_SUCCESS:
+                        notes.append(
+                            f"{path.name}: {method} on {env}: its seeds' evaluations share no env steps "
+                            "(one still running?): each seed drawn, no mean."
+                        )
                     continue
                 steps, values = curve
                 ax.plot(
@@ -147,23 +225,31 @@ def path_figure(trials: list[Trial], path: Path) -> Path | None:
                     values,
                     marker="o" if len(steps) < 3 else None,
                     ms=4,
-                    color=colors[algorithm],
-                    label=f"{algorithm} ({len(group)} seed{'s' if len(group) > 1 else ''})",
+                    color=colors[method],
                 )
             if key != PATH_SUCCESS:
                 ax.axhline(1.0, color="grey", lw=0.8, ls=":")
-                ax.set_yscale("log")
-            ax.set_xscale("log")
+                _ratio_axis(ax)
+            steps_axis(ax, log=log)
             ax.grid(alpha=0.3)
             if row == 0:
-                ax.set_title(env)
+                ax.set_title(wrap(env, 4.0, 10), fontsize=10)
             if col == 0:
-                ax.set_ylabel(PANEL_TITLES[key], fontsize=8)
-            if row == len(PANELS) - 1:
-                ax.set_xlabel("env steps (planners: collision checks)")
-        axes[0][col].legend(fontsize=7)
-    fig.suptitle("Planners on the same test tasks (paper Fig. 4a-c): means over seeds")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+                ax.set_ylabel(wrap(PANEL_TITLES[key], 2.6, 8), fontsize=8)
+            if row == len(panels) - 1:
+                ax.set_xlabel(xlabel, fontsize=8)
+    # One legend for the figure (inside a panel it hides lines): each method and its seeds per env.
+    handles = [plt.Line2D([], [], color=colors[m], linewidth=2) for m in methods]
+    fig.legend(
+        handles,
+        [wrap(_seeds_label(m, groups, envs), 3.2, 8) for m in methods],
+        loc="outside right center",
+        fontsize=8,
+        title="method (seeds)",
+    )
+    what = "Planners' paths" if planners else "Planned paths"
+    title = f"{what} on the test tasks" + (f" ({paper})" if paper else "") + ": means over seeds"
+    fig.suptitle(wrap(title, fig.get_figwidth() * 0.95, 10), fontsize=10)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return path

@@ -3,17 +3,22 @@
 Reads one sweep from MLflow and writes, under --out (default `results/<experiment>/report`):
   success_vs_env_steps.png   success (planned, direct) against env steps: IQM + 95 % bootstrap band
                              from 5 seeds on, else the mean and each seed (no band)
-  final_success.png          final success per configuration (95 % CIs from 5 seeds on; paper Fig. 2b for K)
+  final_success.png          final success per configuration (95 % CIs from 5 seeds on; paper Fig. 2b for K
+                             on the maze)
   success_by_method.png, final_success_by_method.png
                              when the runs hold several algorithms: copilot/eval/success (each
-                             method's headline) against env steps and at the end (paper Fig. 4a, 2a)
+                             method's headline) against env steps and at the end (paper Fig. 4a, 2a
+                             on the maze; 2c on the Ant maze)
   return_vs_env_steps.png    copilot/eval/return (R for reaching a test goal, averaged) against env
-                             steps (paper Fig. 2d, the Ant maze)
+                             steps on the Ant maze (paper Fig. 2d); elsewhere it is R x the goals
+                             reached (R = 1 on the maze: a rate the report already shows), so it is not
+                             drawn and the report says so
   mastered_vs_env_steps.png  copilot/eval/mastered (share of the walker's evaluation track
-                             distributions mastered) against env steps (paper Fig. 3)
+                             distributions mastered) against env steps (paper Fig. 3 on the walker)
   subgoal_tree_<config>.png  one test task's sub-goal paths over training (paper Fig. 4d)
-  summary.csv, summary.md    per-configuration table: final success, success AUC, steps to thresholds,
-                             env steps, privileges (names and counts)
+  summary.csv, summary.md    per-configuration tables: the headline (seeds, privileges and their counts,
+                             env steps, final test success, success AUC) and the details (planned /
+                             direct, steps to thresholds, wall time)
   improvement.csv            P(CO-PILOT's default beats the best other method), when there is one
   metrics.csv.gz             every run's copilot/*, paths/* and env-step metrics (run, config, seed,
                              metric, env steps, value)
@@ -21,8 +26,14 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
                              runs that logged paths/* (RRT*, SGT-PG, CO-PILOT): success, length and
                              collision checks, each against RRT*'s (paper Fig. 4a-c), per agent
   report.md, report.html     all of the above on one page: provenance (commits, store, spec, command)
-                             first, then missing/failed runs
+                             first, then missing/failed runs and what was left out of the figures (no
+                             data, or a figure that would repeat another) and why
 and logs the folder to the sweep's parent MLflow run under `report/`.
+
+Configurations are grouped by algorithm, config key, env id, env config and every other logged setting
+(`load.configurations`): one variant on two layouts is two configurations, labelled `layout=...,
+variant=...`, never one with twice the seeds. The paper's figure numbers are named only where the env is
+the paper's (`paper_label`).
 
 Tracking store: --tracking-uri, else $MLFLOW_TRACKING_URI, else an existing ./mlflow.db or
 ./results/*/mlflow.db that holds the experiment (see `load.resolve_tracking_uri`).
@@ -43,7 +54,17 @@ from pathlib import Path
 
 import numpy as np
 
-from copilot_ray.keys import ALGORITHM_TAG, GIT_COMMIT_TAG, SUCCESS_PLANNED, TREES_DIR
+from copilot_ray.keys import (
+    ALGORITHM_TAG,
+    EVAL_MASTERED,
+    EVAL_RETURN,
+    GIT_COMMIT_TAG,
+    REACHED_DIRECT,
+    REACHED_PLANNED,
+    SUCCESS_METRICS,
+    SUCCESS_PLANNED,
+    TREES_DIR,
+)
 from copilot_ray.privileges import DESCRIPTIONS
 
 from . import figures, paths, stats, tables
@@ -54,6 +75,7 @@ from .load import (
     Sweep,
     Trial,
     add_trials_from,
+    axis_name,
     load_sweep,
     load_tree_snapshots,
     log_report_artifacts,
@@ -135,60 +157,93 @@ def main(argv: list[str] | None = None) -> int:
 
     configs, missing = summarise(sweep, reps=args.bootstrap_reps, seed=args.seed)
     _print_status(sweep, configs, missing)
-    axis_name = ", ".join(sweep.axes()) or "configuration"
+    axes_shown = ", ".join(axis_name(a) for a in sweep.axes()) or "configuration"
 
     # (title, png, caption): the comparison figures' captions name each configuration's privileges
     figs: list[tuple[str, Path, str]] = []
     notes: list[str] = []
+    left_out: list[str] = []  # what a figure leaves out, and why
     several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
     if any(c.metrics for c in configs):
         caption = _privilege_caption(configs)
-        figs.append(
-            (
-                "Success against environment steps",
-                figures.success_curves(configs, axis_name, out / "success_vs_env_steps.png"),
-                caption,
-            )
+
+        def add(title: str, png: Path | None) -> None:
+            if png is not None:
+                figs.append((title, png, caption))
+
+        add(
+            "Success against environment steps",
+            figures.success_curves(configs, axes_shown, out / "success_vs_env_steps.png", notes=left_out),
         )
-        figs.append(
-            ("Final success", figures.final_success(configs, axis_name, out / "final_success.png"), caption)
+        k_label = paper_label(configs, maze="paper Fig. 2b") if sweep.axes() == ["K"] else ""
+        add(
+            _titled("Final success", k_label),
+            figures.final_success(
+                configs, axes_shown, out / "final_success.png", paper=k_label, notes=left_out
+            ),
         )
         if several:
             # Several algorithms: the one success figure they all report, per method (paper Fig. 2a, 4a).
             by = figures.BY_METHOD
-            figs.append(
-                (
-                    "Success against environment steps, by method (paper Fig. 4a)",
-                    figures.success_curves(configs, "method", out / "success_by_method.png", by),
-                    caption,
-                )
+            curves = paper_label(configs, maze="paper Fig. 4a", ant="paper Fig. 2c")
+            add(
+                _titled("Success against environment steps, by method", curves),
+                figures.success_curves(
+                    configs,
+                    "method",
+                    out / "success_by_method.png",
+                    by,
+                    title=_titled("Test success against environment steps", curves),
+                    notes=left_out,
+                ),
             )
-            figs.append(
-                (
-                    "Final success by method (paper Fig. 2a)",
-                    figures.final_success(configs, "method", out / "final_success_by_method.png", by),
-                    caption,
-                )
+            bars = paper_label(configs, maze="paper Fig. 2a")
+            add(
+                _titled("Final success by method", bars),
+                figures.final_success(
+                    configs, "method", out / "final_success_by_method.png", by, paper=bars, notes=left_out
+                ),
             )
-        for metric, title, name in (
-            (figures.EVAL_RETURN, "Return against environment steps (paper Fig. 2d)", "return_vs_env_steps"),
-            (figures.EVAL_MASTERED, "Mastered track distributions (paper Fig. 3)", "mastered_vs_env_steps"),
-        ):
-            if any(metric in c.metrics for c in configs):
-                by = "method" if several else axis_name
-                png = figures.success_curves(configs, by, out / f"{name}.png", (metric,))
-                figs.append((title, png, caption))
+        by = "method" if several else axes_shown
+        ant = _return_configs(configs, left_out)
+        if ant:
+            title = "Return against environment steps on the Ant maze (paper Fig. 2d)"
+            add(
+                title,
+                figures.success_curves(
+                    ant, by, out / "return_vs_env_steps.png", (EVAL_RETURN,), title=title, notes=left_out
+                ),
+            )
+        if any(EVAL_MASTERED in c.metrics for c in configs):
+            title = _titled(
+                "Mastered track distributions against environment steps",
+                paper_label(configs, walker="paper Fig. 3"),
+            )
+            add(
+                title,
+                figures.success_curves(
+                    configs,
+                    by,
+                    out / "mastered_vs_env_steps.png",
+                    (EVAL_MASTERED,),
+                    title=title,
+                    notes=left_out,
+                ),
+            )
+        else:
+            left_out.append(
+                f"mastered_vs_env_steps.png: no run logged {EVAL_MASTERED} (the stump-track walker's measure)."
+            )
     else:
-        notes.append("No run has evaluation metrics yet: no success figures.")
-    planner_figs, planner_table, planner_frame = _planner_section(sweep, out)
+        notes.append("No run has the agent's test success (copilot/eval/success*) yet: no success figures.")
+    planner_figs, planner_table, planner_frame, planner_title = _planner_section(configs, out, left_out)
     figs += planner_figs
     tree_figs, snapshots = _tree_figures(sweep, configs, args, out, notes)
-    diag_figs = _diagnostic_figures(configs, snapshots, out, notes)
+    diag_figs = _diagnostic_figures(configs, snapshots, out, notes, left_out)
 
     frame = tables.summary_frame(configs)
     tables.write_csv(frame, out / "summary.csv")
-    table_md = tables.markdown(frame)
-    (out / "summary.md").write_text(table_md)
+    (out / "summary.md").write_text(tables.markdown(frame))
     improvement = tables.improvement_frame(configs, reps=args.bootstrap_reps, seed=args.seed)
     if not improvement.empty:
         tables.write_csv(improvement, out / "improvement.csv")
@@ -207,18 +262,26 @@ def main(argv: list[str] | None = None) -> int:
     for line in provenance:
         if line.startswith("WARNING"):
             print(line, file=sys.stderr)
-    doc = _document(
-        sweep, configs, missing, axis_name, figs, tree_figs + diag_figs, table_md, frame, notes, provenance
-    )
-    below = _improvement_blocks(configs, improvement, several)  # right under the headline table
-    if planner_table:
+    below = _improvement_blocks(configs, improvement, several)  # right under the summary tables
+    if planner_table is not None:
         below += [
-            ("h2", "Planners: paths on the test tasks (Fig. 4b/4c)"),
+            ("h2", planner_title),
             ("p", paths.__doc__.split("\n\n")[1].replace("\n", " ")),
-            ("table", planner_table, planner_frame),
+            ("table", planner_table),
         ]
-    at = _after(doc, "table")
-    doc[at:at] = below
+    doc = _document(
+        sweep,
+        configs,
+        missing,
+        axes_shown,
+        figs,
+        tree_figs + diag_figs,
+        frame,
+        notes,
+        left_out,
+        provenance,
+        below,
+    )
     (out / "report.md").write_text(_to_markdown(doc))
     (out / "report.html").write_text(_to_html(doc, sweep.experiment))
     print(f"report: {out / 'report.md'}")
@@ -234,22 +297,94 @@ def main(argv: list[str] | None = None) -> int:
 
 
 # ---------------------------------------------------------------------------------------------- planners
-def _planner_section(sweep: Sweep, out: Path):
-    """(figures, markdown table, frame): the paths' figure and table (planners.md / .csv) when any run
-    logged paths/*."""
-    frame = paths.path_frame(sweep.trials)
+def _planner_section(configs: list[ConfigSummary], out: Path, left_out: list[str]):
+    """(figures, table, frame, title): the paths' figure and table (planners.md / .csv) when any run logged
+    paths/*, one row per env and configuration."""
+    frame = paths.path_frame(configs)
     if frame.empty:
-        return [], "", frame
+        return [], None, frame, ""
     frame.to_csv(out / "planners.csv", index=False)
-    table = paths.markdown(frame)
-    (out / "planners.md").write_text(table)
-    fig = paths.path_figure(sweep.trials, out / "planners_paths.png")
+    table = paths.table(frame)
+    (out / "planners.md").write_text(table.markdown())
+    with_rrt = frame[list(paths.COLUMNS.values())[1::2]].notna().any().any()  # the ratios to RRT*'s
+    paper = paper_label(configs, maze="paper Fig. 4a-c") if with_rrt else ""
+    fig = paths.path_figure(configs, out / "planners_paths.png", paper=paper, notes=left_out)
     groups: dict[str, list[Trial]] = {}
-    for t in paths.path_trials(sweep.trials):
-        groups.setdefault(t.tags.get(ALGORITHM_TAG, "?"), []).append(t)
-    caption = "Privileges: " + "; ".join(f"{a}: {privileges_label(ts)}" for a, ts in sorted(groups.items()))
-    figs = [("Planners: success, length and collision checks against RRT*", fig, caption)] if fig else []
-    return figs, table, frame
+    for c in configs:
+        groups.setdefault(c.method, []).extend(paths.path_trials(c.trials))
+    caption = "Privileges: " + "; ".join(
+        f"{a}: {privileges_label(ts)}" for a, ts in sorted(groups.items()) if ts
+    )
+    title = _titled("Planners: success, length and collision checks against RRT*", paper)
+    if not with_rrt:
+        title = "Planners: success of the planned paths (no RRT* reference: no length or check ratios)"
+    figs = [(title, fig, caption)] if fig else []
+    table_title = _titled("Planners: paths on the test tasks", "paper Fig. 4b/4c" if paper else "")
+    return figs, table, frame, table_title
+
+
+# The paper's figures are about its envs: a label is given only where every configuration ran on one.
+MAZE_PREFIX = "maze-"  # maze-point, maze-rigid, maze-snake: Fig. 2a / 2b / 4
+ANT_MAZE = "ant-maze"  # Fig. 2c / 2d
+WALKER_PREFIX = "walker-stumps"  # Fig. 3
+
+
+def paper_label(configs: list[ConfigSummary], maze: str = "", ant: str = "", walker: str = "") -> str:
+    """The paper's figure for this comparison's env ("" when the env is not the paper's for it, or when
+    the configurations ran on different kinds of env)."""
+    envs = {c.env_id for c in configs if c.metrics or c.trials}
+    if not envs:
+        return ""
+    if all(e.startswith(MAZE_PREFIX) for e in envs):
+        return maze
+    if envs == {ANT_MAZE}:
+        return ant
+    if all(e.startswith(WALKER_PREFIX) for e in envs):
+        return walker
+    return ""
+
+
+def _titled(title: str, paper: str) -> str:
+    return f"{title} ({paper})" if paper else title
+
+
+def _return_configs(configs: list[ConfigSummary], left_out: list[str]) -> list[ConfigSummary]:
+    """The configurations whose return is drawn: those on the Ant maze (paper Fig. 2d). Elsewhere the
+    return is the task reward R times the goals reached: on the maze (R = 1) the success curve again,
+    so it is left out, and `left_out` says why."""
+    have = [c for c in configs if EVAL_RETURN in c.metrics]
+    ant = [c for c in have if c.env_id == ANT_MAZE]
+    others = [c for c in have if c.env_id != ANT_MAZE]
+    if not have:
+        left_out.append(f"return_vs_env_steps.png: no run logged {EVAL_RETURN}.")
+    elif others:
+        envs = ", ".join(sorted({c.env_id or "?" for c in others}))
+        trials = [t for c in others for t in c.trials if EVAL_RETURN in t.curves]
+        equal = {_return_equals(t) for t in trials}
+        if None not in equal:  # R = 1 (the maze): the return is a rate the report has already
+            names = " / ".join(sorted(m.split("/")[-1] for m in equal))
+            why = f"it equals {names} in every run (task reward R = 1), so it would repeat that curve"
+        else:
+            why = "outside the Ant maze (paper Fig. 2d) it is the task reward R times the goals reached"
+        which = "the configurations on " + envs if ant else "every configuration"
+        left_out.append(f"return_vs_env_steps.png leaves out {which} ({EVAL_RETURN}, {envs}): {why}.")
+    return ant
+
+
+# What the return of R = 1 equals: the goals reached (collisions allowed; R x reached is the return), or a
+# success (collision-free) rate where the two agree.
+RETURN_TWINS = (REACHED_PLANNED, REACHED_DIRECT, *SUCCESS_METRICS)
+
+
+def _return_equals(trial: Trial) -> str | None:
+    """The rate `trial`'s return equals at every evaluation (R = 1), or None."""
+    steps, values = trial.curves[EVAL_RETURN]
+    for metric in RETURN_TWINS:
+        if metric in trial.curves:
+            s, v = trial.curves[metric]
+            if np.array_equal(s, steps) and np.allclose(v, values):
+                return metric
+    return None
 
 
 def _privilege_caption(configs: list[ConfigSummary]) -> str:
@@ -318,10 +453,12 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
     return result, loaded
 
 
-def _diagnostic_figures(configs: list[ConfigSummary], snapshots, out: Path, notes: list[str]):
+def _diagnostic_figures(
+    configs: list[ConfigSummary], snapshots, out: Path, notes: list[str], left_out: list[str]
+):
     """The diagnostics page: why runs do or do not learn (copilot/diag/... curves, tau_hat profiles)."""
     result = []
-    path = figures.diagnostics(configs, out / "diagnostics.png")
+    path = figures.diagnostics(configs, out / "diagnostics.png", notes=left_out)
     if path is None:
         notes.append("No run logged copilot/diag/... metrics: no diagnostics figure.")
     else:
@@ -348,11 +485,6 @@ def _tree_trial(c: ConfigSummary) -> Trial:
 # ---------------------------------------------------------------------------------------------- document
 # The page is a short list of blocks rendered twice: Markdown (report.md) and HTML (report.html, which
 # the MLflow UI previews).
-
-
-def _after(doc, kind: str) -> int:
-    """The index just after the first block of `kind`."""
-    return next(i for i, part in enumerate(doc) if part[0] == kind) + 1
 
 
 def _provenance(sweep: Sweep, argv: list[str], log_to: str | None) -> list[str]:
@@ -394,8 +526,8 @@ def _spec_lines(sweep: Sweep) -> list[str]:
 
 def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
     """Under the headline table: P(CO-PILOT's default beats the best other method)."""
-    if not several:
-        return []
+    if not several or not any(m in c.metrics for c in configs for m in SUCCESS_METRICS):
+        return []  # one method, or planners alone (no success of an agent to compare)
     head = ("h2", "Probability of improvement over the best other method")
     why = (
         "P(X > Y) (Agarwal et al. 2021): the chance that a seed of CO-PILOT's default configuration "
@@ -406,7 +538,7 @@ def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
     )
     if frame.empty:
         return [head, ("p", why), ("p", "No CO-PILOT default configuration or no other method with success.")]
-    return [head, ("p", why), ("table", tables.improvement_markdown(frame), frame)]
+    return [head, ("p", why), ("table", tables.improvement_table(frame))]
 
 
 def _summary_text(configs: list[ConfigSummary]) -> str:
@@ -433,16 +565,27 @@ def _summary_text(configs: list[ConfigSummary]) -> str:
         "seeds at the last result. Privileges: from the runs' tags ('-': runs older than the tag): "
         + "; ".join(f"{k} = {v}" for k, v in DESCRIPTIONS.items())
         + "; collision checks, resets, map queries: cumulative counts at the last result, mean over seeds "
-        "('-': not logged). FAILED/KILLED runs are excluded; RUNNING runs count with what they have so far."
+        "('-': not logged). FAILED/KILLED runs are excluded; RUNNING runs count with what they have so far. "
+        "A configuration is one algorithm, config key, env and env config: seeds are pooled only within it."
     )
 
 
+DETAILS_TEXT = (
+    "Details: one row per configuration and success metric it logged. success = what every method "
+    "reports (CO-PILOT and SoRB: the agent following its plan; SAC, HER, PPO: the agent alone); planned = "
+    "the agent following the planner's finest path; direct = the agent alone. A row named 'success = "
+    "planned' (or '= direct') stands for metrics that agree in every figure. Steps to a threshold and "
+    "wall time as above; last evaluation = mean over seeds of the env steps of each seed's last evaluation."
+)
+
+
 def _document(
-    sweep, configs, missing: Missing, axis_name, figs, tree_figs, table_md, frame, notes, provenance
+    sweep, configs, missing: Missing, axes_shown, figs, tree_figs, frame, notes, left_out, provenance, below
 ):
     statuses: dict[str, int] = {}
     for t in sweep.trials:
         statuses[t.status] = statuses.get(t.status, 0) + 1
+    seeds = "; ".join(f"{c.label}: {c.n_seeds}" for c in configs)
     doc: list[tuple] = [("h1", f"Sweep report: {sweep.experiment}"), ("h2", "Provenance"), ("ul", provenance)]
     doc.append(
         (
@@ -450,7 +593,8 @@ def _document(
             [
                 f"sweep: {sweep.sweep_name}; parent run: {sweep.parent_run_id or '(none)'}",
                 f"trials: {len(sweep.trials)} ({', '.join(f'{n} {s}' for s, n in sorted(statuses.items()))}); "
-                f"configurations: {len(configs)}; varying axis: {axis_name}",
+                f"configurations: {len(configs)}; varying: {axes_shown}",
+                f"seeds with evaluations per configuration: {seeds}",
                 f"every run's metrics: {METRICS_CSV}",
             ],
         )
@@ -465,9 +609,18 @@ def _document(
         if not missing.empty() or notes
         else ("p", "Nothing missing: every trial finished with evaluations.")
     )
+    if left_out:
+        doc.append(("h2", "Left out of the figures"))
+        doc.append(("ul", left_out))
     doc.append(("h2", "Summary"))
     doc.append(("p", _summary_text(configs)))
-    doc.append(("table", table_md, frame))
+    doc.append(("table", tables.headline_table(frame)))
+    details = tables.details_table(frame)
+    if details.rows:
+        doc.append(("h3", "Details by success metric"))
+        doc.append(("p", DETAILS_TEXT))
+        doc.append(("table", details))
+    doc += below
     for title, path, *caption in figs + tree_figs:
         doc.append(("h2", title))
         doc.append(("img", path.name, title))
@@ -480,42 +633,47 @@ def _to_markdown(doc) -> str:
     out = []
     for block in doc:
         kind = block[0]
-        if kind == "h1":
-            out.append(f"# {block[1]}\n")
-        elif kind == "h2":
-            out.append(f"## {block[1]}\n")
+        if kind in HEADINGS:
+            out.append(f"{'#' * HEADINGS[kind]} {block[1]}\n")
         elif kind == "p":
             out.append(block[1] + "\n")
         elif kind == "ul":
             out.append("\n".join(f"- {item}" for item in block[1]) + "\n")
         elif kind == "table":
-            out.append(block[1])
+            out.append(block[1].markdown())
         elif kind == "img":
             out.append(f"![{block[2]}]({block[1]})\n")
     return "\n".join(out)
+
+
+HEADINGS = {"h1": 1, "h2": 2, "h3": 3}
+# Tables fit the page: small type, the full width, cells that wrap between words (a long word breaks only
+# where it would overflow).
+HTML_STYLE = (
+    "body{font-family:sans-serif;max-width:1200px;margin:auto;padding:0 12px;line-height:1.4}"
+    "table{border-collapse:collapse;font-size:12px;width:100%;table-layout:auto;margin:8px 0 16px}"
+    "td,th{border:1px solid #ccc;padding:3px 6px;vertical-align:top;overflow-wrap:break-word}"
+    "th{background:#f2f2f2;text-align:left;font-weight:600}"
+    "tr:nth-child(even) td{background:#fafafa}"
+    "p,li{font-size:14px}img{max-width:100%;height:auto}"
+)
 
 
 def _to_html(doc, title: str) -> str:
     body = []
     for block in doc:
         kind = block[0]
-        if kind in ("h1", "h2", "p"):
+        if kind in HEADINGS or kind == "p":
             body.append(f"<{kind}>{html.escape(block[1])}</{kind}>")
         elif kind == "ul":
             body.append("<ul>" + "".join(f"<li>{html.escape(i)}</li>" for i in block[1]) + "</ul>")
         elif kind == "table":
-            body.append(block[2].to_html(index=False, na_rep="-", float_format=lambda x: f"{x:.4g}"))
+            body.append(block[1].html())
         elif kind == "img":
-            body.append(
-                f'<img src="{html.escape(block[1])}" alt="{html.escape(block[2])}" style="max-width:100%">'
-            )
-    style = (
-        "body{font-family:sans-serif;max-width:1200px;margin:auto}table{border-collapse:collapse;font-size:12px}"
-        "td,th{border:1px solid #ccc;padding:3px 6px}"
-    )
+            body.append(f'<img src="{html.escape(block[1])}" alt="{html.escape(block[2])}">')
     return (
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-        f"<style>{style}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+        f"<style>{HTML_STYLE}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
     )
 
 

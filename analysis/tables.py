@@ -1,16 +1,20 @@
-"""The per-configuration summary table, as a pandas DataFrame, CSV (full precision, one number per
-column) and Markdown (rounded, each cell saying what it is: "IQM x [95% CI a, b]" from 5 seeds on,
-"mean x, range over n seeds: [a, b]" below; no `tabulate` dependency), and the probability-of-improvement
-table of CO-PILOT's default over the best other method.
+"""The per-configuration summary tables, as a pandas DataFrame, CSV (full precision, one number per
+column) and Markdown / HTML (`Table`: rounded, readable headers, each cell saying what it is: "IQM x [95% CI
+a, b]" from 5 seeds on, "mean x, range over n seeds: [a, b]" below; no `tabulate` dependency), and the
+probability-of-improvement table of CO-PILOT's default over the best other method.
 
-Headline figures are final success (each seed's last evaluation) and the normalised area under the
-success curve; never the best evaluation. Beside them, what each configuration used: env steps and its
-privileges (copilot_ray.privileges), named and counted.
+Two tables, so that each fits a page: the headline (`headline_table`: configuration, seeds, privileges, env
+steps and privilege counts, final test success and its area under the curve, the success every method
+reports) and the details (`details_table`: one row per configuration and success metric, the planned /
+direct pair where an algorithm has it, steps to thresholds, wall time). Headline figures are final success
+(each seed's last evaluation) and the normalised area under the success curve; never the best evaluation.
 """
 
 from __future__ import annotations
 
+import html
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
@@ -107,8 +111,38 @@ def shown_metrics(frame: pd.DataFrame) -> list[str]:
     return [s for s in SHORT.values() if (frame[f"{s}_n_seeds"] > 0).any()] if len(frame) else []
 
 
-def markdown(frame: pd.DataFrame) -> str:
-    shorts = shown_metrics(frame)
+@dataclass
+class Table:
+    """A table as the report shows it: readable headers, formatted cells; Markdown and HTML."""
+
+    header: list[str]
+    rows: list[list[str]] = field(default_factory=list)
+
+    def markdown(self) -> str:
+        lines = ["| " + " | ".join(self.header) + " |", "|" + "---|" * len(self.header)]
+        lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in self.rows]
+        return "\n".join(lines) + "\n"
+
+    def html(self) -> str:
+        head = "".join(f"<th>{html.escape(h)}</th>" for h in self.header)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in self.rows
+        )
+        return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def headline_short(frame: pd.DataFrame) -> str:
+    """The success the headline shows: `success` (what every method reports), `planned` for older runs."""
+    shown = shown_metrics(frame)
+    return "success" if "success" in shown or not shown else shown[0]
+
+
+def headline_table(frame: pd.DataFrame) -> Table:
+    """One row per configuration: what it used (env steps, privileges and their counts) and its final
+    test success and success AUC (`headline_short`)."""
+    short = headline_short(frame)
+    what = "" if short == "success" else f" ({short})"
+    success = bool(shown_metrics(frame))  # planners alone have none: no columns of dashes
     header = [
         "configuration",
         "seeds",
@@ -118,23 +152,67 @@ def markdown(frame: pd.DataFrame) -> str:
         "resets",
         "map queries",
     ]
-    for short in shorts:
-        header += [f"{short} final", f"{short} AUC"]
-        header += [f"{short} steps to {thr:g} (seeds)" for thr in THRESHOLDS]
-    header.append("wall time (mean)")
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    table = Table(header + ([f"final test success{what}", f"test success AUC{what}"] if success else []))
     for _, r in frame.iterrows():
         cells = [str(r["configuration"]), str(r["n_seeds"]), str(r["privileges"]), _steps(r["env_steps"])]
         cells += [_steps(r[name]) for name in COUNTS.values()]
-        for short in shorts:
+        if success:
             cells += [_estimate(r, f"{short}_final"), _estimate(r, f"{short}_auc")]
+        table.rows.append(cells)
+    return table
+
+
+def details_table(frame: pd.DataFrame) -> Table:
+    """One row per configuration and success metric it has (success; planned and direct where it has
+    them): final, AUC, env steps to each threshold (seeds that reached it), the step of the last
+    evaluation, wall time. A metric that equals another in every figure is one row ("success = planned")."""
+    table = Table(
+        [
+            "configuration",
+            "metric",
+            "final",
+            "AUC",
+            *(f"env steps to {thr:g} (seeds)" for thr in THRESHOLDS),
+            "last evaluation (env steps)",
+            "wall time (mean)",
+        ]
+    )
+    shorts = shown_metrics(frame)
+    for _, r in frame.iterrows():
+        names: dict[str, str] = {}  # metric shown -> its name in the row
+        for s in (s for s in shorts if r[f"{s}_n_seeds"] > 0):
+            kept = next((k for k in names if _same(r, k, s)), None)
+            if kept is None:
+                names[s] = s
+            else:  # e.g. CO-PILOT's success is its planned success: one row "success = planned"
+                names[kept] += f" = {s}"
+        for s, name in names.items():
+            cells = [str(r["configuration"]), name, _estimate(r, f"{s}_final"), _estimate(r, f"{s}_auc")]
             for thr in THRESHOLDS:
                 cells.append(
-                    f"{_steps(r[f'{short}_steps_to_{thr:g}'])} ({r[f'{short}_seeds_reaching_{thr:g}']}/{r['n_seeds']})"
+                    f"{_steps(r[f'{s}_steps_to_{thr:g}'])} ({r[f'{s}_seeds_reaching_{thr:g}']}/{r['n_seeds']})"
                 )
-        cells.append(_duration(r["wall_time_s_mean"]))
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n"
+            cells += [_steps(r[f"{s}_final_env_steps"]), _duration(r["wall_time_s_mean"])]
+            table.rows.append(cells)
+    return table
+
+
+def _same(r, a: str, b: str) -> bool:
+    """Whether metrics `a` and `b` of one row agree in every figure the tables show."""
+    cols = ["n_seeds", "final", "final_low", "final_high", "auc", "auc_low", "auc_high", "final_env_steps"]
+    cols += [f"steps_to_{thr:g}" for thr in THRESHOLDS] + [f"seeds_reaching_{thr:g}" for thr in THRESHOLDS]
+    return all(_equal(r[f"{a}_{c}"], r[f"{b}_{c}"]) for c in cols)
+
+
+def _equal(x, y) -> bool:
+    if isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y):
+        return True
+    return bool(x == y)
+
+
+def markdown(frame: pd.DataFrame) -> str:
+    """summary.md: the headline table, then the details table."""
+    return headline_table(frame).markdown() + "\n" + details_table(frame).markdown()
 
 
 def _duration(seconds: float) -> str:
@@ -169,10 +247,12 @@ def improvement_frame(
     return pd.DataFrame(rows)
 
 
-def improvement_markdown(frame: pd.DataFrame) -> str:
-    header = ["CO-PILOT (default)", "best other method", "P(final success higher)", "P(AUC higher)"]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+def improvement_table(frame: pd.DataFrame) -> Table:
+    table = Table(["CO-PILOT (default)", "best other method", "P(final success higher)", "P(AUC higher)"])
     for _, r in frame.iterrows():
-        cells = [str(r["copilot"]), str(r["other"]), str(r["p_final_text"]), str(r["p_auc_text"])]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n"
+        table.rows.append([str(r["copilot"]), str(r["other"]), str(r["p_final_text"]), str(r["p_auc_text"])])
+    return table
+
+
+def improvement_markdown(frame: pd.DataFrame) -> str:
+    return improvement_table(frame).markdown()

@@ -517,9 +517,9 @@ def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
 
 
 def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_path):
-    """CO-PILOT (planned, direct, success) against PPO (success, direct only), from two stores
-    (--also-from): the table's success column is each method's headline, and the Fig. 2a / 4a figures
-    are drawn; a store given twice is refused."""
+    """CO-PILOT (planned, direct, success) against PPO (success, direct only) on the Ant maze, from two
+    stores (--also-from): the table's success column is each method's headline, the by-method figures
+    and the Ant maze's return (paper Fig. 2d) are drawn; a store given twice is refused."""
     import mlflow
     from mlflow.entities import Metric
 
@@ -540,7 +540,7 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
                 SWEEP_TAG: f"b_{algorithm}",
                 CONFIG_KEY_TAG: "default",
                 ALGORITHM_TAG: algorithm,
-                ENV_TAG: "maze-point",
+                ENV_TAG: "ant-maze",
                 SEED_TAG: seed,
             }
             rid = client.create_run(exp_id, tags=tags).info.run_id
@@ -562,11 +562,17 @@ def test_baselines_get_the_by_method_figures_and_the_common_success_column(tmp_p
     assert frame.loc["algorithm=ppo", "success_final"] == pytest.approx(0.2)
     assert frame.loc["algorithm=copilot", "success_final"] == pytest.approx(0.85)
     assert np.isnan(frame.loc["algorithm=ppo", "planned_final"])  # PPO has no plan
-    # the Ant maze's return (Fig. 2d) from both, the walker's mastered share (Fig. 3) where logged
+    # the Ant maze's return (Fig. 2d) from both, the walker's mastered share where logged (not the
+    # walker here: not labelled Fig. 3)
     names = ("success_by_method.png", "final_success_by_method.png", "return_vs_env_steps.png")
+    report = (out / "report.md").read_text()
     for name in (*names, "mastered_vs_env_steps.png"):
         assert (out / name).stat().st_size > 10_000
-        assert name in (out / "report.md").read_text()
+        assert name in report
+    assert "## Return against environment steps on the Ant maze (paper Fig. 2d)" in report
+    assert (
+        "Fig. 3" not in report and "Fig. 4a" not in report and "Fig. 2a" not in report
+    )  # maze and walker figures
     assert main([*argv, "--also-from", uris["copilot"]]) == 2  # the same runs twice
 
 
@@ -847,3 +853,213 @@ def test_provenance_block_and_metrics_export(honest, store):
     assert rows.value.iloc[-1] == pytest.approx(HONEST_SUCCESS["copilot"][4][-1])
     assert {"copilot/eval/fresh", "copilot/privileges/resets", ENV_STEPS} <= set(csv.metric)
     assert (store["out"] / "metrics.csv.gz").is_file()
+
+
+# ------------------------------------------------------------------- configurations are not seeds
+# Two sweeps with the same variant names on two layouts (as sweeps/choose_defaults.yaml runs them): the
+# runs' config keys and axis tags agree, only their env config (param env.config.layout) tells them apart.
+LAYOUT_SWEEPS = {"four_rooms": "four-rooms", "u_maze": "u-maze"}
+LAYOUT_SUCCESS = {  # (layout, variant) -> each seed's success at STEPS[:3]
+    ("four-rooms", "continue"): ([0.1, 0.2, 0.3], [0.1, 0.3, 0.5]),
+    ("four-rooms", "abort_layer"): ([0.0, 0.1, 0.2], [0.0, 0.2, 0.4]),
+    ("u-maze", "continue"): ([0.5, 0.7, 0.9], [0.4, 0.6, 0.8]),
+    ("u-maze", "abort_layer"): ([0.3, 0.4, 0.5], [0.2, 0.3, 0.4]),
+}
+
+
+def _layout_store(root: Path, variants=("continue", "abort_layer")) -> str:
+    """Experiment "layouts": one sweep run per layout, `variants` x seeds 0 and 1 in each; success,
+    planned (= success), direct, return (= success: R = 1 on the maze) and the planner's path success."""
+    import mlflow
+    from mlflow.entities import Metric, Param
+
+    from copilot_ray.keys import (
+        ENV_PARAM,
+        EVAL_RETURN,
+        EVAL_SUCCESS,
+        PATH_SUCCESS,
+        PRIVILEGES_TAG,
+        REACHED_PLANNED,
+        VARIANT_TAG,
+    )
+
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("layouts", artifact_location=(root / "art").as_uri())
+    now = int(time.time() * 1000)
+    for sweep, layout in LAYOUT_SWEEPS.items():
+        pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: sweep}).info.run_id
+        for variant in variants:
+            for seed, values in enumerate(LAYOUT_SUCCESS[(layout, variant)]):
+                tags = {
+                    PARENT_TAG: pid,
+                    ROLE_TAG: ROLE_TRIAL,
+                    SWEEP_TAG: sweep,
+                    CONFIG_KEY_TAG: f"variant={variant}",  # the same keys in both sweeps
+                    ALGORITHM_TAG: "copilot",
+                    ENV_TAG: "maze-point",
+                    K_TAG: "5",
+                    VARIANT_TAG: variant,
+                    PRIVILEGES_TAG: "collision_checks",
+                    SEED_TAG: str(seed),
+                }
+                rid = client.create_run(
+                    exp_id, run_name=f"variant={variant}-seed{seed}", tags=tags
+                ).info.run_id
+                params = {ENV_PARAM: "maze-point", "env.config.layout": layout, "seed": str(seed)}
+                params["after_failure"] = variant
+                steps = STEPS[:3]
+                ms = [Metric(ENV_STEPS, s, now, s) for s in steps]
+                for key in (EVAL_SUCCESS, SUCCESS_PLANNED, EVAL_RETURN, REACHED_PLANNED, PATH_SUCCESS):
+                    ms += [Metric(key, v, now, s) for s, v in zip(steps, values, strict=True)]
+                ms += [Metric(SUCCESS_DIRECT, v / 2, now, s) for s, v in zip(steps, values, strict=True)]
+                client.log_batch(rid, metrics=ms, params=[Param(k, v) for k, v in params.items()])
+                client.set_terminated(rid, "FINISHED")
+    return uri
+
+
+@pytest.fixture(scope="module")
+def layouts(tmp_path_factory):
+    root = tmp_path_factory.mktemp("layouts")
+    uri = _layout_store(root)
+    out = root / "report"
+    rc = main(["layouts", "--tracking-uri", uri, "--parent-run", "all", "--out", str(out), "--no-log"])
+    return {"uri": uri, "out": out, "rc": rc, "frame": pd.read_csv(out / "summary.csv")}
+
+
+def test_two_configurations_of_two_seeds_each_show_n_2(tmp_path):
+    """The issue's case: two configurations (one variant on two layouts) x two seeds; the config keys and
+    axis tags agree, the env config does not. Each configuration has n = 2, never one with n = 4."""
+    from analysis.aggregate import summarise
+    from analysis.load import load_sweep
+
+    uri = _layout_store(tmp_path, variants=("continue",))
+    out = tmp_path / "report"
+    assert main(["layouts", "--tracking-uri", uri, "--parent-run", "all", "--out", str(out), "--no-log"]) == 0
+    frame = pd.read_csv(out / "summary.csv").set_index("configuration")
+    assert sorted(frame.index) == ["layout=four-rooms", "layout=u-maze"]
+    assert list(frame["n_seeds"]) == [2, 2]
+    four, u = (LAYOUT_SUCCESS[(layout, "continue")] for layout in ("four-rooms", "u-maze"))
+    assert frame.loc["layout=four-rooms", "success_final"] == pytest.approx(np.mean([v[-1] for v in four]))
+    assert frame.loc["layout=u-maze", "success_final"] == pytest.approx(np.mean([v[-1] for v in u]))
+    report = (out / "report.md").read_text()
+    assert "configurations: 2; varying: layout" in report
+    assert "| layout=four-rooms | 2 |" in report and "| layout=u-maze | 2 |" in report
+    assert "range over 4 seeds" not in report
+    configs, _ = summarise(load_sweep(uri, "layouts", "all"), reps=100)
+    assert [(c.label, c.n_seeds) for c in configs] == [("layout=four-rooms", 2), ("layout=u-maze", 2)]
+
+
+def test_env_config_is_an_axis(layouts):
+    """layout x variant x 2 seeds: four configurations labelled by both, n = 2 each; the planners' table
+    keeps them apart too."""
+    from analysis.load import Sweep, load_sweep
+
+    assert layouts["rc"] == 0
+    sweep = load_sweep(layouts["uri"], "layouts", "all")
+    assert sweep.axes() == ["env.config.layout", "variant"]
+    frame = layouts["frame"].set_index("configuration")
+    expected = {f"layout={layout}, variant={variant}" for layout, variant in LAYOUT_SUCCESS}
+    assert set(frame.index) == expected and set(frame["n_seeds"]) == {2}
+    row = frame.loc["layout=u-maze, variant=abort_layer"]
+    assert row["success_final"] == pytest.approx(np.mean([0.5, 0.4]))
+    planners = pd.read_csv(layouts["out"] / "planners.csv")
+    assert len(planners) == 4 and set(planners["n_seeds"]) == {2}
+    assert set(planners["env"]) == {"maze-point, layout=four-rooms", "maze-point, layout=u-maze"}
+    assert set(planners["method"]) == {"copilot (variant=continue)", "copilot (variant=abort_layer)"}
+    # a layout file the sweep resolved to a path is named by its file
+    trial = sweep.trials[0]
+    trial.params["env.config.layout"] = "/somewhere/mazes/spiral.txt"
+    assert Sweep("u", "e", "1", None, "s", sweep.trials).axes() == ["env.config.layout", "variant"]
+    from analysis.aggregate import config_label
+
+    assert config_label(trial, ["env.config.layout", "variant"]).startswith("layout=spiral, variant=")
+
+
+def test_one_configuration_in_two_sweeps_is_split_not_pooled():
+    """Same config key, same params, seeds 0 and 1 in each of two sweeps: a seed repeats, so the runs are
+    two configurations (by sweep), never 'n = 4' with each seed twice."""
+    from analysis.aggregate import config_label
+    from analysis.load import Sweep, Trial, configurations
+
+    def trial(sweep, parent, seed):
+        tags = {ALGORITHM_TAG: "copilot", SWEEP_TAG: sweep, PARENT_TAG: parent, SEED_TAG: seed}
+        return Trial(f"{sweep}{seed}", "r", "FINISHED", "default", seed, tags)
+
+    trials = [trial("a", "p1", "0"), trial("a", "p1", "1"), trial("b", "p2", "0"), trial("b", "p2", "1")]
+    groups = list(configurations(trials).values())
+    assert [[t.run_id for t in g] for g in groups] == [["a0", "a1"], ["b0", "b1"]]
+    sweep = Sweep("u", "e", "1", None, "s", trials)
+    assert sweep.axes() == ["config_key", "sweep"]
+    assert config_label(trials[2], sweep.axes()) == "default, sweep=b"
+    # seeds 0, 1 and 2, 3: no seed repeats, one configuration of four seeds
+    trials[2].seed, trials[3].seed = "2", "3"
+    assert len(configurations(trials)) == 1
+
+
+def test_headline_table_is_compact_and_success_is_shown_once(layouts):
+    """The headline: configuration, seeds, privileges, env steps and counts, final test success and its
+    AUC (nine columns); the per-metric details in a second table, where CO-PILOT's success (= planned) is
+    one row, not two."""
+    md = (layouts["out"] / "summary.md").read_text()
+    headline, details = md.split("\n\n")
+    header = headline.splitlines()[0]
+    assert header == (
+        "| configuration | seeds | privileges | env steps | collision checks | resets | map queries "
+        "| final test success | test success AUC |"
+    )
+    assert "planned" not in headline and "steps to" not in headline
+    rows = [r for r in details.splitlines()[2:] if r.startswith("| layout=u-maze, variant=continue |")]
+    assert [r.split(" | ")[1] for r in rows] == ["success = planned", "direct"]
+    assert "| env steps to 0.5 (seeds) |" in details.splitlines()[0]
+
+
+def test_report_html_table_has_readable_headers_and_fits(layouts):
+    html = (layouts["out"] / "report.html").read_text()
+    assert "<th>final test success</th>" in html and "<th>env steps to 0.5 (seeds)</th>" in html
+    assert "success_final" not in html and "n_seeds" not in html  # no raw CSV column names
+    assert "overflow-wrap:break-word" in html and "width:100%" in html
+
+
+def test_maze_return_is_left_out_and_the_report_says_why(layouts):
+    """On the maze the return (R = 1) repeats a rate the report already has: no figure, a line why, and
+    no 'paper Fig. 2d' anywhere."""
+    out = layouts["out"]
+    assert not (out / "return_vs_env_steps.png").exists()
+    report = (out / "report.md").read_text()
+    left = report.split("## Left out of the figures")[1].split("## Summary")[0]
+    assert "return_vs_env_steps.png leaves out every configuration" in left
+    assert "it equals reached_planned in every run (task reward R = 1)" in left
+    assert "mastered_vs_env_steps.png: no run logged copilot/eval/mastered" in left
+    # no RRT* here: the planners' figure has no ratio rows, and says so
+    assert "planners_paths.png: no 'path length / RRT*'s (tasks both solved)' row" in left
+    assert "Fig. 2d" not in report  # the maze is not the Ant maze
+    assert "Fig. 4" not in report  # no RRT*, so not the paper's planners figure
+
+
+def test_figures_without_data_are_not_drawn(tmp_path):
+    """A store of the common success only (no planned / direct): no planned/direct figures with empty
+    panels, and the report names them."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("plain", artifact_location=(tmp_path / "art").as_uri())
+    now = int(time.time() * 1000)
+    for seed in ("0", "1"):
+        tags = {ROLE_TAG: ROLE_TRIAL, CONFIG_KEY_TAG: "default", SEED_TAG: seed, ALGORITHM_TAG: "sac"}
+        rid = client.create_run(exp_id, tags=tags).info.run_id
+        client.log_batch(rid, metrics=[Metric(EVAL_SUCCESS, 0.1 * i, now, s) for i, s in enumerate(STEPS)])
+        client.set_terminated(rid, "FINISHED")
+    out = tmp_path / "report"
+    assert main(["plain", "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
+    assert not list(out.glob("*.png"))
+    report = (out / "report.md").read_text()
+    assert (
+        "success_vs_env_steps.png: not drawn: no configuration logged success_planned / success_direct."
+        in report
+    )
+    assert "final_success.png: not drawn" in report and "return_vs_env_steps.png: no run logged" in report
