@@ -595,8 +595,8 @@ def test_variants_build_their_configs():
     paper = build_algorithm_config({"variant": "paper", "repetitions": 1, "seed": 0}, spec)
     base = build_algorithm_config({"variant": "base", "repetitions": 1, "seed": 0}, spec)
     assert short.tau_max == 5 and base.tau_max == 20 and paper.tau_max == 20  # config wins over the preset
-    assert paper.preset == "paper_literal" and paper.after_failure == "continue"
-    assert base.after_failure == "restart"
+    assert paper.preset == "paper_literal" and paper.subtask_reward == "halving"
+    assert base.subtask_reward == "uniform"
     with pytest.raises(SpecError, match=r"trial.variant: 'nope' is invalid"):
         build_algorithm_config({"variant": "nope", "seed": 0}, spec)
 

@@ -14,7 +14,7 @@ def test_preset_flag_sets_the_readings_and_explicit_flags_override_it():
     assert config.preset == "paper_literal" and config.after_failure == "continue"
     assert config.tau_max == 40 and config.subtask_reward == "halving"
     default = train.build_config(train.parse_args([]))
-    assert default.preset is None and default.after_failure == "restart" and default.tau_max == 25
+    assert default.preset is None and default.subtask_reward == "uniform" and default.tau_max == 25
 
 
 def test_every_setting_but_the_schedule_fields_is_a_flag_with_its_rule_in_the_help():
