@@ -36,3 +36,12 @@ def tracking_uri_problem(uri: str) -> str | None:
     elif scheme in ("http", "https") and not rest.split("/")[0]:
         return f"names no server; use {scheme}://<host>[:port]"
     return None
+
+
+def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> str:
+    """How to look at a store's runs in MLflow's UI. MLflow 3's UI opens an experiment on its GenAI pages
+    (whatever the experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""
+    page = f"#/experiments/{experiment_id}?workflowType=machine_learning" if experiment_id else ""
+    if tracking_uri.startswith(("http://", "https://")):
+        return f"open {tracking_uri.rstrip('/')}/{page}"
+    return f"mlflow ui --backend-store-uri {tracking_uri}, then open http://127.0.0.1:5000/{page}"

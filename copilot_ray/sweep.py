@@ -66,7 +66,7 @@ from copilot_ray.keys import (
 )
 from copilot_ray.spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.spec.estimate import total_wall_time_line
-from copilot_ray.store import tracking_uri_problem
+from copilot_ray.store import tracking_uri_problem, ui_hint
 from copilot_ray.tracking import config_key, trial_flat
 
 EXIT_INTERRUPTED = 130
@@ -306,7 +306,7 @@ def run_sweep(
     own_ray = runtime.start_ray(address)
     exp_id, parent_id = open_tracking(run)
     rows, interrupted, tune_paths = run_experiments(run, runtime, exp_id, parent_id, extra_callbacks)
-    outcome = report_sweep(run, rows, interrupted, tune_paths, parent_id, wall=time.time() - started)
+    outcome = report_sweep(run, rows, interrupted, tune_paths, parent_id, wall=time.time() - started, exp_id=exp_id)
     if own_ray:
         runtime.stop_ray()
     return outcome
@@ -474,7 +474,13 @@ def _tuner(run: SweepRun, runtime, index, exp_name, seed, exp_id, parent_id, ext
 
 
 def report_sweep(
-    run: SweepRun, rows: list[TrialRow], interrupted: bool, tune_paths: list[str], parent_id: str, wall: float
+    run: SweepRun,
+    rows: list[TrialRow],
+    interrupted: bool,
+    tune_paths: list[str],
+    parent_id: str,
+    wall: float,
+    exp_id: str | None = None,
 ) -> SweepOutcome:
     """Ends the parent run with the summary table and prints it, where the results are and what next."""
     spec, uri = run.spec, run.uri
@@ -493,10 +499,7 @@ def report_sweep(
     _say("")
     _say(f"Tune results: {', '.join(tune_paths)}")
     _say(f"MLflow store: {uri} (experiment {spec.experiment!r}, parent run {parent_id})")
-    if uri.startswith(("http://", "https://")):
-        _say(f"  the MLflow UI is the server's own page: {uri}")
-    else:
-        _say(f"  mlflow ui --backend-store-uri {uri}")
+    _say(f"  {ui_hint(uri, exp_id)}")
     _say(f"Report: {report_command(spec, uri)}")
     if interrupted:
         _say(f"interrupted: state saved. Resume with: python -m copilot_ray.sweep {spec.source} --resume")

@@ -25,7 +25,7 @@ from copilot_ray.algorithms.registry import RunContext, get_algorithm
 from copilot_ray.envs import UnknownEnvError, make
 from copilot_ray.settings import problems
 from copilot_ray.spec import load_yaml_value
-from copilot_ray.store import default_tracking_uri, tracking_uri_problem
+from copilot_ray.store import default_tracking_uri, tracking_uri_problem, ui_hint
 
 ALGORITHM = "copilot"
 # The flags of settings whose names changed, so that old command lines keep working.
@@ -35,7 +35,9 @@ _ALIASES = {"eval_num_tasks": ["--eval-tasks"]}
 RESULTS = Path("results") / "train"  # the default store and the runs' checkpoint folders, under the cwd
 EXAMPLE = """example (about an hour on two cores; --help lists every setting):
   python -m copilot_ray.train --layout four-rooms --preset paper_literal --stop-env-steps 300000 --seed 1
-  mlflow ui --backend-store-uri sqlite:///$PWD/results/train/mlflow.db"""
+  mlflow ui --backend-store-uri sqlite:///$PWD/results/train/mlflow.db
+  (then http://127.0.0.1:5000/#/experiments/<id>?workflowType=machine_learning: the runs, not the GenAI
+  pages MLflow 3's UI opens on by default)"""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -225,6 +227,8 @@ def main(argv: list[str] | None = None) -> int:
     from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
 
     name = run_name(args, config)
+    while args.checkpoint_dir is None and (RESULTS / name).exists():  # two runs started in one second
+        name += "+"
     checkpoint_dir = Path(args.checkpoint_dir or RESULTS / name).resolve()
     tracking_uri = None if args.no_tracking else args.tracking_uri or default_tracking_uri(RESULTS)
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
@@ -281,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
             if trees.is_dir():
                 run.log_artifacts(trees, keys.TREES_DIR)
             run.end(status)
-            print(f"compare runs: mlflow ui --backend-store-uri {tracking_uri}")
+            print(f"compare runs: {ui_hint(tracking_uri, run.run.info.experiment_id)}")
         algo.stop()
         ray.shutdown()
     return 0 if status == "FINISHED" else 130
