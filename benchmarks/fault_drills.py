@@ -143,7 +143,7 @@ def audit(spec_path: Path, iterations: int, failing_seeds: tuple[str, ...] = ())
         TRAINING_ITERATION,
         TRIAL_ID_TAG,
     )
-    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep_spec import load_spec
 
     spec = load_spec(spec_path)
     client = mlflow.MlflowClient(spec.tracking.uri)
@@ -295,7 +295,7 @@ def drill_runner(directory: Path, iterations: int) -> dict[str, int]:
     import mlflow
 
     from copilot_ray.keys import AGENT_SUBTASKS_LOST
-    from copilot_ray.spec import load_spec
+    from copilot_ray.sweep_spec import load_spec
 
     config = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())["config"]
     # one sub-task per sampling round: many rounds per iteration, so the kill lands inside one

@@ -48,7 +48,7 @@ ENVS = {
 def run(name: str, seed: int, env_steps: int | None) -> list[tuple[int, float, float]]:
     from copilot_ray.algorithms.hrl.algorithm import HRL
     from copilot_ray.algorithms.hrl.config import HRLConfig
-    from copilot_ray.algorithms.registry import RunContext
+    from copilot_ray.registry import RunContext
 
     env_config, values, budget = ENVS[name]
     budget = env_steps or budget

@@ -60,7 +60,7 @@ def parse_sets(items: list[str]) -> dict:
     """`--set KEY=VALUE` items as setting values (YAML values, as in a spec); exits naming a bad one."""
     from copilot_ray.algorithms.copilot.settings import SETTINGS
     from copilot_ray.settings import problems
-    from copilot_ray.spec import load_yaml_value
+    from copilot_ray.sweep_spec import load_yaml_value
 
     out = {}
     for item in items:
@@ -76,7 +76,7 @@ def parse_sets(items: list[str]) -> dict:
 
 def build(preset: str, args, seed: int, sets: dict):
     from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
-    from copilot_ray.algorithms.registry import RunContext
+    from copilot_ray.registry import RunContext
 
     run = RunContext("maze-point", {"layout": args.layout}, seed=seed, num_cpus_for_main_process=1)
     values = {

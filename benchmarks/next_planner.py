@@ -36,13 +36,13 @@ from rrt_star import rrt_on_test_tasks  # noqa: E402 - benchmarks/rrt_star.py, n
 from copilot_ray import keys  # noqa: E402
 from copilot_ray.algorithms.next.config import NEXTConfig  # noqa: E402
 from copilot_ray.algorithms.next.settings import SETTINGS  # noqa: E402
-from copilot_ray.algorithms.registry import RunContext  # noqa: E402
 from copilot_ray.planning.next_planner import (  # noqa: E402
     NEXTPlanner,
     padded_paths,
     rrt_star_demonstrations,
 )
 from copilot_ray.planning.path_metrics import RRTReference, path_metrics, score_paths  # noqa: E402
+from copilot_ray.registry import RunContext  # noqa: E402
 from copilot_ray.settings import problems  # noqa: E402
 
 # Set by --tasks and --rrt-time-limit instead.

@@ -2,7 +2,7 @@
 
     python -m copilot_ray.sweep SPEC.yaml [--check] [--resume] [--address ADDR] [--tracking-uri URI]
 
-* The spec is validated first (``copilot_ray.spec.load_specs``): a bad spec prints one line per problem
+* The spec is validated first (``copilot_ray.sweep_spec.load_specs``): a bad spec prints one line per problem
   (file, key path, value, why) on stderr and exits 2 before Ray is imported. A file of several specs
   (YAML documents, e.g. one per algorithm) is validated whole, then its parts run one after another. ``--check`` prints the plan
   (configurations x seeds, trials, budget) and exits 0, also without Ray.
@@ -64,9 +64,9 @@ from copilot_ray.keys import (
     result_value,
     validation_key,
 )
-from copilot_ray.spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
-from copilot_ray.spec.estimate import total_wall_time_line
 from copilot_ray.store import tracking_uri_problem, ui_hint
+from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
+from copilot_ray.sweep_spec.estimate import total_wall_time_line
 from copilot_ray.tracking import config_key, trial_flat
 
 EXIT_INTERRUPTED = 130
@@ -525,7 +525,7 @@ def _say(line: str) -> None:
 # ================================================================================================ CLI
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m copilot_ray.sweep", description=__doc__.split("\n\n")[0])
-    p.add_argument("spec", help="sweep spec YAML (format: copilot_ray/spec/__init__.py; examples: sweeps/)")
+    p.add_argument("spec", help="sweep spec YAML (format: copilot_ray/sweep_spec/__init__.py; examples: sweeps/)")
     p.add_argument("--check", action="store_true", help="validate and print the plan; start nothing")
     p.add_argument("--resume", action="store_true", help="continue an interrupted or failed sweep")
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")

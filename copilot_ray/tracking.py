@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 import yaml
 
-from copilot_ray.algorithms.registry import get_algorithm
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     ALPHA_SCHEDULE_TAG,
@@ -55,7 +54,8 @@ from copilot_ray.keys import (
     result_value,
 )
 from copilot_ray.privileges import tag_value
-from copilot_ray.spec import build_algorithm_config, load_spec
+from copilot_ray.registry import get_algorithm
+from copilot_ray.sweep_spec import build_algorithm_config, load_spec
 
 MLFLOW_PARAM_LIMIT = 500  # MLflow rejects longer param values
 

@@ -21,11 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from copilot_ray import keys
-from copilot_ray.algorithms.registry import RunContext, get_algorithm
 from copilot_ray.envs import UnknownEnvError, make
+from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
-from copilot_ray.spec import load_yaml_value
 from copilot_ray.store import default_tracking_uri, tracking_uri_problem, ui_hint
+from copilot_ray.sweep_spec import load_yaml_value
 
 ALGORITHM = "copilot"
 # The flags of settings whose names changed, so that old command lines keep working.

@@ -18,7 +18,6 @@ from ray import tune
 from ray.tune import Callback
 
 from copilot_ray.algorithms.copilot.algorithm import CoPilot
-from copilot_ray.algorithms.registry import get_algorithm
 from copilot_ray.keys import (
     ENV_STEPS,
     EVAL_FRESH,
@@ -37,7 +36,8 @@ from copilot_ray.keys import (
     validation_key,
     validation_metrics,
 )
-from copilot_ray.spec import (
+from copilot_ray.registry import get_algorithm
+from copilot_ray.sweep_spec import (
     build_algorithm_config,
     default_point,
     optuna_define_by_run,

@@ -225,8 +225,8 @@ def test_sorb_and_hrl_run_on_the_ant_maze(ray_session):
     from copilot_ray import keys
     from copilot_ray.algorithms.hrl.algorithm import HRL
     from copilot_ray.algorithms.hrl.config import HRLConfig
-    from copilot_ray.algorithms.registry import RunContext
     from copilot_ray.algorithms.sorb.algorithm import SoRBConfig
+    from copilot_ray.registry import RunContext
 
     sorb = (
         SoRBConfig()

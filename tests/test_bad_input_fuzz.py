@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from copilot_ray.envs.maze.layouts import LayoutError, parse_layout
-from copilot_ray.spec import SpecError, parse_spec
+from copilot_ray.sweep_spec import SpecError, parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())

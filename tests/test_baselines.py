@@ -137,7 +137,7 @@ def test_ppo_reports_the_common_metric_and_resumes(ray_session, tmp_path):
     ],
 )
 def test_bad_baseline_settings_are_refused_before_anything_runs(tmp_path, kind, setting, value, why):
-    from copilot_ray.spec import SpecError, load_spec
+    from copilot_ray.sweep_spec import SpecError, load_spec
 
     spec = {
         "name": "bad",
@@ -160,8 +160,8 @@ def test_a_baselines_spec_file_runs_every_algorithm_into_one_experiment(ray_sess
     import mlflow
 
     from copilot_ray.keys import ALGORITHM_TAG, ROLE_TAG, ROLE_TRIAL
-    from copilot_ray.spec import load_specs
     from copilot_ray.sweep import main
+    from copilot_ray.sweep_spec import load_specs
 
     common = {
         "experiment": "baselines",

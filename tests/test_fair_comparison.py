@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from copilot_ray import keys
-from copilot_ray.spec import SpecError, format_plan, load_specs, parse_spec
+from copilot_ray.sweep_spec import SpecError, format_plan, load_specs, parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 MAZE = {"id": "maze-point", "config": {"layout": "empty"}}
@@ -94,8 +94,8 @@ def test_search_declared_is_the_algorithms_own_space_and_its_defaults_are_tried_
 
 @pytest.mark.parametrize("algorithm", ["copilot", "sac", "her", "sorb", "ppo"])
 def test_every_compared_algorithm_declares_a_space_whose_ranges_hold_its_defaults(algorithm):
-    from copilot_ray.algorithms.registry import get_algorithm
-    from copilot_ray.spec.plan import default_point
+    from copilot_ray.registry import get_algorithm
+    from copilot_ray.sweep_spec.plan import default_point
 
     entry = get_algorithm(algorithm)
     assert entry.search_space

@@ -36,7 +36,7 @@ FAST = {
 
 def _config(seed=0, **changes):
     from copilot_ray.algorithms.hrl.config import HRLConfig
-    from copilot_ray.algorithms.registry import RunContext
+    from copilot_ray.registry import RunContext
 
     return HRLConfig.from_settings({**FAST, **changes}, RunContext("maze-point", OPEN_MAZE, seed=seed))
 
@@ -185,7 +185,7 @@ def test_the_algorithm_relabels_sampled_offsets_with_its_current_low_level():
     ],
 )
 def test_bad_settings_are_refused_naming_the_key_and_the_value(tmp_path, setting, value, why):
-    from copilot_ray.spec import SpecError, load_spec
+    from copilot_ray.sweep_spec import SpecError, load_spec
 
     spec = {
         "name": "bad",
@@ -303,8 +303,8 @@ def test_a_sweep_runs_it_through_tune_into_mlflow(ray_session, tmp_path, capsys)
     import mlflow
 
     from copilot_ray.keys import ALGORITHM_TAG, ROLE_TAG, ROLE_TRIAL
-    from copilot_ray.spec import load_spec
     from copilot_ray.sweep import main
+    from copilot_ray.sweep_spec import load_spec
 
     spec = {
         "name": "hrl_sweep",

@@ -137,7 +137,7 @@ def test_start_inside_a_wall_is_refused_naming_it():
 
 @pytest.mark.parametrize("env_id", ["maze-rigid", "maze-snake"])
 def test_a_spec_on_a_body_maze_builds_a_copilot_config(env_id):
-    from copilot_ray.spec import build_algorithm_config, parse_spec
+    from copilot_ray.sweep_spec import build_algorithm_config, parse_spec
 
     spec = parse_spec(
         {

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import torch
 
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
 from copilot_ray.planning.next_planner import (
     ConfigSpace,
@@ -19,7 +18,8 @@ from copilot_ray.planning.next_planner import (
     rrt_star_demonstrations,
 )
 from copilot_ray.planning.path_metrics import CountedChecks, score_paths
-from copilot_ray.spec import SpecError, parse_spec
+from copilot_ray.registry import RunContext
+from copilot_ray.sweep_spec import SpecError, parse_spec
 
 # A zigzag corridor (7 x 7 cells, one cell wide): most straight lines between two tasks' ends collide.
 ZIGZAG = ".......\n######.\n.......\n.######\n.......\n######.\n.......\n"

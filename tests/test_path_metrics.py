@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from copilot_ray import keys
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
 from copilot_ray.planning import path_metrics as pm
+from copilot_ray.registry import RunContext
 
 
 @pytest.fixture

@@ -47,9 +47,9 @@ def test_the_readme_shows_each_kind_of_command():
 
 @pytest.mark.parametrize("command", SWEEPS)
 def test_sweep_commands_name_a_valid_spec_and_flags(command):
-    from copilot_ray.spec import load_specs
     from copilot_ray.store import tracking_uri_problem
     from copilot_ray.sweep import parse_args
+    from copilot_ray.sweep_spec import load_specs
 
     args = parse_args(_args(command, "-m copilot_ray.sweep "))
     assert load_specs(ROOT / args.spec)
@@ -60,7 +60,7 @@ def _shipped_stores() -> dict[tuple[str, str], str]:
     """(experiment, store URI as run from the repository's root) -> the spec file that writes it."""
     import os
 
-    from copilot_ray.spec import load_specs
+    from copilot_ray.sweep_spec import load_specs
 
     out = {}
     cwd = os.getcwd()
@@ -88,7 +88,7 @@ def test_report_commands_name_an_experiment_a_shipped_spec_writes_there(command)
 @pytest.mark.parametrize("command", TRAINS)
 def test_train_commands_parse_and_pass_their_checks(command):
     from copilot_ray import train
-    from copilot_ray.algorithms.registry import get_algorithm
+    from copilot_ray.registry import get_algorithm
     from copilot_ray.settings import problems
 
     argv = _args(command, "-m copilot_ray.train")

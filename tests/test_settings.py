@@ -19,9 +19,9 @@ from copilot_ray.algorithms.copilot.settings import (
     defaults,
     render_readme,
 )
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.planning.alpha_schedule import CLOCKS, KINDS, AlphaSchedule
-from copilot_ray.spec import SpecError, parse_spec
+from copilot_ray.registry import RunContext
+from copilot_ray.sweep_spec import SpecError, parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from copilot_ray import keys
-from copilot_ray.spec import (
+from copilot_ray.sweep_spec import (
     SpecError,
     SweepSpec,
     build_algorithm_config,
@@ -383,7 +383,7 @@ def test_rejected_spec_imports_no_ray(tmp_path):
     path.write_text(yaml.safe_dump(spec_with(config__tree_depth=-1)))
     code = (
         "import sys\n"
-        "from copilot_ray.spec import load_spec, SpecError\n"
+        "from copilot_ray.sweep_spec import load_spec, SpecError\n"
         f"try:\n    load_spec({str(path)!r})\nexcept SpecError as e:\n    print('REJECTED', e)\n"
         f"load_spec({str(ROOT / 'sweeps/hpo.yaml')!r})\n"
         "assert 'ray' not in sys.modules, 'ray was imported'\n"

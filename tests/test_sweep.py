@@ -91,8 +91,8 @@ def test_cli_bad_spec_exits_2_naming_the_key_without_ray(tmp_path):
 
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
 def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
-    from copilot_ray.spec import load_specs
     from copilot_ray.sweep import main
+    from copilot_ray.sweep_spec import load_specs
 
     assert main([str(path), "--check"]) == 0
     out = capsys.readouterr().out
@@ -101,8 +101,8 @@ def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
 
 
 def test_existing_results_need_resume(tmp_path):
-    from copilot_ray.spec import load_spec
     from copilot_ray.sweep import SweepError, run_sweep
+    from copilot_ray.sweep_spec import load_spec
 
     spec = load_spec(_smoke_copy(tmp_path))
     (Path(spec.tracking.storage) / spec.name / "tune" / spec.name).mkdir(parents=True)
@@ -112,8 +112,8 @@ def test_existing_results_need_resume(tmp_path):
 
 # ------------------------------------------------------------------------------------- on Ray
 def test_smoke_sweep_is_tracked_in_mlflow(ray_session, tmp_path):
-    from copilot_ray.spec import load_spec
     from copilot_ray.sweep import run_sweep
+    from copilot_ray.sweep_spec import load_spec
 
     spec = load_spec(_smoke_copy(tmp_path))
     outcome = run_sweep(spec)
@@ -182,8 +182,8 @@ def _interrupt_callback():
 
 
 def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path):
-    from copilot_ray.spec import load_spec
     from copilot_ray.sweep import run_sweep
+    from copilot_ray.sweep_spec import load_spec
 
     spec = load_spec(_smoke_copy(tmp_path))
     _InterruptAfterFirstTrial.armed = True
@@ -212,8 +212,8 @@ def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
     """An Optuna sweep killed mid-way continues the same study: no trial lost, none run twice."""
     import optuna
 
-    from copilot_ray.spec import load_spec
     from copilot_ray.sweep import run_sweep, sweep_root
+    from copilot_ray.sweep_spec import load_spec
 
     path = _smoke_copy(tmp_path)
     data = yaml.safe_load(path.read_text())
@@ -256,8 +256,8 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     """RRT* then SGT-PG on two agents (env.id as a list), one MLflow experiment; the second part divides
     by the reference the first one stored."""
     from copilot_ray.keys import ALGORITHM_TAG, ENV_TAG, PATH_LENGTH_VS_RRT, PATH_SUCCESS
-    from copilot_ray.spec import load_specs
     from copilot_ray.sweep import main
+    from copilot_ray.sweep_spec import load_specs
 
     common = {
         "experiment": "planners",

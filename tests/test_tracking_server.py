@@ -58,8 +58,8 @@ def test_sweep_and_report_through_a_tracking_server(ray_session, tmp_path, mlflo
     import mlflow
 
     from analysis.report import main as report_main
-    from copilot_ray.spec import load_spec
     from copilot_ray.sweep import run_sweep
+    from copilot_ray.sweep_spec import load_spec
 
     url, artifacts = mlflow_server
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())

@@ -8,7 +8,7 @@ carries the same number under its own name.
 
 A subclass implements ``start(cfg, env)``, ``iterate() -> (metrics, collision_checks, done)``,
 ``state() -> dict`` and ``restore(state)``; this class turns the trial's flat Tune config into the
-algorithm's config (``copilot_ray.spec.build_algorithm_config``), builds the env, nests the metrics the
+algorithm's config (``copilot_ray.sweep_spec.build_algorithm_config``), builds the env, nests the metrics the
 way an RLlib result nests them, and checkpoints ``state()`` with pickle. Outside a sweep, give it the
 config itself: ``RRTStarTrial(config={"algorithm_config": RRTStarConfig.from_settings(values, run)})``.
 """
@@ -26,7 +26,7 @@ from ray import tune
 
 from copilot_ray import keys
 from copilot_ray.envs import make
-from copilot_ray.spec import build_algorithm_config
+from copilot_ray.sweep_spec import build_algorithm_config
 from copilot_ray.tracking import load_spec_cached, trial_flat
 
 _STATE_FILE = "planner_trial_state.pkl"

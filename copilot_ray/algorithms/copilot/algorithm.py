@@ -69,7 +69,6 @@ from copilot_ray.algorithms.copilot.settings import (
 )
 from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID, TraversalRules, make_traversal_env
 from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_learner, uses_fast_learner
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
 from copilot_ray.evaluation import (
     EVAL_SPLITS,
@@ -87,6 +86,7 @@ from copilot_ray.planning import (
     construct_trees,
 )
 from copilot_ray.planning.path_metrics import CountedChecks, RRTReference, path_metrics, rrt_reference
+from copilot_ray.registry import RunContext
 
 logger = logging.getLogger(__name__)
 RUNNER_RESTORE_TIMEOUT_S = 120  # waiting for a failed env runner to come back when none is left

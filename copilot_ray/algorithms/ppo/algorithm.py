@@ -26,7 +26,6 @@ from ray.tune.registry import register_env
 from copilot_ray import keys
 from copilot_ray.algorithms.copilot.traversal_env import TraversalRules
 from copilot_ray.algorithms.ppo import settings as ppo_settings
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
 from copilot_ray.evaluation import (
@@ -36,6 +35,7 @@ from copilot_ray.evaluation import (
     SuccessCurve,
     evaluate_copilot,
 )
+from copilot_ray.registry import RunContext
 
 GOAL_TASK_ENV_ID = "copilot-goal-task"
 DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS

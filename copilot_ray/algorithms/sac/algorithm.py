@@ -29,8 +29,8 @@ from ray.rllib.utils.annotations import override
 from copilot_ray.algorithms.copilot.agent_updates import FastLearnerUpdater, replay_capacity
 from copilot_ray.algorithms.copilot.algorithm import CoPilot, CoPilotConfig
 from copilot_ray.algorithms.gc_sac import GoalLayout, HindsightReplayBuffer
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.algorithms.sac import settings as sac_settings
+from copilot_ray.registry import RunContext
 
 _HINDSIGHT_DEFAULTS = {s.field: s.default for s in sac_settings.HINDSIGHT}
 

@@ -38,10 +38,10 @@ from ray.rllib.utils.annotations import override
 from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from copilot_ray import keys
-from copilot_ray.algorithms.registry import RunContext
 from copilot_ray.algorithms.sac.algorithm import GoalSAC, HERConfig
 from copilot_ray.algorithms.sorb import settings as sorb_settings
 from copilot_ray.algorithms.sorb.graph import ReplayGraph, pad_front
+from copilot_ray.registry import RunContext
 
 _SEARCH_DEFAULTS = {s.field: s.default for s in sorb_settings.SEARCH}
 # Rows per critic call when building the graph (memory: rows x hidden floats per layer).

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from copilot_ray.algorithms.registry import get_algorithm
+from copilot_ray.registry import get_algorithm
 
-# (a spec is a copilot_ray.spec.models.SweepSpec; not imported: models imports this module)
+# (a spec is a copilot_ray.sweep_spec.models.SweepSpec; not imported: models imports this module)
 SweepSpec = Any
 
 MIN_EVALUATIONS = 3

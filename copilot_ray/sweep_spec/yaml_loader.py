@@ -9,7 +9,7 @@ from typing import Any
 
 import yaml
 
-from copilot_ray.spec.errors import SpecError
+from copilot_ray.sweep_spec.errors import SpecError
 
 
 class SpecLoader(yaml.SafeLoader):

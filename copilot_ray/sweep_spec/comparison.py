@@ -20,10 +20,10 @@ from collections import defaultdict
 from collections.abc import Sequence
 from typing import Any
 
-from copilot_ray.algorithms.registry import get_algorithm, metric_known
-from copilot_ray.spec.errors import did_you_mean
+from copilot_ray.registry import get_algorithm, metric_known
+from copilot_ray.sweep_spec.errors import did_you_mean
 
-# (a spec is a copilot_ray.spec.models.SweepSpec; not imported: models imports this module)
+# (a spec is a copilot_ray.sweep_spec.models.SweepSpec; not imported: models imports this module)
 SweepSpec = Any
 
 CADENCE = "eval_every_env_steps"

@@ -13,7 +13,9 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from copilot_ray import keys
-from copilot_ray.algorithms.registry import (
+from copilot_ray.envs import env_ids, make
+from copilot_ray.envs.maze.layouts import LayoutError
+from copilot_ray.registry import (
     ALGORITHMS,
     AlgorithmEntry,
     RunContext,
@@ -22,15 +24,13 @@ from copilot_ray.algorithms.registry import (
     get_algorithm,
     metric_known,
 )
-from copilot_ray.envs import env_ids, make
-from copilot_ray.envs.maze.layouts import LayoutError
 from copilot_ray.settings import Setting, is_int, is_number
 from copilot_ray.settings import problems as setting_problems
-from copilot_ray.spec.comparison import comparison_problems, link_stages
-from copilot_ray.spec.errors import Issue, Issues, SpecError, did_you_mean, short
-from copilot_ray.spec.estimate import MIN_EVALUATIONS, too_few_evaluations
-from copilot_ray.spec.yaml_loader import read_yaml_documents, read_yaml_file
 from copilot_ray.store import tracking_uri_problem
+from copilot_ray.sweep_spec.comparison import comparison_problems, link_stages
+from copilot_ray.sweep_spec.errors import Issue, Issues, SpecError, did_you_mean, short
+from copilot_ray.sweep_spec.estimate import MIN_EVALUATIONS, too_few_evaluations
+from copilot_ray.sweep_spec.yaml_loader import read_yaml_documents, read_yaml_file
 
 
 class _Model(BaseModel):
@@ -240,7 +240,7 @@ class SchedulerSpec(_Model):
 
 class StopSpec(_Model):
     """When a trial ends. `min_evaluations` (default MIN_EVALUATIONS): the fewest evaluations a trial
-    must be sure to get before it does (spec/estimate.py); lower it only for smoke runs, where a trial
+    must be sure to get before it does (sweep_spec/estimate.py); lower it only for smoke runs, where a trial
     only has to run."""
 
     env_steps: int | None = None

@@ -74,8 +74,8 @@ checks, ``build_algorithm_config``), ``plan`` (``--check``'s text), ``tune_trans
 objects).
 """
 
-from copilot_ray.spec.errors import SpecError
-from copilot_ray.spec.models import (
+from copilot_ray.sweep_spec.errors import SpecError
+from copilot_ray.sweep_spec.models import (
     ParamSearch,
     SweepSpec,
     build_algorithm_config,
@@ -84,14 +84,14 @@ from copilot_ray.spec.models import (
     metric_known,
     parse_spec,
 )
-from copilot_ray.spec.plan import default_point, format_plan
-from copilot_ray.spec.tune_translation import (
+from copilot_ray.sweep_spec.plan import default_point, format_plan
+from copilot_ray.sweep_spec.tune_translation import (
     optuna_define_by_run,
     to_tune_scheduler,
     to_tune_search_space,
     tune_stop,
 )
-from copilot_ray.spec.yaml_loader import SpecLoader, load_yaml_value, read_yaml_file
+from copilot_ray.sweep_spec.yaml_loader import SpecLoader, load_yaml_value, read_yaml_file
 
 __all__ = [
     "ParamSearch",

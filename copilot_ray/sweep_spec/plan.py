@@ -6,10 +6,10 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from copilot_ray import keys
-from copilot_ray.spec.estimate import cpu_warning, trial_estimates, wall_time_line
+from copilot_ray.sweep_spec.estimate import cpu_warning, trial_estimates, wall_time_line
 
 if TYPE_CHECKING:  # annotations only: models imports this module
-    from copilot_ray.spec.models import ParamSearch, SweepSpec
+    from copilot_ray.sweep_spec.models import ParamSearch, SweepSpec
 
 
 def format_plan(
@@ -110,7 +110,7 @@ def format_plan(
 def default_point(spec: SweepSpec) -> dict[str, Any]:
     """Every searched setting at its default, when each default lies in its domain and no parameter is
     conditional: an Optuna study tries this point first (so the defaults always compete). {} otherwise."""
-    from copilot_ray.algorithms.registry import get_algorithm
+    from copilot_ray.registry import get_algorithm
 
     if spec.searcher.type != "optuna" or spec.has_conditional_params:
         return {}
