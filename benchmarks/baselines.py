@@ -46,7 +46,7 @@ def _off_policy(kind: str, seed: int, eval_interval: int):
     config = (
         cls()
         .environment("maze-point", env_config=OPEN_MAZE)
-        .copilot(task_batch_size=8, eval_interval=eval_interval, **AGENT)
+        .agent(task_batch_size=8, eval_interval=eval_interval, **AGENT)
         .training(num_steps_sampled_before_learning_starts=500)
         .debugging(seed=seed)
     )
@@ -112,9 +112,7 @@ def speed(updates: int, repeats: int) -> None:
     for kind in ("sac", "her", "sorb"):
         config = _off_policy(kind, 0, 0).environment("maze-point", env_config={"layout": "four-rooms"})
         # Sampling only: the updates are timed below (learning would start after 10^9 steps).
-        config.copilot(tau_max=800, task_batch_size=4).training(
-            num_steps_sampled_before_learning_starts=10**9
-        )
+        config.agent(tau_max=800, task_batch_size=4).training(num_steps_sampled_before_learning_starts=10**9)
         algo = config.build_algo()
         for _ in range(2):
             algo.train()
@@ -168,7 +166,7 @@ def search(
     trained = Algorithm.from_checkpoint(checkpoint)
     old = trained.config
     config = SoRBConfig().environment(old.goal_env, env_config=old.goal_env_config)
-    config.copilot(**{k: getattr(old, k) for k in ("tau_max", "agent_input", "reward_scale")})
+    config.agent(**{k: getattr(old, k) for k in ("tau_max", "agent_input", "reward_scale")})
     config.training(gamma=old.gamma).debugging(seed=old.seed)
     state = trained.get_state()
     trained.stop()

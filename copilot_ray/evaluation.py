@@ -307,7 +307,11 @@ def evaluate_copilot(
     first = make(goal_env_id, **dict(goal_env_config))
     # An env that steps many agents as arrays (batch_step) needs one instance, not one per task.
     shared = hasattr(first.unwrapped, "batch_step")
-    envs = [first] * n if shared else [first] + [make(goal_env_id, **dict(goal_env_config)) for _ in range(n - 1)]
+    envs = (
+        [first] * n
+        if shared
+        else [first] + [make(goal_env_id, **dict(goal_env_config)) for _ in range(n - 1)]
+    )
     # depth 0: no planner, the "plan" is the task itself.
     trees = (
         np.stack([starts, goals], axis=1)

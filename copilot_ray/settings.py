@@ -217,3 +217,128 @@ def problems(settings: Mapping[str, Setting], values: Mapping[str, Any]) -> list
         elif (msg := setting.problem(value)) is not None:
             out.append((key, value, msg))
     return out
+
+
+# ------------------------------------------------------------------------------- values to a config
+def effective(
+    settings: Mapping[str, Setting], values: Mapping[str, Any], presets: Mapping[str, Mapping[str, Any]] = {}
+) -> dict[str, Any]:
+    """Every setting at the value a run of flat `values` uses: its default, then the named preset's
+    (`values["preset"]`; a preset's nested dicts are its dotted keys), then `values` themselves."""
+    out = {key: s.default for key, s in settings.items()}
+    for key, value in presets.get(values.get("preset") or "", {}).items():
+        if isinstance(value, Mapping) and key not in settings:
+            out.update({f"{key}.{field}": v for field, v in value.items() if f"{key}.{field}" in settings})
+        elif key in settings:
+            out[key] = value
+    out.update({k: v for k, v in values.items() if k in settings})
+    return out
+
+
+def route(settings: Mapping[str, Setting], values: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """Flat `values` grouped by where their settings go: `{target: {field: value}}` (`planner.std` ->
+    `{"planner": {"std": ...}}`, a top-level key -> `{target: {key: ...}}`). Unknown keys raise KeyError."""
+    out: dict[str, dict[str, Any]] = {}
+    for key, value in values.items():
+        setting = settings[key]
+        out.setdefault(setting.target, {})[setting.field] = value
+    return out
+
+
+def check(settings: Mapping[str, Setting], values: Mapping[str, Any], owner: str) -> None:
+    """Raises ValueError with one line per value that breaks its setting's rule (or is no setting),
+    each "<owner>: <key>=<value> is invalid: must be <rule>": the one message every config gives."""
+    found = problems(settings, values)
+    if found:
+        raise ValueError(
+            "\n".join(f"{owner}: {key}={value!r} is invalid: {why}" for key, value, why in found)
+        )
+
+
+def record_class(
+    name: str,
+    settings: Mapping[str, Setting],
+    nested: tuple[str, ...] = (),
+    doc: str = "",
+    with_run: bool = True,
+) -> type:
+    """A frozen dataclass holding one run (env_id, env_config, seed, torch_threads) and every setting of `settings` (the config of
+    an algorithm that is not an RLlib Algorithm): one field per setting, dots as underscores (`hrl.c`
+    -> `hrl_c`), one dict per `nested` target (`planner.std` -> `planner["std"]`), each defaulting to the
+    table's default (no field re-declares one). Values are checked on construction (`check`);
+    `from_settings(values, run)` builds one from flat setting values and a RunContext, `setting_values()`
+    gives them back, `to_dict()` is `dataclasses.asdict`. Subclass it to add methods. `with_run=False`: the
+    settings alone (no run fields, no `from_settings`)."""
+    import copy
+    import dataclasses
+
+    fields: list[tuple] = (
+        [
+            ("env_id", str),
+            ("env_config", dict, dataclasses.field(default_factory=dict)),
+            ("seed", int, dataclasses.field(default=0)),
+            ("torch_threads", int, dataclasses.field(default=1)),
+        ]
+        if with_run
+        else []
+    )
+    for target in nested:
+        defaults = {s.field: s.default for s in settings.values() if s.target == target}
+        fields.append((target, dict, dataclasses.field(default_factory=lambda d=defaults: copy.deepcopy(d))))
+    for key, s in settings.items():
+        if s.target not in nested:
+            mutable = isinstance(s.default, list | dict)
+            default = (
+                dataclasses.field(default_factory=lambda d=s.default: copy.deepcopy(d))
+                if mutable
+                else (dataclasses.field(default=s.default))
+            )
+            fields.append((key.replace(".", "_"), Any, default))
+
+    def setting_values(self) -> dict[str, Any]:
+        """`{setting key: value}` of every setting (dotted keys)."""
+        return {
+            key: getattr(self, s.target)[s.field]
+            if s.target in nested
+            else getattr(self, key.replace(".", "_"))
+            for key, s in settings.items()
+        }
+
+    def __post_init__(self) -> None:
+        check(settings, self.setting_values(), name)
+        for target in nested:
+            unknown = sorted(
+                set(getattr(self, target)) - {s.field for s in settings.values() if s.target == target}
+            )
+            if unknown:
+                raise ValueError(f"{name}: {target}.{unknown[0]} is not a setting")
+
+    def from_settings(cls, values: Mapping[str, Any], run: Any):
+        """Flat setting values (dotted keys) + a registry RunContext (env, seed, the process's CPUs)."""
+        check(settings, values, name)
+        kwargs: dict[str, Any] = {}
+        for target, given in route(settings, values).items():
+            if target in nested:
+                defaults = {s.field: s.default for s in settings.values() if s.target == target}
+                kwargs[target] = {**defaults, **given}
+        kwargs.update({k.replace(".", "_"): v for k, v in values.items() if settings[k].target not in nested})
+        return cls(
+            env_id=run.env_id,
+            env_config=dict(run.env_config),
+            seed=int(run.seed),
+            torch_threads=max(1, int(getattr(run, "num_cpus_for_main_process", 1) or 1)),
+            **kwargs,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    namespace = {
+        "__doc__": doc,
+        "setting_values": setting_values,
+        "__post_init__": __post_init__,
+        "to_dict": to_dict,
+    }
+    if with_run:
+        namespace["from_settings"] = classmethod(from_settings)
+    return dataclasses.make_dataclass(name, fields, frozen=True, namespace=namespace)

@@ -306,7 +306,9 @@ def run_sweep(
     own_ray = runtime.start_ray(address)
     exp_id, parent_id = open_tracking(run)
     rows, interrupted, tune_paths = run_experiments(run, runtime, exp_id, parent_id, extra_callbacks)
-    outcome = report_sweep(run, rows, interrupted, tune_paths, parent_id, wall=time.time() - started, exp_id=exp_id)
+    outcome = report_sweep(
+        run, rows, interrupted, tune_paths, parent_id, wall=time.time() - started, exp_id=exp_id
+    )
     if own_ray:
         runtime.stop_ray()
     return outcome
@@ -525,7 +527,9 @@ def _say(line: str) -> None:
 # ================================================================================================ CLI
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m copilot_ray.sweep", description=__doc__.split("\n\n")[0])
-    p.add_argument("spec", help="sweep spec YAML (format: copilot_ray/sweep_spec/__init__.py; examples: sweeps/)")
+    p.add_argument(
+        "spec", help="sweep spec YAML (format: copilot_ray/sweep_spec/__init__.py; examples: sweeps/)"
+    )
     p.add_argument("--check", action="store_true", help="validate and print the plan; start nothing")
     p.add_argument("--resume", action="store_true", help="continue an interrupted or failed sweep")
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")

@@ -475,7 +475,12 @@ class TrialRuns:
     _STATE = ("tracking_uri", "experiment_id", "sweep", "parent_run_id", "rllib_timers")
 
     def __init__(
-        self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str, rllib_timers: bool = False
+        self,
+        tracking_uri: str,
+        experiment_id: str,
+        sweep: str,
+        parent_run_id: str,
+        rllib_timers: bool = False,
     ):
         self.tracking_uri = tracking_uri
         self.experiment_id = experiment_id

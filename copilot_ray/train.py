@@ -65,7 +65,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     run.add_argument(
         "--stop-env-steps", type=int, default=100_000, help="stop after this many env steps (default 100000)"
     )
-    run.add_argument("--stop-iters", type=int, default=None, help="stop after this many iterations (default: none)")
+    run.add_argument(
+        "--stop-iters", type=int, default=None, help="stop after this many iterations (default: none)"
+    )
     run.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
     run.add_argument(
         "--num-env-runners", type=int, default=0, help="remote env runners (default 0: sample on the driver)"
@@ -81,7 +83,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help=f"MLflow tracking URI (default: the embedded store sqlite:///$PWD/{RESULTS}/mlflow.db)",
     )
     run.add_argument("--no-tracking", action="store_true", help="log nothing to MLflow")
-    run.add_argument("--experiment", default="copilot-train", help="MLflow experiment (default copilot-train)")
+    run.add_argument(
+        "--experiment", default="copilot-train", help="MLflow experiment (default copilot-train)"
+    )
     settings = p.add_argument_group("CO-PILOT settings (default: the setting's own; see the README's table)")
     for s in get_algorithm(ALGORITHM).settings.values():
         if s.on_cli:
@@ -206,7 +210,9 @@ def progress_line(result: dict[str, Any], started: float) -> str:
 
 def run_name(args: argparse.Namespace, config) -> str:
     """What the run is called in MLflow and its checkpoint folder: env, K, b, seed and when it started."""
-    return f"{args.env}-K{config.tree_depth}-b{config.repetitions}-s{args.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return (
+        f"{args.env}-K{config.tree_depth}-b{config.repetitions}-s{args.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

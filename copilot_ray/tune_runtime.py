@@ -193,7 +193,9 @@ class ProgressPrinter(Callback):
         elif planned is None:
             figures = f"validation success {_fmt(success)}{mark}"
         else:
-            figures = f"validation success {_fmt(success)} (planned {_fmt(planned)} direct {_fmt(direct)}){mark}"
+            figures = (
+                f"validation success {_fmt(success)} (planned {_fmt(planned)} direct {_fmt(direct)}){mark}"
+            )
         _say(
             f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
             f"env_steps {int(steps):8d}  {figures}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"
@@ -224,7 +226,12 @@ class MlflowSweepCallback(Callback):
     ``copilot_ray.tracking.TrialRuns``."""
 
     def __init__(
-        self, tracking_uri: str, experiment_id: str, sweep: str, parent_run_id: str, rllib_timers: bool = False
+        self,
+        tracking_uri: str,
+        experiment_id: str,
+        sweep: str,
+        parent_run_id: str,
+        rllib_timers: bool = False,
     ):
         self.runs = TrialRuns(tracking_uri, experiment_id, sweep, parent_run_id, rllib_timers)
 

@@ -127,7 +127,7 @@ def test_tasks_outside_the_maze_or_in_a_wall_are_refused(env):
 
 
 def test_traversal_carries_the_ants_motion_from_one_sub_goal_to_the_next():
-    from copilot_ray.algorithms.copilot.traversal_env import TraversalEnv
+    from copilot_ray.algorithms.sac.traversal_env import TraversalEnv
 
     # after_failure="continue": the 5-step sub-task fails, and the next one carries on from there
     rules = {"tau_max": 5, "after_failure": "continue"}
@@ -206,7 +206,7 @@ def test_copilot_and_sac_train_and_evaluate_on_the_ant_maze(ray_session):
     sac = (
         GoalSACConfig()
         .environment("ant-maze", env_config={"num_train_tasks": 8})
-        .copilot(eval_interval=1, **common)
+        .agent(eval_interval=1, **common)
         .debugging(seed=0)
         .build_algo()
     )
@@ -231,7 +231,7 @@ def test_sorb_and_hrl_run_on_the_ant_maze(ray_session):
     sorb = (
         SoRBConfig()
         .environment("ant-maze", env_config={"num_train_tasks": 8})
-        .copilot(tau_max=50, task_batch_size=2, reward_scale=1000.0, eval_interval=1, eval_num_tasks=2)
+        .agent(tau_max=50, task_batch_size=2, reward_scale=1000.0, eval_interval=1, eval_num_tasks=2)
         .training(num_steps_sampled_before_learning_starts=50)
         .search(pretrain_env_steps=50, graph_size=40, max_edge_steps=100, waypoint_steps=25)
         .debugging(seed=0)

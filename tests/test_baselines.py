@@ -26,7 +26,7 @@ def _her(**search):
     config = (
         cls()
         .environment("maze-point", env_config=OPEN_MAZE)
-        .copilot(tau_max=40, task_batch_size=8, eval_interval=3, eval_num_tasks=40)
+        .agent(tau_max=40, task_batch_size=8, eval_interval=3, eval_num_tasks=40)
         .training(num_steps_sampled_before_learning_starts=500)
         .debugging(seed=0)
     )
@@ -174,8 +174,18 @@ def test_a_baselines_spec_file_runs_every_algorithm_into_one_experiment(ray_sess
     agent = {"tau_max": 20, "task_batch_size": 4, "eval_every_env_steps": 1, "eval_num_tasks": 10}
     learning = {"num_steps_sampled_before_learning_starts": 100}
     parts = [
-        {"name": "b_sac", "algorithm": "sac", "config": {**agent, **learning}, "stop": {"iterations": 2, "min_evaluations": 1}},
-        {"name": "b_her", "algorithm": "her", "config": {**agent, **learning}, "stop": {"iterations": 2, "min_evaluations": 1}},
+        {
+            "name": "b_sac",
+            "algorithm": "sac",
+            "config": {**agent, **learning},
+            "stop": {"iterations": 2, "min_evaluations": 1},
+        },
+        {
+            "name": "b_her",
+            "algorithm": "her",
+            "config": {**agent, **learning},
+            "stop": {"iterations": 2, "min_evaluations": 1},
+        },
         {
             "name": "b_sorb",
             "algorithm": "sorb",

@@ -3,7 +3,7 @@
 import pytest
 
 from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
-from copilot_ray.algorithms.copilot.traversal_env import TRAVERSAL_ENV_ID
+from copilot_ray.algorithms.sac.traversal_env import TRAVERSAL_ENV_ID
 
 
 def config(**copilot):

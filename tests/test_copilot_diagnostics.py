@@ -7,8 +7,8 @@ from copilot_ray import keys
 from copilot_ray.algorithms.copilot.diagnostics import (
     plan_diagnostics,
     tau_hat_profile,
-    traversal_diagnostics,
 )
+from copilot_ray.algorithms.sac.traversal_diagnostics import traversal_diagnostics
 from copilot_ray.envs import make
 
 

@@ -96,7 +96,12 @@ def test_a_planned_evaluation_never_gets_more_steps_than_the_task():
     goals = np.array([[0.9, 0.5]], np.float32)
     common = {"goal_env_id": "maze-point", "goal_env_config": OPEN, "policies": {"d": stuck}}
     result = evaluate_copilot(
-        **common, planner=Straight(), starts=starts, goals=goals, depth=2, tau_max=5,
+        **common,
+        planner=Straight(),
+        starts=starts,
+        goals=goals,
+        depth=2,
+        tau_max=5,
         step_limit_of=lambda k: 100,  # noqa: ARG005 - more than the task allows
     )
     assert result.by_action["d"]["success_planned"] == 0.0
@@ -113,7 +118,12 @@ def test_a_planned_evaluation_never_gets_more_steps_than_the_task():
     evaluation.follow_waypoints = spy
     try:
         evaluate_copilot(
-            **common, planner=Straight(), starts=starts, goals=goals, depth=2, tau_max=5,
+            **common,
+            planner=Straight(),
+            starts=starts,
+            goals=goals,
+            depth=2,
+            tau_max=5,
             step_limit_of=lambda k: 100,  # noqa: ARG005
         )
     finally:
@@ -148,7 +158,15 @@ def test_the_evaluation_cadence_counts_env_steps_not_iterations():
     every_10k = EvaluationSchedule(every_iterations=1, every_env_steps=10_000)
     # iterations of different sizes: evaluated once per 10k boundary passed, whatever the iteration count
     ends = [4_000, 9_999, 10_500, 16_000, 31_000, 33_000, 40_000]
-    assert [every_10k.due(i + 1, s) for i, s in enumerate(ends)] == [False, False, True, False, True, False, True]
+    assert [every_10k.due(i + 1, s) for i, s in enumerate(ends)] == [
+        False,
+        False,
+        True,
+        False,
+        True,
+        False,
+        True,
+    ]
     restored = EvaluationSchedule(1, 10_000)
     restored.set_state(every_10k.get_state())
     assert not restored.due(8, 45_000) and restored.due(9, 50_000)

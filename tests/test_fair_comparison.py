@@ -56,7 +56,9 @@ def test_a_test_metric_as_the_searcher_metric_is_refused_naming_the_key_and_the_
     assert "use 'copilot/validation/success'" in text
     # with a scheduler, the message says that it would choose by the test tasks too
     data["scheduler"] = {"type": "asha", "max_t": 5000}
-    assert "the searcher and the asha scheduler would choose" in str(pytest.raises(SpecError, parse_spec, data).value)
+    assert "the searcher and the asha scheduler would choose" in str(
+        pytest.raises(SpecError, parse_spec, data).value
+    )
     # path metrics are test-set figures with no validation twin
     data["searcher"]["metric"] = keys.PATH_SUCCESS
     assert "no validation figure is logged for it" in str(pytest.raises(SpecError, parse_spec, data).value)
@@ -82,7 +84,12 @@ def test_search_declared_is_the_algorithms_own_space_and_its_defaults_are_tried_
     from copilot_ray.algorithms.sac.her_settings import SEARCH_SPACE
 
     data = part("t", search="declared") | {
-        "searcher": {"type": "optuna", "metric": "copilot/validation/success_auc", "mode": "max", "num_samples": 3}
+        "searcher": {
+            "type": "optuna",
+            "metric": "copilot/validation/success_auc",
+            "mode": "max",
+            "num_samples": 3,
+        }
     }
     spec = parse_spec(data)
     assert list(spec.search) == list(SEARCH_SPACE)
@@ -101,7 +108,12 @@ def test_every_compared_algorithm_declares_a_space_whose_ranges_hold_its_default
     assert entry.search_space
     data = part("t", algorithm, search="declared") | {
         "config": {},
-        "searcher": {"type": "optuna", "metric": "copilot/validation/success_auc", "mode": "max", "num_samples": 2},
+        "searcher": {
+            "type": "optuna",
+            "metric": "copilot/validation/success_auc",
+            "mode": "max",
+            "num_samples": 2,
+        },
     }
     spec = parse_spec(data)  # every domain passes its setting's own rule
     assert set(default_point(spec)) == set(entry.search_space)
@@ -117,7 +129,9 @@ def test_parts_of_one_experiment_must_share_budget_cadence_and_tasks(tmp_path):
         )
     )
     assert "experiment 'cmp': stop.env_steps differs between its parts (a: 5000, b: 9000, c: 5000)" in text
-    assert "c: config.eval_every_env_steps: 0 is invalid: the parts of experiment 'cmp' are a comparison" in text
+    assert (
+        "c: config.eval_every_env_steps: 0 is invalid: the parts of experiment 'cmp' are a comparison" in text
+    )
     assert "eval_every_env_steps differs between its parts (a: 1000, b: 1000, c: 0)" in text
 
 
@@ -150,26 +164,46 @@ def test_best_of_names_a_tuning_part_with_the_same_algorithm_and_a_validation_me
         write(tmp_path, tune, final)
     )
     final["best_of"]["metric"] = "copilot/validation/success"
-    text = problems(write(tmp_path, tune, final, part("ghost", best_of={"sweep": "tun", "metric": "copilot/validation/success"})))
+    text = problems(
+        write(
+            tmp_path,
+            tune,
+            final,
+            part("ghost", best_of={"sweep": "tun", "metric": "copilot/validation/success"}),
+        )
+    )
     assert "final: best_of.sweep: 'tune' is invalid: it runs her, this part sac" in text
-    assert "best_of.sweep: 'tun' is invalid: not a part of this file" in text and "did you mean 'tune'?" in text
+    assert (
+        "best_of.sweep: 'tun' is invalid: not a part of this file" in text and "did you mean 'tune'?" in text
+    )
     # a best_of part searches nothing itself
-    with pytest.raises(SpecError, match=r"best_of: 'tune' is invalid: a part that takes the best configuration"):
-        parse_spec(part("x", best_of={"sweep": "tune", "metric": "copilot/validation/success"}, search="declared"))
+    with pytest.raises(
+        SpecError, match=r"best_of: 'tune' is invalid: a part that takes the best configuration"
+    ):
+        parse_spec(
+            part("x", best_of={"sweep": "tune", "metric": "copilot/validation/success"}, search="declared")
+        )
 
 
 def test_the_shipped_fair_comparison_is_valid_and_reads_stage_one_from_the_store():
     specs = load_specs(ROOT / "sweeps" / "fair_maze.yaml")
     tuning = [s for s in specs if s.search]
     final = [s for s in specs if s.best_of is not None]
-    assert len(tuning) == 6 and len(final) == 7 and len(specs) == 13  # stage 2 adds the privileged restart row
-    assert {s.experiment for s in tuning} == {"fair-maze-tuning"} and {s.experiment for s in final} == {"fair-maze"}
+    assert (
+        len(tuning) == 6 and len(final) == 7 and len(specs) == 13
+    )  # stage 2 adds the privileged restart row
+    assert {s.experiment for s in tuning} == {"fair-maze-tuning"} and {s.experiment for s in final} == {
+        "fair-maze"
+    }
     for s in specs:
         assert not keys.is_test_metric(s.searcher.metric or s.best_of.metric)
     for s in final:
         uri, experiment = s.best_of_store()
         tuned = next(t for t in tuning if t.name == s.best_of.sweep)
-        assert (uri, experiment) == (tuned.tracking.uri, "fair-maze-tuning") and tuned.algorithm == s.algorithm
+        assert (uri, experiment) == (
+            tuned.tracking.uri,
+            "fair-maze-tuning",
+        ) and tuned.algorithm == s.algorithm
         assert "read from its MLflow store when this part starts" in format_plan(s)
 
 
@@ -224,7 +258,12 @@ def test_a_stage_two_part_writes_the_winner_into_the_spec_it_runs_with(tmp_path)
     uri = _store_with_a_tuning_sweep(tmp_path)
     data = part(
         "final",
-        best_of={"sweep": "tune", "metric": "copilot/validation/success_auc", "uri": uri, "experiment": "tuning"},
+        best_of={
+            "sweep": "tune",
+            "metric": "copilot/validation/success_auc",
+            "uri": uri,
+            "experiment": "tuning",
+        },
         tracking={"storage": str(tmp_path / "results")},
     )
     spec = load_specs(write(tmp_path, data))[0]
@@ -251,17 +290,33 @@ def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session,
     common = {
         "env": {"id": "maze-point", "config": open_maze},
         "algorithm": "her",
-        "config": {"tau_max": 20, "task_batch_size": 4, "eval_every_env_steps": 80, "eval_num_tasks": 10,
-                   "num_steps_sampled_before_learning_starts": 100},
+        "config": {
+            "tau_max": 20,
+            "task_batch_size": 4,
+            "eval_every_env_steps": 80,
+            "eval_num_tasks": 10,
+            "num_steps_sampled_before_learning_starts": 100,
+        },
         "stop": {"env_steps": 160, "min_evaluations": 1},
         "resources": {"max_concurrent_trials": 2, "num_env_runners": 0},
         "tracking": {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/fair.db"},
     }
     metric = "copilot/validation/success_auc"
-    tune = {"name": "tune_her", "experiment": "tuning", **common, "search": "declared", "seeds": [0],
-            "searcher": {"type": "optuna", "metric": metric, "mode": "max", "num_samples": 2, "seed": 0}}
-    final = {"name": "final_her", "experiment": "final", **common, "seeds": [5],
-             "best_of": {"sweep": "tune_her", "metric": metric}}
+    tune = {
+        "name": "tune_her",
+        "experiment": "tuning",
+        **common,
+        "search": "declared",
+        "seeds": [0],
+        "searcher": {"type": "optuna", "metric": metric, "mode": "max", "num_samples": 2, "seed": 0},
+    }
+    final = {
+        "name": "final_her",
+        "experiment": "final",
+        **common,
+        "seeds": [5],
+        "best_of": {"sweep": "tune_her", "metric": metric},
+    }
     path = write(tmp_path, tune, final)
     assert main([str(path)]) == 0
 
@@ -274,7 +329,8 @@ def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session,
     top = max(r.data.metrics[metric] for r in trials)
     best = [r for r in trials if r.data.metrics[metric] == top]  # (a tie at this tiny budget: any of them)
     (run,) = [
-        r for r in client.search_runs([client.get_experiment_by_name("final").experiment_id])
+        r
+        for r in client.search_runs([client.get_experiment_by_name("final").experiment_id])
         if r.data.tags.get(keys.ROLE_TAG) == keys.ROLE_TRIAL
     ]
     assert run.data.tags[keys.SEED_TAG] == "5" and run.info.status == "FINISHED"

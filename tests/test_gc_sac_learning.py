@@ -18,8 +18,8 @@ from ray.rllib.core import COMPONENT_RL_MODULE, DEFAULT_MODULE_ID
 from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from copilot_ray.algorithms.copilot.agent_updates import FastLearnerUpdater, StockLearnerUpdater
 from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_learner
+from copilot_ray.algorithms.sac.agent_updates import FastLearnerUpdater, StockLearnerUpdater
 
 
 class ReachGoal2D(gym.Env):

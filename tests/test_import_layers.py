@@ -90,7 +90,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def test_the_graph_sees_known_edges():
     graph = import_graph()
     assert "copilot_ray.algorithms.copilot.settings" in graph["copilot_ray.algorithms.copilot.algorithm"]
-    assert "copilot_ray.evaluation" in graph["copilot_ray.algorithms.copilot.algorithm"]
+    assert "copilot_ray.algorithms.sac.algorithm" in graph["copilot_ray.algorithms.copilot.algorithm"]
 
 
 def test_a_planted_cycle_is_found():

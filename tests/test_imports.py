@@ -7,7 +7,7 @@ import pytest
 
 MODULES = [
     "copilot_ray.evaluation",  # was a cycle: evaluation -> copilot package -> algorithm -> evaluation
-    "copilot_ray.algorithms.copilot.traversal_env",
+    "copilot_ray.algorithms.sac.traversal_env",
     "copilot_ray.algorithms.copilot.algorithm",
     "copilot_ray.algorithms.gc_sac",
     "analysis.report",

@@ -41,7 +41,9 @@ def test_smoke_sweep_uses_both_nodes_of_a_cluster(two_nodes, tmp_path):
     import mlflow
 
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
-    data.update(tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130, "min_evaluations": 1})
+    data.update(
+        tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130, "min_evaluations": 1}
+    )
     data["resources"] = {"max_concurrent_trials": 2, "num_env_runners": 0}  # one trial per node
     path = tmp_path / "smoke.yaml"
     path.write_text(yaml.safe_dump(data))

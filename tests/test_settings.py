@@ -78,9 +78,11 @@ def test_spec_and_config_refuse_the_same_bad_value_naming_the_key(setting):
         config_with(setting.key, value).validate()
 
 
-def test_tree_depth_zero_is_plain_sac_in_both():
-    parse_spec(spec_with({"tree_depth": 0}))
-    config_with("tree_depth", 0).validate()
+def test_tree_depth_zero_is_refused_in_both_the_agent_alone_is_algorithm_sac():
+    with pytest.raises(SpecError, match=r"config\.tree_depth: 0 is invalid"):
+        parse_spec(spec_with({"tree_depth": 0}))
+    with pytest.raises(ValueError, match=r"CoPilotConfig: tree_depth=0 is invalid"):
+        config_with("tree_depth", 0).validate()
 
 
 @pytest.mark.parametrize("clip", [1.5, 1.0, 0.0])
@@ -128,7 +130,6 @@ def test_presets_name_only_settings_and_paper_literal_differs_where_the_readme_s
     # paper_literal isolates CO-PILOT's readings: the agent's SAC settings stay the baselines'.
     assert paper.initial_alpha == CoPilotConfig().initial_alpha == 0.02
     assert paper.agent_input == CoPilotConfig().agent_input == "state_goal_delta"
-    assert config_with("preset", "plain_sac").tree_depth == 0
 
 
 def test_unknown_copilot_argument_is_refused_naming_it():

@@ -134,7 +134,7 @@ def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
     [
         (
             {"config__tree_depth": -1},
-            "config.tree_depth: -1 is invalid: tree_depth must be an integer in [0, 10]",
+            "config.tree_depth: -1 is invalid: tree_depth must be an integer in [1, 10]",
         ),
         ({"config__tree_depth": 11}, "too deep for memory"),
         ({"config__tree_depth": "5"}, "config.tree_depth: '5' is invalid"),
@@ -155,7 +155,7 @@ def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
         ({"search__repetitions__grid": [1, 1]}, "duplicate value 1"),
         (
             {"search": {"tree_depth": {"grid": [1, 2, -1]}}, "config": {}},
-            "search.tree_depth.grid[2]: -1 is invalid: tree_depth must be an integer in [0, 10]",
+            "search.tree_depth.grid[2]: -1 is invalid: tree_depth must be an integer in [1, 10]",
         ),
         ({"config": {"tree_depth": 2, "planner.std": 0.0}}, "config.planner.std: 0.0 is invalid"),
         ({"config__tree_deph": 3}, "config.tree_deph: unknown key; did you mean 'tree_depth'?"),
@@ -234,7 +234,13 @@ def test_range_rejections(domain, expected):
 
 
 def _optuna(**kw):
-    return {"type": "optuna", "metric": "copilot/validation/success_planned", "mode": "max", "num_samples": 4, **kw}
+    return {
+        "type": "optuna",
+        "metric": "copilot/validation/success_planned",
+        "mode": "max",
+        "num_samples": 4,
+        **kw,
+    }
 
 
 def test_range_ends_follow_the_keys_rule():

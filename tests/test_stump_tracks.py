@@ -283,7 +283,7 @@ def test_copilot_and_sac_report_the_mastered_share_on_the_walker(ray_session):
         algo = (
             cls()
             .environment("walker-stumps-short", env_config=env_config)
-            .copilot(**common, **extra)
+            .agent(**common, **extra)
             .debugging(seed=0)
             .build_algo()
         )
@@ -310,7 +310,7 @@ def test_sorb_runs_on_the_walker_and_reports_the_mastered_share(ray_session):
     sorb = (
         SoRBConfig()
         .environment("walker-stumps", env_config={"num_eval_distributions": 2, "tracks_per_distribution": 1})
-        .copilot(tau_max=30, task_batch_size=1, reward_scale=200.0, eval_interval=1, eval_num_tasks=1)
+        .agent(tau_max=30, task_batch_size=1, reward_scale=200.0, eval_interval=1, eval_num_tasks=1)
         .training(num_steps_sampled_before_learning_starts=30)
         .search(pretrain_env_steps=30, graph_size=20, max_edge_steps=50, waypoint_steps=15)
         .debugging(seed=0)

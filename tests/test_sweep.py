@@ -128,7 +128,9 @@ def test_smoke_sweep_is_tracked_in_mlflow(ray_session, tmp_path):
     assert {a.path for a in client.list_artifacts(parent.info.run_id)} >= {SPEC_ARTIFACT, SUMMARY_ARTIFACT}
     # the parent row carries the outcome per configuration (validation figures), and the best of them
     summary = parent.data.metrics
-    assert {"summary/tree_depth_1/validation_success", "summary/tree_depth_2/validation_success"} <= set(summary)
+    assert {"summary/tree_depth_1/validation_success", "summary/tree_depth_2/validation_success"} <= set(
+        summary
+    )
     assert summary["summary/best/validation_success"] == max(
         summary["summary/tree_depth_1/validation_success"], summary["summary/tree_depth_2/validation_success"]
     )

@@ -19,7 +19,9 @@ def test_maze_sets_are_disjoint_sized_from_the_config_and_stable_under_the_seed(
     assert not pairs["train"] & pairs["validation"]
     assert not pairs["train"] & pairs["test"]
     assert not pairs["validation"] & pairs["test"]
-    again = make("maze-point", layout="u-maze", num_train_tasks=40, num_validation_tasks=15, num_test_tasks=10)
+    again = make(
+        "maze-point", layout="u-maze", num_train_tasks=40, num_validation_tasks=15, num_test_tasks=10
+    )
     for name in TASK_SETS:
         for a, b in zip(sets[name], again.unwrapped.tasks(name), strict=True):
             np.testing.assert_array_equal(a, b)

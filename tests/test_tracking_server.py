@@ -63,13 +63,18 @@ def test_sweep_and_report_through_a_tracking_server(ray_session, tmp_path, mlflo
 
     url, artifacts = mlflow_server
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
-    data.update(tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130, "min_evaluations": 1})
+    data.update(
+        tracking={"storage": str(tmp_path / "results")}, stop={"env_steps": 130, "min_evaluations": 1}
+    )
     data["search"] = {"tree_depth": {"grid": [1]}}
     path = tmp_path / "smoke.yaml"
     path.write_text(yaml.safe_dump(data))
     outcome = run_sweep(load_spec(path), tracking_uri=url)
     assert outcome.status == "finished" and outcome.tracking_uri == url
-    assert f"the MLflow UI is the server's own page: {url}" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert (
+        f"open {url}/#/experiments/" in out and "?workflowType=machine_learning" in out
+    )  # the server's own UI
 
     client = mlflow.MlflowClient(url)
     exp = client.get_experiment_by_name("smoke")

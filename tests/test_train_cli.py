@@ -57,7 +57,7 @@ def test_flag_values_are_read_as_in_a_spec_and_reach_the_config():
     [
         (["--preset", "paper"], "--preset 'paper' is invalid: must be one of"),
         (["--planner-clip", "1.5"], "--planner-clip 1.5 is invalid: must be a number in (0, 1)"),
-        (["--tree-depth", "11"], "--tree-depth 11 is invalid: must be an integer in [0, 10]"),
+        (["--tree-depth", "11"], "--tree-depth 11 is invalid: must be an integer in [1, 10]"),
         (
             ["--collision-cost", "area"],
             "--collision-cost 'area' is invalid: must be one of ['indicator', 'length']",

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from copilot_ray.algorithms.copilot.settings import PRESETS
-from copilot_ray.algorithms.copilot.traversal_env import TraversalEnv, TraversalRules, traversal_queue
+from copilot_ray.algorithms.sac.traversal_env import TraversalEnv, TraversalRules, traversal_queue
 
 # These tests read the paper literally unless a test names a rule: (s, g) observations, R / 2^k
 # rewards, the next sub-task continues where the agent stopped. (The paper_literal preset keeps the

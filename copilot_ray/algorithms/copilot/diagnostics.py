@@ -8,17 +8,7 @@ Plans (the trees the agent is about to traverse), per layer k >= 1:
                                     step distance + success radius
     segment_unreachable_layer_<k>   share of layer k's segments longer than that
 
-Traversals (the finished sub-tasks of one agent phase):
-
-    success_after_reached / success_after_failed
-                                    sub-task success of the 2nd, 3rd, ... sub-task of a layer, split by
-                                    whether the sub-task before it in the same layer was reached: a
-                                    large gap is the cascade of failures the paper's "continue from
-                                    where the agent stopped" produces
-    first_subtask_trivial           share of first sub-tasks of a layer whose sub-goal already lies
-                                    within the success radius of s0 (reached in one step: says little)
-    subtask_collided                share of sub-tasks that ended against an obstacle
-    dtau_tuple_length_mean/_max     length of the measured D_tau tuples (start -> where it ended)
+The traversals' figures (of every agent, a planner or not) are copilot_ray.algorithms.sac.traversal_diagnostics.
 
 The returned keys are the full metric names (`copilot_ray.keys.DIAG_*`). All functions are pure numpy on
 arrays, so they are tested on hand-made trees.
@@ -60,36 +50,6 @@ def plan_diagnostics(
         out[keys.DIAG_SEGMENT_LENGTH_LAYER + str(k)] = float(np.mean(lengths))
         out[keys.DIAG_REACHABLE_LENGTH_LAYER + str(k)] = reach
         out[keys.DIAG_SEGMENT_UNREACHABLE_LAYER + str(k)] = float(np.mean(lengths > reach))
-    return out
-
-
-def traversal_diagnostics(
-    records: dict[str, np.ndarray], *, distance: ArrayFn, success_radius: float
-) -> dict[str, float]:
-    """Figures of one agent phase's finished sub-tasks (the `_subtask_records` columns; `goal`, the
-    sub-goals, is optional and needed for `first_subtask_trivial`)."""
-    task, layer, index = records["task"], records["layer"], records["index"]
-    reached = records["reached"].astype(bool)
-    # Traversal order: task by task, layers K..0, sub-goals left to right.
-    order = np.lexsort((index, -layer, task))
-    task, layer, index, reached = task[order], layer[order], index[order], reached[order]
-    same_run = (task[1:] == task[:-1]) & (layer[1:] == layer[:-1]) & (index[1:] == index[:-1] + 1)
-    prev_reached, this_reached = reached[:-1][same_run], reached[1:][same_run]
-    out: dict[str, float] = {}
-    if (prev_reached).any():
-        out[keys.DIAG_SUCCESS_AFTER_REACHED] = float(this_reached[prev_reached].mean())
-    if (~prev_reached).any():
-        out[keys.DIAG_SUCCESS_AFTER_FAILED] = float(this_reached[~prev_reached].mean())
-    if "goal" in records:
-        first = records["index"] == 1
-        if first.any():
-            near = distance(records["start"][first], records["goal"][first]) <= success_radius
-            out[keys.DIAG_FIRST_SUBTASK_TRIVIAL] = float(np.mean(near))
-    if "collided" in records:
-        out[keys.DIAG_SUBTASK_COLLIDED] = float(np.mean(records["collided"]))
-    lengths = distance(records["start"], records["end"])
-    out[keys.DIAG_DTAU_TUPLE_LENGTH_MEAN] = float(np.mean(lengths))
-    out[keys.DIAG_DTAU_TUPLE_LENGTH_MAX] = float(np.max(lengths))
     return out
 
 

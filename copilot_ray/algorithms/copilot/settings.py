@@ -22,23 +22,24 @@ No Ray import here: a sweep spec is validated against this table before anything
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 from copilot_ray import keys
+from copilot_ray.algorithms.sac import settings as agent_settings
 from copilot_ray.planning.alpha_schedule import CLOCKS as ALPHA_CLOCKS
 from copilot_ray.planning.alpha_schedule import KINDS as ALPHA_KINDS
 from copilot_ray.planning.alpha_schedule import PRESETS as ALPHA_PRESETS
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
 from copilot_ray.planning.planner import ANGLE_MODES, NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
-from copilot_ray.privileges import COLLISION_CHECKS, MAP_QUERIES, RESET_TO_STATE
+from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import (
     Setting,
     bool_setting,
     choice_setting,
     float_setting,
     int_setting,
-    is_number,
     markdown_value,
     numbers_setting,
     replace_between,
@@ -46,11 +47,16 @@ from copilot_ray.settings import (
 )
 
 MAX_TREE_DEPTH = 10  # 2^(K+1) - 1 sub-tasks per task: K = 10 is already 2047; deeper is a typo
-# Where CoPilotConfig.from_settings puts a setting: .copilot(key=...), .copilot(planner={field: ...}),
-# .copilot(cost_model={field: ...}), one field of the alpha schedule, .training(key=...).
-TARGETS = ("copilot", "planner", "cost_model", "alpha_schedule", "training")
+# Where CoPilotConfig.from_settings puts a setting: .copilot(key=...), .agent(key=...) (the goal-conditioned
+# SAC agent's, sac/settings.py), .copilot(planner={field: ...}), .copilot(cost_model={field: ...}), one
+# field of the alpha schedule, .training(key=...).
+TARGETS = ("copilot", "agent", "planner", "cost_model", "alpha_schedule", "training")
 
 _int, _float, _bool, _choice, _sizes = int_setting, float_setting, bool_setting, choice_setting, sizes_setting
+# The goal-conditioned SAC agent's settings (CO-PILOT's agent is that agent): CO-PILOT takes them from
+# there, with its own defaults where they differ (a sub-task, not a task, per episode).
+_A = agent_settings.SETTINGS
+_A_TREE = {s.key: s for s in agent_settings.TREE_TRAVERSAL}
 
 
 def _schedule_ok(v: Any) -> bool:
@@ -66,11 +72,11 @@ def _alpha_field(key: str, kind_setting: Any, *args: Any, **kw: Any) -> Setting:
 
 
 # Choices of the readings (the paper's first).
-STEP_LIMITS = ("fixed", "scaled")
-AFTER_FAILURE = ("continue", "restart", "abort_layer")
-SUBTASK_REWARDS = ("halving", "uniform")
-AGENT_COLLISIONS = ("none", "penalty", "terminate")
-AGENT_INPUTS = ("state_goal", "state_goal_delta")
+STEP_LIMITS = agent_settings.STEP_LIMITS
+AFTER_FAILURE = agent_settings.AFTER_FAILURE
+SUBTASK_REWARDS = agent_settings.SUBTASK_REWARDS
+AGENT_COLLISIONS = agent_settings.AGENT_COLLISIONS
+AGENT_INPUTS = agent_settings.AGENT_INPUTS
 FAILED_SUBTASK_COSTS = ("end_state", "lower_bound")
 TRAVERSAL_TREES = ("sampled", "mean")
 EVAL_ACTIONS = keys.EVAL_ACTIONS
@@ -82,8 +88,8 @@ _TREE = [
         "tree_depth",
         "copilot",
         5,
-        "K: a tree has 2^K + 1 sub-goals (0: no planner, plain goal-conditioned SAC)",
-        0,
+        "K: a tree has 2^K + 1 sub-goals (the agent without a planner is algorithm sac)",
+        1,
         MAX_TREE_DEPTH,
         note=" (K > 10 is too deep for memory: 2^(K+1) - 1 sub-tasks per task)",
         # The planner's collision penalty (Eq. 11) asks the map about every segment it costs.
@@ -92,12 +98,10 @@ _TREE = [
     _int(
         "repetitions", "copilot", 5, "b: traversals of every task mini-batch per iteration (paper 4.1: 5)", 1
     ),
-    _int(
-        "task_batch_size",
-        "copilot",
-        2,
-        "tasks the agent traverses per iteration (paper 4.1: a mini-batch of 30)",
-        1,
+    replace(
+        _A["task_batch_size"],
+        default=2,
+        doc="tasks the agent traverses per iteration (paper 4.1: a mini-batch of 30)",
         why="not a reading: iteration size. With 30 tasks x b = 5 one iteration at K = 5 is up to 236k env "
         "steps (30 x 5 x 63 x 25), so a 300k-step run gets one or two evaluations; with 2 it is at most 16k "
         "(about 10k in practice). The planner keeps its batch of 30 (planner_task_batch_size)",
@@ -144,30 +148,15 @@ _ALPHA_FIELDS = [
     _alpha_field("values", numbers_setting, "alpha of each step", 0.0, 1.0, "alpha values in [0, 1]"),
 ]
 _TRAVERSAL = [
-    _int(
-        "tau_max",
-        "copilot",
-        25,
-        "step limit of one sub-task (paper 4.1: 25)",
-        1,
+    replace(
+        _A["tau_max"],
+        default=25,
+        doc="step limit of one sub-task (paper 4.1: 25)",
         why="the paper's; `step_limit: scaled` made failing upper layers cost ~3x the env steps",
     ),
-    _choice(
-        "step_limit",
-        "copilot",
-        "fixed",
-        "sub-task step limit: tau_max for every sub-task, or tau_max x 2^(K-k) for layer k",
-        STEP_LIMITS,
-        why="the paper's",
-    ),
-    _choice(
-        "after_failure",
-        "copilot",
-        "continue",
-        "after a failed sub-task the next starts where the agent stopped, at the missed sub-goal (when free), or the layer ends",
-        AFTER_FAILURE,
-        # restart puts the agent at the missed sub-goal after asking the map whether it is free.
-        grants=lambda v: (RESET_TO_STATE, MAP_QUERIES) if v == "restart" else (),
+    replace(_A_TREE["step_limit"], why="the paper's"),
+    replace(
+        _A_TREE["after_failure"],
         why="the paper's, and chosen on VALIDATION tasks among the privilege-free readings (restart resets the "
         "agent to a missed sub-goal after a map query, which no baseline may): mean validation success AUC over "
         "four-rooms and u-maze, 2 seeds each, 60k env steps: continue 0.095, abort_layer 0.030; final "
@@ -175,46 +164,17 @@ _TRAVERSAL = [
         "its other three runs <= 0.03), the median AUC favours abort_layer (0.026 vs 0.020) "
         "(`bash scripts/run_at_commit.sh --commit 4166145 sweeps/choose_defaults.yaml`)",
     ),
-    _choice(
-        "subtask_reward",
-        "copilot",
-        "uniform",
-        "reward for reaching a layer-k sub-goal: R / 2^k (Eq. 6) or R",
-        SUBTASK_REWARDS,
+    replace(
+        _A_TREE["subtask_reward"],
         why="a layer-5 reward of 1/32 is worth less than the entropy bonus SAC keeps by not reaching the "
         "sub-goal: test success 0.00 at 10k and 21k env steps with `halving`, 0.16 at 18k and 0.44 at 27k "
         "with `uniform`",
     ),
-    _float(
-        "reward_scale",
-        "copilot",
-        1.0,
-        "R: multiplies the goal env's reward (paper: 1 in the maze)",
-        0.0,
-        lo_open=True,
-        why="the paper's",
-    ),
-    _choice(
-        "agent_collision",
-        "copilot",
-        "none",
-        "a blocked move of the agent: free, a penalty, or a penalty and the end of the sub-task",
-        AGENT_COLLISIONS,
-        why="the paper's; `penalty` and `terminate` are there to try",
-    ),
-    _float(
-        "agent_collision_penalty",
-        "copilot",
-        0.0,
-        "reward subtracted per blocked move (agent_collision penalty/terminate)",
-        0.0,
-    ),
-    _choice(
-        "agent_input",
-        "copilot",
-        "state_goal_delta",
-        "what the agent's networks see: (state, sub-goal), or that plus sub-goal - achieved goal",
-        AGENT_INPUTS,
+    replace(_A["reward_scale"], why="the paper's"),
+    replace(_A["agent_collision"], why="the paper's; `penalty` and `terminate` are there to try"),
+    _A["agent_collision_penalty"],
+    replace(
+        _A["agent_input"],
         why="the delta is a function of s and g; without it the finest sub-tasks stayed at 51-58 % success "
         "and test success at 0.00-0.01 over 31k env steps; with it 0.44 at 27k",
     ),
@@ -237,7 +197,7 @@ _TRAVERSAL = [
         "one at 1x, so the finest segments drifted longer (share beyond reach 0.06 -> 0.16). Weak evidence: "
         "the drift showed under both readings in the probes",
     ),
-    _int("subtasks_per_sample", "copilot", 64, "sub-tasks per env runner between two learner updates", 1),
+    _A["subtasks_per_sample"],
 ]
 _PLANNER = [
     _int(
@@ -367,28 +327,9 @@ _COST_MODEL = [
     _int("cost_model.batch_size", "cost_model", 256, "tau_hat's batch size", 1),
 ]
 _EVALUATION = [
-    _int(
-        "eval_interval",
-        "copilot",
-        1,
-        "iterations between evaluations (0: never); ignored when eval_every_env_steps is set",
-        0,
-    ),
-    _int(
-        "eval_every_env_steps",
-        "copilot",
-        0,
-        "evaluate at the end of every iteration that passes another multiple of this many env steps, so "
-        "that methods with different iteration sizes are evaluated on one cadence (0: use eval_interval)",
-        0,
-    ),
-    _int(
-        "eval_num_tasks",
-        "copilot",
-        100,
-        "validation and test tasks per evaluation (the paper's test set has 100)",
-        1,
-    ),
+    _A["eval_interval"],
+    _A["eval_every_env_steps"],
+    _A["eval_num_tasks"],
     _int(
         "eval_tree_tasks", "copilot", 3, "fixed test tasks whose sub-goal trees are saved per evaluation", 0
     ),
@@ -399,83 +340,18 @@ _EVALUATION = [
         "RRT*'s time per task for the paths/*_vs_rrt metrics (computed once per env, cached; 0: none)",
         0.0,
     ),
-    _choice(
-        "eval_action",
-        "copilot",
-        "deterministic",
-        "the actions behind the headline copilot/eval/success_* (both are always logged)",
-        EVAL_ACTIONS,
-        why="which actions the headline metrics use; both are always logged",
-    ),
+    _A["eval_action"],
 ]
-_SAC = [
-    _bool(
-        "fast_learner",
-        "copilot",
-        True,
-        "our flat-buffer SAC learner (false: RLlib's stock SAC module, learner and buffer, ~10x slower)",
-    ),
-    _float(
-        "updates_per_env_step",
-        "copilot",
-        None,
-        "SAC gradient steps per env step; null: from training_intensity when set, else 1.0",
-        0.0,
-        lo_open=True,
-        optional=True,
-    ),
-    _float("actor_lr", "training", 3e-4, "SAC actor learning rate (SB3's default)", 0.0, lo_open=True),
-    _float("critic_lr", "training", 3e-4, "SAC critic learning rate", 0.0, lo_open=True),
-    _float("alpha_lr", "training", 3e-4, "SAC temperature learning rate", 0.0, lo_open=True),
-    _float("gamma", "training", 0.99, "discount", 0.0, 1.0, lo_open=True),
-    _float(
-        "initial_alpha",
-        "training",
-        0.02,
-        "SAC's initial entropy temperature",
-        0.0,
-        lo_open=True,
-        why="SAC's default temperature swamps sparse sub-task rewards (open maze: 0.00 vs 0.74 test success "
-        "at 8k env steps)",
-    ),
-    Setting(
-        "target_entropy",
-        "float",
-        "training",
-        "auto",
-        'the entropy SAC tunes its temperature towards ("auto": -|A|)',
-        lambda v: v == "auto" or is_number(v),
-        '"auto" or a number',
-        why="the paper's (SAC's default)",
-    ),
-    _float("tau", "training", 0.005, "target network update rate", 0.0, 1.0, lo_open=True),
-    _int("train_batch_size_per_learner", "training", 256, "SAC batch size", 1),
-    _float(
-        "training_intensity",
-        "training",
-        None,
-        "RLlib's update-to-data ratio: replayed per sampled timesteps (= updates_per_env_step x batch size)",
-        0.0,
-        lo_open=True,
-        optional=True,
-    ),
-    _int(
-        "num_steps_sampled_before_learning_starts",
-        "training",
-        1000,
-        "env steps before the first SAC update",
-        0,
-    ),
-]
+_SAC = list(agent_settings.LEARNER)
 
-PRESET_NAMES = ("default", "paper_literal", "plain_sac")
+PRESET_NAMES = ("default", "paper_literal")
 _PRESET = [
     _choice(
         "preset",
         "copilot",
         None,
-        "a named set of readings applied before every other setting: the measured defaults, the paper's "
-        "reading, or plain SAC (tree depth 0)",
+        "a named set of readings applied before every other setting: the measured defaults, or the "
+        "paper's reading",
         PRESET_NAMES,
         optional=True,
     )
@@ -503,7 +379,7 @@ def defaults(target: str) -> dict[str, Any]:
 # The measured reading of every paper ambiguity (the settings with a `why`), and agent_collision_penalty
 # because a preset may change it.
 _DEFAULT_READINGS: dict[str, Any] = {
-    s.key: s.default for s in SETTINGS.values() if s.why and s.target in ("copilot", "training")
+    s.key: s.default for s in SETTINGS.values() if s.why and s.target in ("copilot", "agent", "training")
 }
 _DEFAULT_READINGS["agent_collision_penalty"] = SETTINGS["agent_collision_penalty"].default
 _DEFAULT_READINGS["planner"] = {
@@ -527,23 +403,14 @@ PRESETS: dict[str, dict[str, Any]] = {
         # this preset isolates the paper's readings of CO-PILOT itself. (The paper's "SAC with its
         # default hyperparameters" is initial_alpha 1.0 and agent_input state_goal: set them to see it.)
     },
-    # Not a reading but the baseline CO-PILOT must beat: the same learner, replay and evaluation with
-    # no planner (tree depth 0), one episode per task with the step budget of a finest traversal
-    # (2^5 sub-tasks x 25 steps).
-    "plain_sac": {**_DEFAULT_READINGS, "tree_depth": 0, "tau_max": 800},
 }
 assert tuple(PRESETS) == PRESET_NAMES
 
-# What a comparison tunes (`search: declared` in a spec; rl-zoo style, each algorithm's space next to
-# its settings). The goal-conditioned SAC learner that CO-PILOT, SAC, HER and SoRB share: its learning
-# rates and discount. The defaults lie inside every range (an Optuna study tries them first).
-LEARNER_SEARCH_SPACE: dict[str, dict] = {
-    "actor_lr": {"float": [1e-4, 1e-3], "log": True},
-    "critic_lr": {"float": [1e-4, 1e-3], "log": True},
-    "gamma": {"categorical": [0.98, 0.99, 0.995]},
-}
 # CO-PILOT, its readings (the preset) held fixed: the learner's space plus the planner's learning rate.
-SEARCH_SPACE: dict[str, dict] = {**LEARNER_SEARCH_SPACE, "planner.lr": {"float": [1e-3, 1e-2], "log": True}}
+SEARCH_SPACE: dict[str, dict] = {
+    **agent_settings.LEARNER_SEARCH_SPACE,
+    "planner.lr": {"float": [1e-3, 1e-2], "log": True},
+}
 
 # ------------------------------------------------------------------------------------------ metrics
 # What a CO-PILOT run logs that a sweep may optimise or stop on; `<k>` is a tree layer (0..K).
@@ -600,16 +467,15 @@ def max_iteration_env_steps(values: Mapping[str, Any]) -> int:
     task_batch_size x b x the sub-tasks' step limits summed over the layers K..0."""
     v = effective_values(values)
     depth, tau = int(v["tree_depth"]), int(v["tau_max"])
-    per_tree = sum(2**k * (tau * 2 ** (depth - k) if v["step_limit"] == "scaled" else tau) for k in range(depth + 1))
+    per_tree = sum(
+        2**k * (tau * 2 ** (depth - k) if v["step_limit"] == "scaled" else tau) for k in range(depth + 1)
+    )
     return int(v["task_batch_size"]) * int(v["repetitions"]) * per_tree
 
 
 def combination_problems(values: Mapping[str, Any]) -> list[tuple[tuple[str, ...], Any, str]]:
     """Values valid one by one that clash together: (the keys involved, their values, why)."""
-    out: list[tuple[tuple[str, ...], Any, str]] = []
-    both = ("updates_per_env_step", "training_intensity")
-    if all(values.get(k) is not None for k in both):
-        out.append((both, {k: values[k] for k in both}, "both set the update-to-data ratio; set one"))
+    out = agent_settings.combination_problems(values)
     if "alpha_schedule" in values and "alpha_schedule.kind" in values:
         out.append(
             (

@@ -191,7 +191,9 @@ class HRL:
             if split == "test":
                 out.update(figures)
             else:
-                out.update({keys.validation_key(k): v for k, v in figures.items() if "/" not in keys.eval_leaf(k)})
+                out.update(
+                    {keys.validation_key(k): v for k, v in figures.items() if "/" not in keys.eval_leaf(k)}
+                )
         return out
 
     def _evaluate_split(self, split: str) -> dict[str, float]:

@@ -24,8 +24,8 @@ from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LI
 from ray.tune.registry import register_env
 
 from copilot_ray import keys
-from copilot_ray.algorithms.copilot.traversal_env import TraversalRules
 from copilot_ray.algorithms.ppo import settings as ppo_settings
+from copilot_ray.algorithms.sac.traversal_env import TraversalRules
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
 from copilot_ray.evaluation import (
@@ -204,7 +204,9 @@ class GoalPPO(PPO):
             for key in direct:
                 value = values[keys.eval_leaf(key)]
                 if test:
-                    self.metrics.log_value(keys.metric_path(keys.eval_by_action(key, action)), value, window=1)
+                    self.metrics.log_value(
+                        keys.metric_path(keys.eval_by_action(key, action)), value, window=1
+                    )
                 if action == cfg.eval_action:
                     log(key, value)
         headline = result.by_action[cfg.eval_action]

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -41,9 +41,8 @@ from copilot_ray import keys
 from copilot_ray.algorithms.sac.algorithm import GoalSAC, HERConfig
 from copilot_ray.algorithms.sorb import settings as sorb_settings
 from copilot_ray.algorithms.sorb.graph import ReplayGraph, pad_front
-from copilot_ray.registry import RunContext
+from copilot_ray.settings import Setting
 
-_SEARCH_DEFAULTS = {s.field: s.default for s in sorb_settings.SEARCH}
 # Rows per critic call when building the graph (memory: rows x hidden floats per layer).
 _CRITIC_CHUNK = 32_768
 
@@ -51,31 +50,20 @@ _CRITIC_CHUNK = 32_768
 class SoRBConfig(HERConfig):
     """The HER baseline's config plus SoRB's search settings (`.search(...)`, `sorb.*` in specs)."""
 
+    SETTINGS: ClassVar[Mapping[str, Setting]] = sorb_settings.SETTINGS
+    NESTED: ClassVar[tuple[str, ...]] = ("her", "sorb")
+
     def __init__(self, algo_class=None):
         super().__init__(algo_class=algo_class or SoRB)
-        self.sorb: dict[str, Any] = dict(_SEARCH_DEFAULTS)
-
-    @classmethod
-    def from_settings(cls, values: Mapping[str, Any], run: RunContext) -> SoRBConfig:
-        search = {k.split(".", 1)[1]: v for k, v in values.items() if k.startswith("sorb.")}
-        config = super().from_settings({k: v for k, v in values.items() if not k.startswith("sorb.")}, run)
-        return config.search(**search)
 
     def search(self, **settings: Any) -> SoRBConfig:
         """SoRB's settings: pretrain_env_steps, graph_size, max_edge_steps, waypoint_steps."""
-        unknown = sorted(set(settings) - set(_SEARCH_DEFAULTS))
-        if unknown:
-            raise ValueError(
-                f"SoRBConfig.search: unknown setting {unknown[0]!r}; known: {sorted(_SEARCH_DEFAULTS)}"
-            )
+        self._refuse_unknown({f"sorb.{k}" for k in settings}, "search")
         self.sorb = {**self.sorb, **settings}
         return self
 
     @override(HERConfig)
     def validate(self) -> None:
-        for s in sorb_settings.SEARCH:
-            if (why := s.problem(self.sorb.get(s.field))) is not None:
-                raise ValueError(f"SoRBConfig: {s.key}={self.sorb.get(s.field)!r} is invalid: {why}")
         if self.num_learners != 0:
             raise ValueError(
                 f"SoRBConfig: num_learners={self.num_learners!r} is invalid: the search reads the critic of "

@@ -33,48 +33,46 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from copilot_ray.algorithms.copilot.settings import SETTINGS
+from copilot_ray.algorithms.sac.settings import SETTINGS, TREE_TRAVERSAL
 from copilot_ray.envs import make
 from copilot_ray.envs.continuation import reset_toward
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
 from copilot_ray.planning.subgoal_tree import path_indices
+from copilot_ray.settings import record_class
 
 TRAVERSAL_ENV_ID = "copilot-traversal"
 
 
-@dataclass(frozen=True)
-class TraversalRules:
-    """How sub-tasks are run and rewarded (see the module docstring). Defaults and rules are the
-    settings of the same names (settings.py)."""
+# The settings that say how sub-tasks are run and rewarded (the env runners get them in env_config).
+RULE_KEYS = (
+    "tau_max",
+    "step_limit",
+    "after_failure",
+    "subtask_reward",
+    "reward_scale",
+    "agent_collision",
+    "agent_collision_penalty",
+    "agent_input",
+)
 
-    tau_max: int = SETTINGS["tau_max"].default
-    step_limit: str = SETTINGS["step_limit"].default
-    after_failure: str = SETTINGS["after_failure"].default
-    subtask_reward: str = SETTINGS["subtask_reward"].default
-    reward_scale: float = SETTINGS["reward_scale"].default
-    agent_collision: str = SETTINGS["agent_collision"].default
-    agent_collision_penalty: float = SETTINGS["agent_collision_penalty"].default
-    agent_input: str = SETTINGS["agent_input"].default
 
-    def __post_init__(self) -> None:
-        for name in self.__dataclass_fields__:
-            value = getattr(self, name)
-            if (why := SETTINGS[name].problem(value)) is not None:
-                raise ValueError(f"{name}={value!r} is invalid: {why}")
+_RULES = {**SETTINGS, **{s.key: s for s in TREE_TRAVERSAL}}
+
+
+class TraversalRules(record_class("TraversalRules", {k: _RULES[k] for k in RULE_KEYS}, with_run=False)):
+    """How sub-tasks are run and rewarded (see the module docstring): the settings of the same names,
+    their defaults and rules read off settings.py, checked on construction."""
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> TraversalRules:
         """The rules from a traversal env_config (keys of this class; missing ones keep their defaults)."""
         return cls(**{k: config[k] for k in cls.__dataclass_fields__ if k in config})
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
     def step_limit_of(self, layer: int, depth: int) -> int:
         """Steps a layer-`layer` sub-task of a depth-`depth` tree may take."""
