@@ -342,3 +342,43 @@ def record_class(
     if with_run:
         namespace["from_settings"] = classmethod(from_settings)
     return dataclasses.make_dataclass(name, fields, frozen=True, namespace=namespace)
+
+
+_ANNOTATIONS = {"int": int, "float": float, "bool": bool, "str": str, "list": list, "schedule": Any}
+
+
+def keyword_arguments(
+    table: Mapping[str, Setting], targets: tuple[str, ...], nested: tuple[str, ...] = ()
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Decorates a `method(self, **settings)` setter with named keyword arguments read off `table`:
+    every undotted setting whose target is in `targets`, and one dict per `nested` target (its dotted
+    settings' defaults). help() and signature-reading editors then show each name, type, default and
+    doc; the method body is unchanged (arguments left out keep their current value)."""
+    import inspect
+
+    def decorate(method: Callable[..., Any]) -> Callable[..., Any]:
+        params = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+        lines = []
+        for key, s in table.items():
+            if "." in key or s.target not in targets:
+                continue
+            params.append(
+                inspect.Parameter(
+                    key, inspect.Parameter.KEYWORD_ONLY, default=s.default, annotation=_ANNOTATIONS[s.kind]
+                )
+            )
+            lines.append(f"    {key} ({s.kind}, default {s.default!r}): {s.doc}")
+        for name in nested:
+            fields = {s.field: s.default for s in table.values() if s.target == name and "." in s.key}
+            params.append(
+                inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=fields, annotation=dict)
+            )
+            lines.append(f"    {name} (dict, updates the current one key by key; defaults {fields!r})")
+        method.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
+        method.__doc__ = (
+            f"{method.__doc__ or ''}\n\n    Arguments (left out: unchanged; a new config holds these defaults):\n"
+            + "\n".join(lines)
+        )
+        return method
+
+    return decorate

@@ -3,6 +3,7 @@
 import pytest
 
 from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
+from copilot_ray.algorithms.copilot.settings import SETTINGS
 from copilot_ray.algorithms.sac.traversal_env import TRAVERSAL_ENV_ID
 
 
@@ -153,3 +154,21 @@ def test_traversal_rules_reach_the_env_config():
 def test_bad_reading_knobs_are_rejected_with_key_and_value(knobs, match):
     with pytest.raises(ValueError, match=match):
         config(**knobs).validate()
+
+
+def test_copilot_and_agent_take_named_arguments_with_their_defaults():
+    import inspect
+
+    from copilot_ray.algorithms.sac.algorithm import GoalSACConfig
+
+    params = inspect.signature(CoPilotConfig().copilot).parameters
+    undotted = {k for k, s in SETTINGS.items() if "." not in k and s.target != "training"}
+    assert set(params) == undotted | {"planner", "cost_model"}
+    assert params["tree_depth"].default == SETTINGS["tree_depth"].default
+    assert params["tree_depth"].kind is inspect.Parameter.KEYWORD_ONLY
+    assert params["planner"].default["std"] == SETTINGS["planner.std"].default
+    assert f"tree_depth (int, default {SETTINGS['tree_depth'].default})" in CoPilotConfig.copilot.__doc__
+    agent = inspect.signature(GoalSACConfig().agent).parameters
+    assert "tau_max" in agent and "tree_depth" not in agent and "actor_lr" not in agent
+    with pytest.raises(ValueError, match="unknown setting 'tree_depht'.*tree_depth"):
+        CoPilotConfig().copilot(tree_depht=3)

@@ -36,6 +36,7 @@ import numpy as np
 from gymnasium import spaces
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
+from copilot_ray.envs.goal_env import SparseGoalReward
 from copilot_ray.envs.maze.agents import PointMass
 from copilot_ray.envs.maze.geometry import Obstacles, merge_cells
 from copilot_ray.envs.maze.tasks import SPLITS, sample_task_pairs, split_rng
@@ -117,7 +118,7 @@ def wall_boxes(grid: np.ndarray, cell: float = CELL_SIZE) -> tuple[np.ndarray, n
     return lo, hi
 
 
-class GoalAntMazeEnv(gym.Env):
+class GoalAntMazeEnv(SparseGoalReward, gym.Env):
     """The Ant in a maze towards a goal position (module docstring). Truncates after
     `max_episode_steps` or a flip; terminates on reaching the goal."""
 
@@ -197,17 +198,6 @@ class GoalAntMazeEnv(gym.Env):
 
     def is_free(self, position: np.ndarray) -> bool:
         return bool(self.obstacles.clearance(np.asarray(position, np.float64)[None])[0] > 0.0)
-
-    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None) -> Any:
-        """Sparse: goal_reward within success_radius, else 0. [N, 2] -> [N]; [2] -> float."""
-        reward = np.where(self.compute_terminated(achieved_goal, desired_goal), self.goal_reward, 0.0)
-        return float(reward) if np.ndim(reward) == 0 else reward
-
-    def compute_terminated(
-        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None
-    ) -> Any:
-        reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
-        return bool(reached) if np.ndim(reached) == 0 else reached
 
     # --- tasks ---------------------------------------------------------------------------------
     def sample_tasks(self, n: int, split: str = "train", seed: int | None = None):

@@ -65,6 +65,7 @@ from gymnasium.envs.box2d import bipedal_walker as bw
 from gymnasium.utils import EzPickle
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
+from copilot_ray.envs.goal_env import SparseGoalReward
 from copilot_ray.envs.goal_observation import flat_observation
 from copilot_ray.envs.task_sets import SPLIT_STREAMS, check_task_set
 
@@ -232,7 +233,7 @@ class TrackGeometry:
         return np.abs(np.asarray(b, np.float64) - np.asarray(a, np.float64))[..., 0]
 
 
-class GoalStumpTracksEnv(bw.BipedalWalker):
+class GoalStumpTracksEnv(SparseGoalReward, bw.BipedalWalker):
     """BipedalWalker on a stump track heading for a hull x position (module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": bw.FPS}
@@ -292,17 +293,6 @@ class GoalStumpTracksEnv(bw.BipedalWalker):
     def is_free(self, position: np.ndarray) -> bool:
         """Every x of the goal space is a place a walker can be put (stood on whatever is there)."""
         return bool(self.goal_space.contains(np.asarray(position, np.float32).reshape(1)))
-
-    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None) -> Any:
-        """Sparse: goal_reward within success_radius, else 0. [N, 1] -> [N]; [1] -> float."""
-        reward = np.where(self.compute_terminated(achieved_goal, desired_goal), self.goal_reward, 0.0)
-        return float(reward) if np.ndim(reward) == 0 else reward
-
-    def compute_terminated(
-        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None
-    ) -> Any:
-        reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
-        return bool(reached) if np.ndim(reached) == 0 else reached
 
     # --- tracks and tasks ------------------------------------------------------------------------
     def distributions(self) -> np.ndarray:

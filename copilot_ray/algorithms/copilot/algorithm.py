@@ -54,7 +54,7 @@ from copilot_ray.planning import (
     construct_trees,
 )
 from copilot_ray.planning.path_metrics import CountedChecks, RRTReference, rrt_reference
-from copilot_ray.settings import Setting
+from copilot_ray.settings import Setting, keyword_arguments
 
 _STATE_KEY = "copilot"
 # Tasks per planner phase of the warm start: the paper's task mini-batch for the maze.
@@ -108,6 +108,7 @@ class CoPilotConfig(GoalSACConfig):
         if training:
             self.training(**training)
 
+    @keyword_arguments(SETTINGS, ("copilot", "agent", "alpha_schedule"), NESTED)
     def copilot(self, **settings: Any) -> CoPilotConfig:
         """Sets CO-PILOT's settings (and the agent's) by name (`settings.SETTINGS` lists them).
 

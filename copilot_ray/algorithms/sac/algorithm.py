@@ -76,7 +76,7 @@ from copilot_ray.evaluation import (
 )
 from copilot_ray.planning.path_metrics import path_metrics
 from copilot_ray.registry import RunContext
-from copilot_ray.settings import Setting, check, route
+from copilot_ray.settings import Setting, check, keyword_arguments, route
 
 logger = logging.getLogger(__name__)
 RUNNER_RESTORE_TIMEOUT_S = 120  # waiting for a failed env runner to come back when none is left
@@ -168,11 +168,10 @@ class GoalSACConfig(SACConfig):
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ValueError(f"{type(self).__name__}.{caller}: unknown setting {unknown[0]!r}{hint}")
 
+    @keyword_arguments(agent_settings.SETTINGS, ("agent",))
     def agent(self, **settings: Any) -> GoalSACConfig:
-        """Sets the agent's settings by name (`SETTINGS` with target "agent": tau_max, task_batch_size,
-        reward_scale, agent_collision(_penalty), agent_input, subtasks_per_sample, eval_interval,
-        eval_every_env_steps, eval_num_tasks, eval_action, fast_learner, updates_per_env_step). SAC's own
-        learning settings go to `.training(...)`. Values are checked by `validate()`."""
+        """Sets the agent's settings by name (`SETTINGS` with target "agent"). SAC's own learning
+        settings go to `.training(...)`. Values are checked by `validate()`."""
         self._refuse_unknown(settings, "agent")
         training = [k for k in settings if self.SETTINGS[k].target == "training"]
         if training:

@@ -11,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
+from copilot_ray.envs.goal_env import SparseGoalReward
 from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, draw_task_sets
 
 from .agents import AgentGeometry, PointMass
@@ -74,7 +75,7 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
     return cfg
 
 
-class GoalMazeEnv(gym.Env):
+class GoalMazeEnv(SparseGoalReward, gym.Env):
     """An agent moves through a maze of square obstacles in the unit square towards a goal configuration.
 
     A move whose straight motion would touch an obstacle or the border is blocked (the agent stays) and
@@ -146,19 +147,6 @@ class GoalMazeEnv(gym.Env):
         return bool(
             self.agent_geometry.clearance(self.obstacles, np.asarray(config, np.float64)[None])[0] > 0.0
         )
-
-    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None) -> Any:
-        """Sparse: goal_reward within success_radius, else 0. [N, d] -> [N]; [d] -> float."""
-        reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
-        reward = np.where(reached, self.goal_reward, 0.0)
-        return float(reward) if np.ndim(reward) == 0 else reward
-
-    def compute_terminated(
-        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None
-    ) -> Any:
-        """Whether the goal is reached (the episode ends there): [N, d] -> bool [N]; [d] -> bool."""
-        reached = self.goal_distance(achieved_goal, desired_goal) <= self.success_radius
-        return bool(reached) if np.ndim(reached) == 0 else reached
 
     def sample_tasks(
         self, n: int, split: str = "train", seed: int | None = None
