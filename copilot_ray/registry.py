@@ -20,8 +20,8 @@ starts) and provide:
 
 The config class (an RLlib AlgorithmConfig, imported only when a run is built) provides
 `from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build. The trial
-class is what a sweep runs: `class MyTrial(tune_runtime.SpecTrial, MyAlgorithm)` for an RLlib Algorithm,
-or a Tune Trainable (`copilot_ray.algorithms.planning_trial.PlanningTrial` for the planner-only baselines,
+class is what a sweep runs: `class MyTrial(trials.spec_trial.SpecTrial, MyAlgorithm)` for an RLlib Algorithm,
+or a Tune Trainable (`copilot_ray.trials.planning_trial.PlanningTrial` for the planner-only baselines,
 whose config class is a plain dataclass).
 """
 
@@ -41,7 +41,7 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
     "copilot": (
         "copilot_ray.algorithms.copilot.settings",
         "copilot_ray.algorithms.copilot.algorithm:CoPilotConfig",
-        "copilot_ray.tune_runtime:CoPilotTrial",
+        "copilot_ray.algorithms.copilot.trial:CoPilotTrial",
     ),
     # The agent-only baselines (CO-PILOT's agent at tree depth 0): SAC, and SAC with HER's replay.
     "sac": (
@@ -117,6 +117,9 @@ class AlgorithmEntry:
     always_privileges: tuple[str, ...] = ()
     search_space: Mapping[str, Any] = field(default_factory=dict)  # raw domains (spec syntax)
     max_iteration_env_steps: Callable[[Mapping[str, Any]], int] | None = None
+    # What its runs are labelled by in progress lines, MLflow tags and the report: label -> setting key
+    # (K: tree_depth, b: repetitions, alpha_schedule); the settings module's LABELS.
+    labels: Mapping[str, str] = field(default_factory=dict)
 
     def privileges(self, values: Mapping[str, Any]) -> tuple[str, ...]:
         """The privileges a run uses at the effective setting `values` (copilot_ray.privileges)."""
@@ -183,4 +186,5 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         always_privileges=tuple(getattr(module, "PRIVILEGES", ())),
         search_space=dict(getattr(module, "SEARCH_SPACE", {})),
         max_iteration_env_steps=getattr(module, "max_iteration_env_steps", None),
+        labels=dict(getattr(module, "LABELS", {})),
     )

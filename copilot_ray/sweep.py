@@ -67,7 +67,7 @@ from copilot_ray.keys import (
 from copilot_ray.store import tracking_uri_problem, ui_hint
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.estimate import total_wall_time_line
-from copilot_ray.tracking import config_key, trial_flat
+from copilot_ray.trials.description import config_key, env_params, trial_flat
 
 EXIT_INTERRUPTED = 130
 
@@ -415,7 +415,7 @@ def _sweep_params(spec) -> dict[str, Any]:
     """The sweep's shape, as the parent run's params."""
     return {
         "algorithm": spec.algorithm,
-        **tracking.env_params(spec, ",".join(spec.env.ids)),
+        **env_params(spec, ",".join(spec.env.ids)),
         "searcher": spec.searcher.type,
         "seeds": list(spec.seeds),
         "trials": len(spec.trial_plan()),

@@ -110,13 +110,14 @@ def test_sgt_pg_trial_logs_paths_against_rrt_and_resumes_exactly(cache, tmp_path
         for key in keys.PATH_METRICS:
             assert key.split("/")[1] in results[-1]["paths"], key
         assert len(list(cache.glob("maze-point-8tasks-*.npz"))) == 1
-        trial.save_checkpoint(str(tmp_path))
+        saved = trial.save(str(tmp_path / "ckpt"))  # what Tune does, and restore() below when it retries
         expected = trial.train()
     finally:
         trial.stop()
     restored = _sgt_pg_trial()
     try:
-        restored.load_checkpoint(str(tmp_path))
+        restored.restore(saved)
+        assert restored.training_iteration == 2
         got = restored.train()
         assert got["paths"] == expected["paths"]  # same planner, optimizer, task sampler and noise
     finally:
@@ -133,7 +134,7 @@ def test_rrt_star_trial_plans_in_chunks_ends_and_stores_the_reference(cache, tmp
     try:
         first = trial.train()
         assert first["paths"]["tasks"] == 2 and not first.get("done")
-        trial.save_checkpoint(str(tmp_path))
+        saved = trial.save(str(tmp_path / "ckpt"))
         results = [trial.train() for _ in range(2)]
         assert [r["paths"]["tasks"] for r in results] == [4, 5] and results[-1]["done"]
         figures = results[-1]["paths"]
@@ -147,7 +148,7 @@ def test_rrt_star_trial_plans_in_chunks_ends_and_stores_the_reference(cache, tmp
         trial.stop()
     restored = RRTStarTrial(config={"algorithm_config": cfg})
     try:
-        restored.load_checkpoint(str(tmp_path))
+        restored.restore(saved)  # Tune's call when it retries or resumes the trial
         assert restored.train()["paths"]["tasks"] == 4  # continues after the 2 planned tasks
     finally:
         restored.stop()

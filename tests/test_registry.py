@@ -7,7 +7,7 @@ import pytest
 from copilot_ray import registry
 from copilot_ray.envs import registry as env_registry
 from copilot_ray.sweep_spec import SpecError, build_algorithm_config, format_plan, parse_spec
-from copilot_ray.tune_runtime import SpecTrial
+from copilot_ray.trials.spec_trial import SpecTrial
 
 TOY = ("tests.toy_algorithm", "tests.toy_algorithm:ToyPPOConfig", "tests.toy_algorithm:ToyPPOTrial")
 

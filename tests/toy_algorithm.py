@@ -14,7 +14,7 @@ from typing import Any
 from ray.rllib.algorithms.ppo import PPO, PPOConfig
 
 from copilot_ray.settings import float_setting, int_setting
-from copilot_ray.tune_runtime import SpecTrial
+from copilot_ray.trials.spec_trial import SpecTrial
 
 SETTINGS = {
     s.key: s

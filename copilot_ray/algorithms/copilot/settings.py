@@ -414,6 +414,9 @@ SEARCH_SPACE: dict[str, dict] = {
 
 # ------------------------------------------------------------------------------------------ metrics
 # What a CO-PILOT run logs that a sweep may optimise or stop on; `<k>` is a tree layer (0..K).
+# What its runs are labelled by (progress lines, MLflow tags, the report's configuration names).
+LABELS = {"K": "tree_depth", "b": "repetitions", "alpha_schedule": "alpha_schedule"}
+
 METRICS: tuple[str, ...] = (
     # Searchers, schedulers and probes read the validation tasks' figures; the test tasks' are reported.
     *keys.validation_metrics(

@@ -1,4 +1,4 @@
-"""NEXTTrial: NEXT trained and scored as a sweep trial (see copilot_ray.algorithms.planning_trial)."""
+"""NEXTTrial: NEXT trained and scored as a sweep trial (see copilot_ray.trials.planning_trial)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ from typing import Any
 
 import numpy as np
 
-from copilot_ray.algorithms.planning_trial import PlanningTrial
 from copilot_ray.planning.next_planner import NEXTPlanner, padded_paths, rrt_star_demonstrations
 from copilot_ray.planning.path_metrics import path_metrics, rrt_reference, score_paths
+from copilot_ray.trials.planning_trial import PlanningTrial
 
 
 class NEXTTrial(PlanningTrial):
@@ -77,6 +77,6 @@ class NEXTTrial(PlanningTrial):
     def state(self) -> dict[str, Any]:
         return {"planner": self.planner.state_dict(), "round": self.round}
 
-    def restore(self, state: dict) -> None:
+    def restore_state(self, state: dict) -> None:
         self.planner.load_state_dict(state["planner"])
         self.round = int(state["round"])

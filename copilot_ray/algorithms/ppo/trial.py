@@ -2,7 +2,7 @@
 
 from copilot_ray import keys
 from copilot_ray.algorithms.ppo.algorithm import GoalPPO
-from copilot_ray.tune_runtime import SpecTrial
+from copilot_ray.trials.spec_trial import SpecTrial
 
 
 class GoalPPOTrial(SpecTrial, GoalPPO):

@@ -1,4 +1,4 @@
-"""RRTStarTrial: RRT* on the test tasks as a sweep trial (see copilot_ray.algorithms.planning_trial)."""
+"""RRTStarTrial: RRT* on the test tasks as a sweep trial (see copilot_ray.trials.planning_trial)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ from typing import Any
 
 import numpy as np
 
-from copilot_ray.algorithms.planning_trial import PlanningTrial
 from copilot_ray.planning.path_metrics import (
     PathScores,
     RRTReference,
@@ -14,6 +13,7 @@ from copilot_ray.planning.path_metrics import (
     reference_path,
 )
 from copilot_ray.planning.rrt_star import rrt_star_for_env
+from copilot_ray.trials.planning_trial import PlanningTrial
 
 
 class RRTStarTrial(PlanningTrial):
@@ -63,5 +63,5 @@ class RRTStarTrial(PlanningTrial):
     def state(self) -> dict[str, Any]:
         return {"solved": self.solved, "length": self.length, "checks": self.checks}
 
-    def restore(self, state: dict) -> None:
+    def restore_state(self, state: dict) -> None:
         self.solved, self.length, self.checks = (list(state[k]) for k in ("solved", "length", "checks"))

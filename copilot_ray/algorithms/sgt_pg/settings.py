@@ -54,4 +54,5 @@ SETTINGS = {
 # What an SGT-PG run logs that a sweep may optimise or stop on.
 # A planner that searches the map: every segment or motion it considers is a ground-truth check.
 PRIVILEGES = (COLLISION_CHECKS,)
+LABELS = {"K": "tree_depth"}  # its runs are labelled by their tree depth, as CO-PILOT's
 METRICS: tuple[str, ...] = (*keys.PATH_METRICS, keys.PLANNER_UPDATES, keys.ENV_STEPS)

@@ -1,4 +1,4 @@
-"""SGTPGTrial: SGT-PG trained and scored as a sweep trial (see copilot_ray.algorithms.planning_trial)."""
+"""SGTPGTrial: SGT-PG trained and scored as a sweep trial (see copilot_ray.trials.planning_trial)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import torch
 
 from copilot_ray import keys
-from copilot_ray.algorithms.planning_trial import PlanningTrial
 from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees
 from copilot_ray.planning.path_metrics import CountedChecks, path_metrics, rrt_reference, score_paths
+from copilot_ray.trials.planning_trial import PlanningTrial
 
 
 class SGTPGTrial(PlanningTrial):
@@ -83,7 +83,7 @@ class SGTPGTrial(PlanningTrial):
             "checks": self.checks.count,
         }
 
-    def restore(self, state: dict) -> None:
+    def restore_state(self, state: dict) -> None:
         self.planner.load_state_dict(state["planner"])
         self.rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"])

@@ -1,7 +1,7 @@
 """SoRB as a sweep trial (the registry's third entry; imports Ray Tune)."""
 
 from copilot_ray.algorithms.sorb.algorithm import SoRB
-from copilot_ray.tune_runtime import SpecTrial
+from copilot_ray.trials.spec_trial import SpecTrial
 
 
 class SoRBTrial(SpecTrial, SoRB):
