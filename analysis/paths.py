@@ -46,7 +46,11 @@ COLUMNS = {
     PATH_CHECKS_VS_RRT: "checks / RRT*",
 }
 PANELS = (PATH_SUCCESS, PATH_LENGTH_VS_RRT, PATH_CHECKS_VS_RRT)
-PLANNER_ONLY = {"rrt_star": "RRT*", "sgt_pg": "SGT-PG"}  # algorithm tag -> name; their env steps are checks
+PLANNER_ONLY = {
+    "rrt_star": "RRT*",
+    "sgt_pg": "SGT-PG",
+    "next": "NEXT",
+}  # algorithm tag -> name; their env steps are checks
 PANEL_TITLES = {
     PATH_SUCCESS: "success (collision-free path to the goal)",
     PATH_LENGTH_VS_RRT: "path length / RRT*'s (tasks both solved)",

@@ -52,6 +52,7 @@ DTAU_SIZE = "copilot/dtau/size"
 COST_MODEL_LOSS = "copilot/cost_model/loss"
 TIME_PREFIX = "copilot/time/"  # wall seconds per phase of an iteration
 PLANNING_SHARE = "copilot/time/planning_share"
+AGENT_SAC_UPDATES = "copilot/agent/sac_updates"  # SAC gradient steps in the iteration
 
 # Evaluation on the held-out TEST tasks (what reports show): the headline action's figures, and per
 # action mode (`eval_by_action`: copilot/eval/<action>/<name>). The same figures on the VALIDATION tasks

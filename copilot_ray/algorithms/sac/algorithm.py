@@ -331,6 +331,7 @@ class GoalSAC(SAC):
         self._privileged = {"resets": 0, "map_queries": 0}
         self.rules = cfg.traversal_rules()
         self._subtasks_lost = 0  # this iteration's, taken by env runners that died (AGENT_SUBTASKS_LOST)
+        self._update_seconds, self._updates_done = 0.0, 0
         self.agent_updater = self._make_agent_updater()
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
         # exact over the run instead of rounded per sampling round.
@@ -380,6 +381,7 @@ class GoalSAC(SAC):
         cfg = self.config
         self._before_iteration()
         self._subtasks_lost = 0
+        self._update_seconds, self._updates_done = 0.0, 0  # this iteration's SAC updates (_learn)
         idx = self._draw_tasks()
         n_tasks = min(cfg.task_batch_size, len(idx))
         stats: dict[str, list[float]] = defaultdict(list)  # averaged over the repetitions
@@ -408,6 +410,9 @@ class GoalSAC(SAC):
         ):
             self.metrics.log_value(keys.metric_path(key), count, window=1)
         self._log_iteration(timing)
+        # agent_s is the whole traversal (env stepping + SAC updates); the updates' part beside it.
+        timing["agent_updates_s"] = self._update_seconds
+        self.metrics.log_value(keys.metric_path(keys.AGENT_SAC_UPDATES), self._updates_done, window=1)
         try:
             q_mean = float(self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, "qf_mean")))
         except KeyError:  # no learner update yet
@@ -570,7 +575,10 @@ class GoalSAC(SAC):
             NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime,
             NUM_AGENT_STEPS_SAMPLED_LIFETIME: lifetime,
         }
+        t0 = time.perf_counter()
         learner_results = self.agent_updater.update(num_updates, timesteps)
+        self._update_seconds += time.perf_counter() - t0
+        self._updates_done += num_updates
         if learner_results:
             self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
         self.env_runner_group.sync_weights(
