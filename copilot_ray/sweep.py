@@ -14,7 +14,7 @@
   searcher runs one experiment per seed, ``<name>-seed<s>`` (study ``<name>-seed<s>``, sampler seed
   ``searcher.seed + index``), one after the other.
 * The trainable is the algorithm's trial class (registry; for CO-PILOT ``CoPilotTrial`` in
-  ``copilot_ray.tune_runtime``, with the Tune callbacks: the one module here that imports Ray), a
+  ``copilot_ray.algorithms.copilot.trial``; the Tune callbacks are in ``copilot_ray.tune_runtime``), a
   subclass of ``CoPilot`` built from a FLAT Tune config (the
   trial's dotted params + ``seed`` + ``_spec_path``) with ``build_algorithm_config``; RLlib's own
   ``save_checkpoint`` / ``load_checkpoint`` carry the whole state, so a trial that fails (up to 2 times)
@@ -24,7 +24,9 @@
 * Ctrl-C / SIGTERM: Tune stops the trials, saves its state and the command prints how to resume (exit
   130). ``--resume`` continues: finished trials are not re-run, unfinished and errored ones continue from
   their last checkpoint, the same MLflow parent and child runs are reused (no duplicates; metric rows
-  already logged are not logged again).
+  already logged are not logged again). A file of several parts also resumes from its MLflow store alone
+  (copied to a new machine without ``tune/``): parts the store records finished are skipped, the others
+  start over (an unfinished attempt's runs are discarded first).
 """
 
 from __future__ import annotations
@@ -604,6 +606,8 @@ def _run_parts(specs: Sequence[Any], args) -> int:
     try:
         for i, spec in enumerate(specs, start=1):
             _say(f"=== part {i} of {len(specs)}: {spec.name} ({spec.algorithm})")
+            if args.resume and spec.name not in started and _done_in_store(spec, args.tracking_uri):
+                continue
             code = _run_one(spec, args, resume=spec.name in started)
             if code != 0:
                 return code
@@ -611,6 +615,21 @@ def _run_parts(specs: Sequence[Any], args) -> int:
     finally:
         if own_ray:
             runtime.stop_ray()
+
+
+def _done_in_store(spec, tracking_uri: str | None) -> bool:
+    """For a part with no Tune folder under --resume (its store was carried here alone): True when the
+    store records it finished (skip it). Runs of an unfinished earlier attempt are discarded first, since
+    the part starts over and would otherwise be counted twice (reports, best_of)."""
+    uri = tracking_uri or spec.tracking.uri
+    finished, runs = tracking.sweep_runs_in_store(uri, spec.experiment, spec.name)
+    if finished:
+        _say(f"{spec.name}: finished in {uri} (parent run {finished}); skipped")
+        return True
+    if runs:
+        tracking.discard_runs(uri, runs)
+        _say(f"{spec.name}: discarded {len(runs)} run(s) of an unfinished attempt whose Tune state is gone")
+    return False
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import subprocess
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -248,12 +248,36 @@ def open_sweep_run(
     run = client.create_run(
         exp_id,
         run_name=sweep,
-        tags={SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP, GIT_COMMIT_TAG: git_commit(), **note, **tags},
+        tags={SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP, GIT_COMMIT_TAG: git_commit(), **note, **dict(tags)},
     )
     run_id = run.info.run_id
     if params:
         _log_params(client, run_id, params_for_mlflow(dict(params)))
     return exp_id, run_id, False
+
+
+def sweep_runs_in_store(tracking_uri: str, experiment: str, sweep: str) -> tuple[str | None, list[str]]:
+    """What the store holds of a sweep: ``(finished parent run id or None, ids of every run it holds)``.
+
+    A store copied to another machine without Tune's folders (a long comparison carried from one session
+    to the next) tells ``--resume`` which parts are done; it opens an existing SQLite file only."""
+    if tracking_uri.startswith("sqlite:///") and not Path(tracking_uri[len("sqlite:///") :]).is_file():
+        return None, []
+    client = _client(tracking_uri)
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None:
+        return None, []
+    parents = find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP})
+    everything = find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep})
+    finished = parents[-1].info.run_id if parents and parents[-1].info.status == "FINISHED" else None
+    return finished, [r.info.run_id for r in everything]
+
+
+def discard_runs(tracking_uri: str, run_ids: Sequence[str]) -> None:
+    """Marks runs deleted (MLflow's soft delete: reports, best_of and the UI's default view skip them)."""
+    client = _client(tracking_uri)
+    for run_id in run_ids:
+        client.delete_run(run_id)
 
 
 def end_sweep_run(

@@ -337,3 +337,55 @@ def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
     assert "path success" in header and "length / RRT*" in header and "planned" not in header
     assert "0.80 ± 0.14" in point and "2.50 ± 0.71" in point
     assert rigid.split("|")[4].strip() == "-"  # no successful path at the end: no length ratio
+
+
+def test_check_prints_the_store_the_run_would_use(tmp_path, capsys):
+    """--check reads --tracking-uri as the run would: its plan names that store, not the spec's."""
+    from copilot_ray.sweep import main
+
+    uri = f"sqlite:///{tmp_path / 'elsewhere.db'}"
+    assert main([str(ROOT / "sweeps" / "smoke.yaml"), "--check", "--tracking-uri", uri]) == 0
+    out = capsys.readouterr().out
+    assert uri in out and "results/smoke" not in out.split("MLflow experiment", 1)[1].splitlines()[0]
+    assert not (tmp_path / "elsewhere.db").exists()  # a plan opens no store
+
+
+def test_resume_from_a_carried_store_skips_finished_parts_and_restarts_the_others(
+    tmp_path, monkeypatch, capsys
+):
+    """A comparison file's store copied alone to a new machine (no Tune folders): --resume skips the
+    part the store records finished and starts the unfinished one over, its earlier runs discarded so
+    that reports and best_of count each trial once."""
+    from types import SimpleNamespace
+
+    from copilot_ray import sweep, tracking
+    from copilot_ray.sweep_spec import load_specs
+
+    uri = f"sqlite:///{tmp_path}/carried.db"
+    base = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
+    base["tracking"] = {"storage": str(tmp_path / "results"), "uri": uri}
+    parts = [{**base, "name": "part_done"}, {**base, "name": "part_cut"}]
+    path = tmp_path / "two.yaml"
+    path.write_text("---\n".join(yaml.safe_dump(p, sort_keys=False) for p in parts))
+    done, cut = load_specs(path)
+
+    _, parent, _ = tracking.open_sweep_run(uri, done.experiment, done.name, resume=False)
+    tracking.end_sweep_run(uri, parent, "FINISHED")
+    _, cut_parent, _ = tracking.open_sweep_run(uri, cut.experiment, cut.name, resume=False)
+    client = tracking._client(uri)
+    exp_id = client.get_experiment_by_name(cut.experiment).experiment_id
+    client.create_run(exp_id, tags={SWEEP_TAG: cut.name, ROLE_TAG: ROLE_TRIAL, PARENT_TAG: cut_parent})
+
+    ran = []
+    monkeypatch.setattr(sweep, "_import_runtime", lambda: SimpleNamespace(start_ray=lambda a: False))
+    monkeypatch.setattr(sweep, "_run_one", lambda spec, args, resume: ran.append((spec.name, resume)) or 0)
+    assert sweep.main([str(path), "--resume"]) == 0
+    assert ran == [("part_cut", False)]
+    out = capsys.readouterr().out
+    assert "part_done: finished in" in out and "discarded 2 run(s)" in out
+    assert tracking.sweep_runs_in_store(uri, cut.experiment, cut.name) == (None, [])
+    finished, kept = tracking.sweep_runs_in_store(uri, done.experiment, done.name)
+    assert finished == parent and kept == [parent]
+    # Without --resume nothing is skipped or discarded.
+    ran.clear()
+    assert sweep.main([str(path)]) == 0 and ran == [("part_done", False), ("part_cut", False)]
