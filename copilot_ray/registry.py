@@ -17,6 +17,8 @@ starts) and provide:
     PRIVILEGES: tuple[str, ...]           optional: what the method always uses that agents learning from
                                           their own episodes do not (copilot_ray.privileges); a setting
                                           whose value grants more says so itself (Setting.grants)
+    GPU_LEARNER: bool                     optional: its learner runs on a GPU when a spec gives trials
+                                          one (resources.gpus_per_trial; RLlib places it); default False
 
 The config class (an RLlib AlgorithmConfig, imported only when a run is built) provides
 `from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build. The trial
@@ -95,13 +97,15 @@ class UnknownAlgorithmError(ValueError):
 
 @dataclass(frozen=True)
 class RunContext:
-    """What a run adds to an algorithm's settings: the env, the seed and the CPUs of its process."""
+    """What a run adds to an algorithm's settings: the env, the seed, the CPUs of its process and the
+    GPUs of its learner (0: the CPU, as on a machine without one)."""
 
     env_id: str
     env_config: Mapping[str, Any] = field(default_factory=dict)
     seed: int = 0
     num_env_runners: int = 0
     num_cpus_for_main_process: int = 1
+    num_gpus: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -120,6 +124,7 @@ class AlgorithmEntry:
     # What its runs are labelled by in progress lines, MLflow tags and the report: label -> setting key
     # (K: tree_depth, b: repetitions, alpha_schedule); the settings module's LABELS.
     labels: Mapping[str, str] = field(default_factory=dict)
+    gpu_learner: bool = False  # the settings module's GPU_LEARNER
 
     def privileges(self, values: Mapping[str, Any]) -> tuple[str, ...]:
         """The privileges a run uses at the effective setting `values` (copilot_ray.privileges)."""
@@ -187,4 +192,5 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         search_space=dict(getattr(module, "SEARCH_SPACE", {})),
         max_iteration_env_steps=getattr(module, "max_iteration_env_steps", None),
         labels=dict(getattr(module, "LABELS", {})),
+        gpu_learner=bool(getattr(module, "GPU_LEARNER", False)),
     )

@@ -68,7 +68,7 @@ from copilot_ray.keys import (
 )
 from copilot_ray.store import tracking_uri_problem, ui_hint
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
-from copilot_ray.sweep_spec.estimate import total_wall_time_line
+from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
 from copilot_ray.trials.description import config_key, env_params, trial_flat
 
 EXIT_INTERRUPTED = 130
@@ -548,8 +548,12 @@ def main(argv: list[str] | None = None) -> int:
         specs = load_specs(args.spec)
     except SpecError as err:
         problems += err.problems
-    if problems:
-        for line in problems:
+    no_gpus = []  # on a local Ray, trials asking for GPUs the machine lacks would wait for ever
+    if not problems and not args.address and any(spec.resources.gpus_per_trial > 0 for spec in specs):
+        gpus = local_gpus()
+        no_gpus = [why for spec in specs if (why := gpu_problem(spec, gpus)) is not None]
+    if problems or (no_gpus and not args.check):
+        for line in problems or no_gpus:
             print(line, file=sys.stderr)
         return 2
     if args.check:
@@ -557,6 +561,8 @@ def main(argv: list[str] | None = None) -> int:
         print("\n\n".join(format_plan(spec, args.tracking_uri, cpus, where) for spec in specs))
         if len(specs) > 1:
             print(f"\n{total_wall_time_line(specs)}")
+        for why in no_gpus:
+            print(f"warning: {why}")
         return 0
     if len(specs) == 1:
         return _run_one(specs[0], args, resume=args.resume)

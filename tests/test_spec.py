@@ -190,6 +190,15 @@ def test_yaml_floats_in_exponent_form_are_numbers(tmp_path):
         ),
         ({"resources": {"max_concurrent_trials": 0}}, "resources.max_concurrent_trials: 0 is invalid"),
         ({"resources": {"num_env_runners": -1}}, "resources.num_env_runners: -1 is invalid"),
+        ({"resources": {"gpus_per_trial": -0.5}}, "resources.gpus_per_trial: -0.5 is invalid"),
+        (
+            {"resources": {"gpus_per_trial": 1.5}},
+            "resources.gpus_per_trial: 1.5 is invalid: must be >= 0, and a whole",
+        ),
+        (
+            {"algorithm": "rrt_star", "config": {}, "search": {}, "resources": {"gpus_per_trial": 1}},
+            "resources.gpus_per_trial: 1 is invalid: 'rrt_star' has no learner that runs on a GPU",
+        ),
         (
             {"algorithm": "copliot"},
             "algorithm: 'copliot' is invalid: unknown algorithm; did you mean 'copilot'?",

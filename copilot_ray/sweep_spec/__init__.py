@@ -18,7 +18,8 @@
     searcher: {type: grid}              # or {type: optuna, sampler: tpe, metric: ..., mode: max, ...}
     scheduler: {type: asha, max_t: 200000, grace_period: 20000, reduction_factor: 3}   # optional
     stop: {env_steps: 200000}           # and/or iterations
-    resources: {max_concurrent_trials: 2, num_env_runners: 0}   # cpus_per_trial >= 1 + num_env_runners
+    resources: {max_concurrent_trials: 2, num_env_runners: 0}   # cpus_per_trial >= 1 + num_env_runners;
+                                        # gpus_per_trial (default 0; 0.25 shares a GPU): the RLlib learner's
     fault_tolerance: {checkpoint_every: 1, max_failures: 2}   # optional: checkpoints, retries of a trial
     tracking: {storage: results/}       # uri default: sqlite:///<abs storage>/<name>/mlflow.db
 

@@ -170,3 +170,21 @@ def cpu_warning(spec: SweepSpec, available: int | None, where: str) -> str | Non
         f"{spec.resources.cpus_per_trial} CPU(s) = {asked} CPUs, but {where} has {available}: trials will "
         "wait for CPUs (lower resources.max_concurrent_trials or num_env_runners, or run on a cluster)"
     )
+
+
+def local_gpus() -> int:
+    """GPUs torch sees on this machine (torch is imported only when a spec asks for GPUs)."""
+    import torch
+
+    return int(torch.cuda.device_count())
+
+
+def gpu_problem(spec: SweepSpec, available: int) -> str | None:
+    """Why the plan cannot run on a machine with `available` GPUs (None: it can, or it asks for none)."""
+    asked = spec.resources.gpus_per_trial
+    if asked <= 0 or asked <= available:
+        return None
+    return (
+        f"resources.gpus_per_trial={asked:g} is invalid: this machine has {available} GPU(s) "
+        "(torch.cuda.device_count()); use 0 here, or run on a cluster with GPUs (--address)"
+    )

@@ -283,14 +283,26 @@ class FaultToleranceSpec(_Model):
         return self
 
 
+def _number(x: float) -> float | int:
+    """A float as the user would have written it (1, not 1.0) in an error message."""
+    return int(x) if float(x).is_integer() else x
+
+
 class ResourcesSpec(_Model):
     max_concurrent_trials: int = 1
     num_env_runners: int = 0
     cpus_per_trial: int | None = None
+    # GPUs of each trial's learner (RLlib's num_gpus_per_learner); fractions share one GPU, as in Tune.
+    gpus_per_trial: float = 0.0
 
     @model_validator(mode="after")
     def _sizes(self) -> ResourcesSpec:
         issues = []
+        g = self.gpus_per_trial
+        if g < 0 or (g > 1 and g != int(g)):
+            issues.append(
+                Issue("gpus_per_trial", _number(g), "must be >= 0, and a whole number above 1 (Ray's rule)")
+            )
         if self.max_concurrent_trials < 1:
             issues.append(Issue("max_concurrent_trials", self.max_concurrent_trials, "must be >= 1"))
         if self.num_env_runners < 0:
@@ -413,6 +425,14 @@ class SweepSpec(_Model):
         issues += self._check_seeds()
         issues += self._check_searcher(entry)
         issues += self._check_best_of(entry.settings)
+        if self.resources.gpus_per_trial > 0 and not entry.gpu_learner:
+            issues.append(
+                Issue(
+                    "resources.gpus_per_trial",
+                    _number(self.resources.gpus_per_trial),
+                    f"{self.algorithm!r} has no learner that runs on a GPU (a planner-only baseline): use 0",
+                )
+            )
         if not issues:
             issues += self._check_combinations(entry)
         if not issues:
@@ -904,6 +924,7 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
         seed=flat.get(keys.SEED_PARAM, spec.seeds[0]),
         num_env_runners=spec.resources.num_env_runners,
         num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners,
+        num_gpus=spec.resources.gpus_per_trial,
     )
     return entry.build_config(spec.merged(flat), run)
 

@@ -92,6 +92,11 @@ def format_plan(
         + (f"at most {b['env_steps']:,} env steps in all; " if b["env_steps"] else "")
         + f"{spec.resources.max_concurrent_trials} at a time ({b['waves']} wave(s)), "
         f"{spec.resources.cpus_per_trial} CPU(s) per trial, {b['cpus']} CPU(s) in use"
+        + (
+            f", {spec.resources.gpus_per_trial:g} GPU(s) per trial (the learner)"
+            if spec.resources.gpus_per_trial
+            else ""
+        )
     )
     ft = spec.fault_tolerance
     retries = "without limit" if ft.max_failures == -1 else f"up to {ft.max_failures} time(s)"

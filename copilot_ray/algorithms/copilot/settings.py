@@ -417,6 +417,9 @@ SEARCH_SPACE: dict[str, dict] = {
 # What its runs are labelled by (progress lines, MLflow tags, the report's configuration names).
 LABELS = {"K": "tree_depth", "b": "repetitions", "alpha_schedule": "alpha_schedule"}
 
+# An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
+GPU_LEARNER = True
+
 METRICS: tuple[str, ...] = (
     # Searchers, schedulers and probes read the validation tasks' figures; the test tasks' are reported.
     *keys.validation_metrics(

@@ -104,6 +104,7 @@ class GoalPPOConfig(PPOConfig):
             .environment(run.env_id, env_config=dict(run.env_config))
             .env_runners(num_env_runners=run.num_env_runners)
             .resources(num_cpus_for_main_process=run.num_cpus_for_main_process)
+            .learners(num_gpus_per_learner=run.num_gpus)  # RLlib places the learner there
             .debugging(seed=run.seed)
             .training(**training)
             .goal_task(**task)

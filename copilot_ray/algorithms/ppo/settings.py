@@ -41,6 +41,9 @@ SEARCH_SPACE: dict[str, dict] = {
     "lambda_": {"categorical": [0.9, 0.95, 1.0]},
     "gamma": {"categorical": [0.98, 0.99, 0.995]},
 }
+# An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
+GPU_LEARNER = True
+
 METRICS = sac_settings.METRICS  # the same figures as the SAC baseline's
 
 

@@ -152,6 +152,9 @@ class GoalSACConfig(SACConfig):
             # The run's own process (sampling when there are no runners, and the learner) gets the
             # CPUs not taken by runners; validate() sizes torch's thread pool from it.
             .resources(num_cpus_for_main_process=run.num_cpus_for_main_process)
+            # The learner (SAC's updates, the batched evaluation's module stays on the runner) on the
+            # run's GPU share; RLlib moves the module and each batch there and sizes the trial's bundle.
+            .learners(num_gpus_per_learner=run.num_gpus)
             .debugging(seed=run.seed)
         )
         config._set_values(values)

@@ -3,6 +3,7 @@ hindsight relabelling's ``her.n_sampled_goal`` and ``her.goal_selection``."""
 
 from copilot_ray.algorithms.sac.settings import (
     AGENT,
+    GPU_LEARNER,
     HINDSIGHT,
     LEARNER_SEARCH_SPACE,
     METRICS,
@@ -14,4 +15,11 @@ SETTINGS = {s.key: s for s in (*AGENT, *HINDSIGHT)}
 # The shared learner's space plus how many goals are relabelled per real one (SB3's default 4).
 SEARCH_SPACE: dict[str, dict] = {**LEARNER_SEARCH_SPACE, "her.n_sampled_goal": {"categorical": [2, 4, 8]}}
 
-__all__ = ["METRICS", "SEARCH_SPACE", "SETTINGS", "combination_problems", "max_iteration_env_steps"]
+__all__ = [
+    "GPU_LEARNER",
+    "METRICS",
+    "SEARCH_SPACE",
+    "SETTINGS",
+    "combination_problems",
+    "max_iteration_env_steps",
+]

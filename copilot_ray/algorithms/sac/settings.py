@@ -232,6 +232,9 @@ LEARNER_SEARCH_SPACE: dict[str, dict] = {
     "gamma": {"categorical": [0.98, 0.99, 0.995]},
 }
 SEARCH_SPACE: dict[str, dict] = dict(LEARNER_SEARCH_SPACE)
+# An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
+GPU_LEARNER = True
+
 # What a run logs that a sweep may optimise or stop on.
 METRICS: tuple[str, ...] = (
     *keys.validation_metrics(keys.EVAL_SUCCESS, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN),

@@ -63,6 +63,9 @@ _HINDSIGHT = [
     for s in HINDSIGHT
 ]
 SETTINGS = {s.key: s for s in (*AGENT, *_HINDSIGHT, *SEARCH)}
+# An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
+GPU_LEARNER = True
+
 METRICS: tuple[str, ...] = (
     *keys.validation_metrics(
         keys.EVAL_SUCCESS, keys.SUCCESS_PLANNED, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN
