@@ -14,8 +14,8 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
   study holds 3 COMPLETE trials and no other.
 * trial: SIGKILL the first trial's worker process (the pid in its results) once it has 3 results; Tune
   retries it from its last checkpoint (FailureConfig) and the sweep ends by itself.
-* runner: the smoke sweep with one env runner per trial; SIGKILL that runner's process once the first
-  trial has 2 results: Ray restarts the actor, CO-PILOT counts the sub-tasks the runner took with it
+* runner: the smoke sweep with one env runner per trial; SIGKILL that runner's process at a random
+  moment (`--kill-seed`) of the first trial's 3rd iteration: Ray restarts the actor, CO-PILOT counts the sub-tasks the runner took with it
   (`copilot/agent/subtasks_lost`, printed) and the trial goes on without a Tune retry.
 * nan: one configuration, seeds 0 and 1, and `COPILOT_RAY_FAULT=planner_nan@3:seed=1` (NaN into seed 1's
   planner weights at iteration 3; copilot_ray/algorithms/copilot/health.py): seed 1 must stop with the
@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -291,6 +292,9 @@ def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
     return audit(spec, iterations)
 
 
+KILL_SEED = 0  # set by --kill-seed
+
+
 def drill_runner(directory: Path, iterations: int) -> dict[str, int]:
     import mlflow
 
@@ -302,12 +306,21 @@ def drill_runner(directory: Path, iterations: int) -> dict[str, int]:
     config["subtasks_per_sample"] = 1
     spec = write_spec(directory, "drill_runner", iterations, resources={"num_env_runners": 1}, config=config)
     proc = sweep(spec)
-    wait_for_results(directory / "results" / "drill_runner" / "tune", 2, proc)
+    rows = wait_for_results(directory / "results" / "drill_runner" / "tune", 2, proc)
+    # Anywhere in the next iteration (checkpoint, sampling, updates, weight sync, evaluation): a delay
+    # drawn from --kill-seed within the 2nd iteration's length, so repeated drills hit different moments.
+    iteration_s = float(rows[-1].get("time_this_iter_s", 3.0))
+    delay = random.Random(KILL_SEED).uniform(0.0, iteration_s)
+    time.sleep(delay)
     runners = [p for p in descendants(proc.pid) if "EnvRunner" in _cmdline(p)]
     if not runners:
+        proc.terminate()  # do not leave the sweep running behind a failed drill
+        proc.wait(timeout=120)
         raise RuntimeError("no env runner process found under the sweep driver")
     os.kill(runners[0], signal.SIGKILL)
-    print(f"  killed env runner process {runners[0]}")
+    print(
+        f"  killed env runner process {runners[0]} {delay:.1f} s into the 3rd iteration ({iteration_s:.1f} s long)"
+    )
     if proc.wait(timeout=900) != 0:
         raise RuntimeError(f"the sweep exited {proc.returncode} (log next to {spec})")
     found = audit(spec, iterations)
@@ -363,7 +376,15 @@ def main() -> int:
     parser.add_argument("--drills", nargs="+", default=list(DRILLS), choices=list(DRILLS))
     parser.add_argument("--iterations", type=int, default=6, help="iterations per trial")
     parser.add_argument("--keep", type=Path, help="work in this folder and keep it (default: a temp dir)")
+    parser.add_argument(
+        "--kill-seed",
+        type=int,
+        default=0,
+        help="runner drill: seed of the kill's moment within the 3rd iteration",
+    )
     args = parser.parse_args()
+    global KILL_SEED
+    KILL_SEED = args.kill_seed
     directory = args.keep or Path(tempfile.mkdtemp(prefix="copilot_drills_"))
     directory.mkdir(parents=True, exist_ok=True)
     bad = 0

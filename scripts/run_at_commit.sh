@@ -3,7 +3,11 @@
 # checkout while it runs (hours) cannot leak into its trials, and every trial's MLflow run names that
 # commit (tag git_commit). The worktree and its own .venv live beside this checkout:
 #
-#   bash scripts/run_at_commit.sh [--commit REV] SPEC.yaml [sweep flags, e.g. --resume]
+#   bash scripts/run_at_commit.sh [--commit REV] [--carry STORE.tar.gz] SPEC.yaml [sweep flags, e.g. --resume]
+#
+# --carry: a results archive from another machine or session (made with `tar -czf STORE.tar.gz results/
+# --exclude='*/tune'` in the old worktree: the MLflow store and its artifacts, not Tune's folders) is
+# unpacked into a new worktree first; with --resume the sweep skips the parts the store records finished.
 #
 # REV defaults to HEAD (which must hold no uncommitted change to copilot_ray/, analysis/ or sweeps/).
 # The sweep's output goes to <worktree>/results/<spec name>.log; the results stay in the worktree's
@@ -11,12 +15,19 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 rev=HEAD
-if [ "${1:-}" = "--commit" ]; then
-  rev="$2"
-  shift 2
-fi
+carry=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --commit) rev="$2"; shift 2 ;;
+    --carry)
+      carry="$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"
+      [ -f "$carry" ] || { echo "error: --carry $2 is not a file" >&2; exit 2; }
+      shift 2 ;;
+    *) break ;;
+  esac
+done
 if [ $# -lt 1 ]; then
-  echo "usage: bash scripts/run_at_commit.sh [--commit REV] SPEC.yaml [sweep flags]" >&2
+  echo "usage: bash scripts/run_at_commit.sh [--commit REV] [--carry STORE.tar.gz] SPEC.yaml [sweep flags]" >&2
   exit 2
 fi
 spec="$1"
@@ -38,6 +49,14 @@ if [ ! -d "$tree" ]; then
   git worktree add --detach "$tree" "$sha" >/dev/null
 fi
 (cd "$tree" && bash scripts/setup_env.sh)
+if [ -n "$carry" ]; then
+  if [ -d "$tree/results" ] && [ -n "$(ls -A "$tree/results" 2>/dev/null)" ]; then
+    echo "error: --carry: $tree/results is not empty; the carried store would overwrite it" >&2
+    exit 2
+  fi
+  tar -xzf "$carry" -C "$tree"
+  echo "carried:  $carry -> $tree/results"
+fi
 log="$tree/results/$(basename "$spec" .yaml).log"
 mkdir -p "$tree/results"
 cd "$tree"
