@@ -90,16 +90,19 @@ class SoRB(GoalSAC):
         """Estimated agent steps from each (observation, achieved goal) to each goal: see the module
         docstring. Batched, in chunks."""
         module = self.learner_group._learner.module[DEFAULT_MODULE_ID]
+        device = next(module.parameters()).device  # the learner's: a GPU with resources.gpus_per_trial
         layout = self.agent_updater.buffer.layout
         reward = float(self.goal_env.unwrapped.goal_reward) * self.rules.reward_factor(0)
         log_gamma = np.log(self.config.gamma)
         out = np.empty(len(goals))
         for lo in range(0, len(goals), _CRITIC_CHUNK):
             hi = lo + _CRITIC_CHUNK
-            obs = torch.as_tensor(layout.compose(observations[lo:hi], goals[lo:hi], achieved[lo:hi]))
+            obs = torch.as_tensor(
+                layout.compose(observations[lo:hi], goals[lo:hi], achieved[lo:hi]), device=device
+            )
             mean, _ = module.pi(module.pi_encoder({Columns.OBS: obs})["encoder_out"]).chunk(2, dim=-1)
             q = module.compute_q_values({Columns.OBS: obs, Columns.ACTIONS: torch.tanh(mean)})
-            ratio = np.clip(q.numpy().astype(np.float64) / reward, 1e-6, 1.0)
+            ratio = np.clip(q.cpu().numpy().astype(np.float64) / reward, 1e-6, 1.0)
             out[lo:hi] = 1.0 + np.log(ratio) / log_gamma
         return out
 
