@@ -96,3 +96,139 @@ def best_configuration(uri: str, experiment: str, sweep: str, metric: str, mode:
         trials=len(group),
         run_ids=tuple(r.info.run_id for _, r in group),
     )
+
+
+# ------------------------------------------------------------------------------- stage 1, as a table
+@dataclass(frozen=True)
+class TunedTrial:
+    """One stage-1 trial as the store holds it: what it tried and what it scored on validation tasks."""
+
+    run_id: str
+    status: str  # MLflow's: FINISHED, RUNNING, KILLED, FAILED
+    values: dict[str, Any]  # its searched settings ({} when its config artifact is missing)
+    score: float  # the objective's last value (NaN: none logged)
+    final: float  # the last validation success
+    env_steps: float
+    collision_checks: float  # the privilege counts it logged (0 where none)
+    resets: float
+
+
+def tuned_trials(uri: str, experiment: str, sweep: str, metric: str) -> list[TunedTrial]:
+    """Every trial run of `sweep` in the store, finished or not, oldest first."""
+    import mlflow
+
+    from copilot_ray.keys import (
+        ENV_STEPS,
+        EVAL_SUCCESS,
+        PRIVILEGE_COLLISION_CHECKS,
+        PRIVILEGE_RESETS,
+        validation_key,
+    )
+    from copilot_ray.tracking import find_runs
+
+    client = mlflow.MlflowClient(uri)
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None:
+        raise StageError(f"no experiment {experiment!r} in {uri}")
+    out = []
+    for run in find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_TRIAL}):
+        m = run.data.metrics
+        try:
+            values = _trial_values(client, run)
+        except StageError:
+            values = {}
+        out.append(
+            TunedTrial(
+                run.info.run_id,
+                run.info.status,
+                values,
+                float(m.get(metric, math.nan)),
+                float(m.get(validation_key(EVAL_SUCCESS), math.nan)),
+                float(m.get(ENV_STEPS, math.nan)),
+                float(m.get(PRIVILEGE_COLLISION_CHECKS, 0.0)),
+                float(m.get(PRIVILEGE_RESETS, 0.0)),
+            )
+        )
+    return out
+
+
+def tuning_table(trials: list[TunedTrial], metric: str, winner: Winner | None) -> str:
+    """A markdown table of one stage-1 sweep, in trial order, the winner marked."""
+    chosen = set(winner.run_ids) if winner else set()
+    lines = [
+        f"| trial | status | searched values | {metric} | final validation success | env steps "
+        "| collision checks | resets |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for i, t in enumerate(trials, start=1):
+        values = ", ".join(f"{k}={_short(v)}" for k, v in sorted(t.values.items())) or "-"
+        mark = " **chosen**" if t.run_id in chosen else ""
+        lines.append(
+            f"| {i}{mark} | {t.status.lower()} | {values} | {_num(t.score)} | {_num(t.final, '.2f')} "
+            f"| {_num(t.env_steps, ',.0f')} | {_num(t.collision_checks, '.3g')} | {_num(t.resets, ',.0f')} |"
+        )
+    return "\n".join(lines)
+
+
+def _short(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def _num(x: float, fmt: str = ".3f") -> str:
+    return "-" if x is None or math.isnan(x) else format(x, fmt)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m copilot_ray.stages EXPERIMENT --tracking-uri URI``: every stage-1 sweep of a tuning
+    experiment as a table of its trials on validation tasks, with the configuration stage 2 gets."""
+    import argparse
+    import sys
+
+    from copilot_ray.keys import EVAL_SUCCESS_AUC, ROLE_SWEEP, validation_key
+    from copilot_ray.store import tracking_uri_problem
+
+    p = argparse.ArgumentParser(prog="python -m copilot_ray.stages", description=main.__doc__)
+    p.add_argument("experiment")
+    p.add_argument("--tracking-uri", required=True)
+    p.add_argument("--metric", default=validation_key(EVAL_SUCCESS_AUC), help="the stage-1 objective")
+    p.add_argument("--mode", choices=("max", "min"), default="max")
+    args = p.parse_args(argv)
+    if (why := tracking_uri_problem(args.tracking_uri)) is not None:
+        print(f"error: --tracking-uri {args.tracking_uri!r} is invalid: {why}", file=sys.stderr)
+        return 2
+    if args.tracking_uri.startswith("sqlite:///") and not Path(args.tracking_uri[10:]).is_file():
+        print(f"error: --tracking-uri {args.tracking_uri!r} is invalid: no such file", file=sys.stderr)
+        return 2
+    import os
+
+    import mlflow
+
+    from copilot_ray.tracking import find_runs
+
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")  # a table, not progress bars
+    client = mlflow.MlflowClient(args.tracking_uri)
+    exp = client.get_experiment_by_name(args.experiment)
+    if exp is None:
+        names = sorted(e.name for e in client.search_experiments())
+        print(
+            f"error: experiment {args.experiment!r} is not in {args.tracking_uri}; it has {names}",
+            file=sys.stderr,
+        )
+        return 2
+    parents = find_runs(client, exp.experiment_id, {ROLE_TAG: ROLE_SWEEP})
+    for sweep in dict.fromkeys(r.data.tags[SWEEP_TAG] for r in parents):
+        status = [r.info.status for r in parents if r.data.tags[SWEEP_TAG] == sweep][-1].lower()
+        trials = tuned_trials(args.tracking_uri, args.experiment, sweep, args.metric)
+        try:
+            winner = best_configuration(args.tracking_uri, args.experiment, sweep, args.metric, args.mode)
+        except StageError:
+            winner = None
+        print(f"### {sweep} ({status}: {len(trials)} trial run(s))\n")
+        print(tuning_table(trials, args.metric, winner))
+        choice = f"{winner.values} ({winner.provenance(sweep, args.metric)})" if winner else "none yet"
+        print(f"\nstage 2 gets: {choice}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -250,6 +250,34 @@ def test_stage_two_picks_the_best_finished_configuration_by_its_mean_over_seeds(
         best_configuration(uri, "nope", "tune", "copilot/validation/success_auc", "max")
 
 
+def test_the_stage_one_table_lists_every_trial_on_validation_tasks_and_marks_the_choice(tmp_path, capsys):
+    """`python -m copilot_ray.stages`: each stage-1 sweep's trials (failed ones too, with their status)
+    by the validation objective, the configuration stage 2 gets marked; a wrong experiment exits 2."""
+    import mlflow
+
+    from copilot_ray.stages import main
+
+    uri = _store_with_a_tuning_sweep(tmp_path)
+    client = mlflow.MlflowClient(uri)
+    exp = client.get_experiment_by_name("tuning").experiment_id
+    for sweep in ("tune", "other"):
+        parent = client.create_run(exp, tags={keys.SWEEP_TAG: sweep, keys.ROLE_TAG: keys.ROLE_SWEEP})
+        client.set_terminated(parent.info.run_id, status="FINISHED")
+    assert main(["tuning", "--tracking-uri", uri]) == 0
+    out = capsys.readouterr().out
+    tune = out.split("### other")[0]
+    assert "### tune (finished: 5 trial run(s))" in tune
+    rows = [line for line in tune.splitlines() if line.startswith("| ") and "status" not in line]
+    assert len(rows) == 5
+    chosen = [r for r in rows if "**chosen**" in r]
+    assert len(chosen) == 1 and "actor_lr=0.0005" in chosen[0] and "0.550" in chosen[0]
+    assert any("failed" in r and "actor_lr=0.0002" in r for r in rows)  # shown, never chosen
+    assert "stage 2 gets: {'actor_lr': 0.0005}" in tune
+    assert "### other (finished: 1 trial run(s))" in out
+    assert main(["tunning", "--tracking-uri", uri]) == 2
+    assert "experiment 'tunning' is not in" in capsys.readouterr().err
+
+
 def test_a_stage_two_part_writes_the_winner_into_the_spec_it_runs_with(tmp_path):
     """The resolved spec records the chosen values and where they came from; the trials' merged config
     has them; a resumed part reads them from that copy (no second look at the store)."""
