@@ -635,6 +635,11 @@ def _done_in_store(spec, tracking_uri: str | None) -> bool:
     if runs:
         tracking.discard_runs(uri, runs)
         _say(f"{spec.name}: discarded {len(runs)} run(s) of an unfinished attempt whose Tune state is gone")
+    studies = sweep_root(spec) / "optuna.db"
+    if studies.is_file():  # its Optuna studies would otherwise feed the old trials to the new search
+        aside = studies.with_name(f"optuna.discarded-{int(time.time())}.db")
+        studies.rename(aside)
+        _say(f"{spec.name}: moved the unfinished attempt's Optuna studies aside to {aside}")
     return False
 
 

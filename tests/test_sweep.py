@@ -376,6 +376,9 @@ def test_resume_from_a_carried_store_skips_finished_parts_and_restarts_the_other
     exp_id = client.get_experiment_by_name(cut.experiment).experiment_id
     client.create_run(exp_id, tags={SWEEP_TAG: cut.name, ROLE_TAG: ROLE_TRIAL, PARENT_TAG: cut_parent})
 
+    studies = Path(cut.tracking.storage) / cut.name / "optuna.db"  # the cut attempt's Optuna studies
+    studies.parent.mkdir(parents=True)
+    studies.write_bytes(b"old trials")
     ran = []
     monkeypatch.setattr(sweep, "_import_runtime", lambda: SimpleNamespace(start_ray=lambda a: False))
     monkeypatch.setattr(sweep, "_run_one", lambda spec, args, resume: ran.append((spec.name, resume)) or 0)
@@ -384,6 +387,7 @@ def test_resume_from_a_carried_store_skips_finished_parts_and_restarts_the_other
     out = capsys.readouterr().out
     assert "part_done: finished in" in out and "discarded 2 run(s)" in out
     assert tracking.sweep_runs_in_store(uri, cut.experiment, cut.name) == (None, [])
+    assert not studies.exists() and len(list(studies.parent.glob("optuna.discarded-*.db"))) == 1
     finished, kept = tracking.sweep_runs_in_store(uri, done.experiment, done.name)
     assert finished == parent and kept == [parent]
     # Without --resume nothing is skipped or discarded.
