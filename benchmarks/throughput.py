@@ -49,7 +49,8 @@ def _spec(algorithm: str, n: int, args, cpus: int, store: Path) -> dict:
         "seeds": list(range(n)),
         "stop": {"env_steps": args.env_steps, "min_evaluations": 1},
         "resources": {"max_concurrent_trials": n, "num_env_runners": 0, "cpus_per_trial": cpus},
-        "tracking": {"uri": f"sqlite:///{store}"},
+        # Tune's folders beside the store, in the benchmark's temp dir: a rerun starts fresh.
+        "tracking": {"uri": f"sqlite:///{store}", "storage": str(store.parent / "results")},
     }
 
 
