@@ -185,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     from copilot_ray.keys import EVAL_SUCCESS_AUC, ROLE_SWEEP, validation_key
-    from copilot_ray.store import tracking_uri_problem
+    from copilot_ray.store import missing_sqlite_file, tracking_uri_problem
 
     p = argparse.ArgumentParser(prog="python -m copilot_ray.stages", description=main.__doc__)
     p.add_argument("experiment")
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     if (why := tracking_uri_problem(args.tracking_uri)) is not None:
         print(f"error: --tracking-uri {args.tracking_uri!r} is invalid: {why}", file=sys.stderr)
         return 2
-    if args.tracking_uri.startswith("sqlite:///") and not Path(args.tracking_uri[10:]).is_file():
+    if missing_sqlite_file(args.tracking_uri) is not None:
         print(f"error: --tracking-uri {args.tracking_uri!r} is invalid: no such file", file=sys.stderr)
         return 2
     import os

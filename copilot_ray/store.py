@@ -38,6 +38,15 @@ def tracking_uri_problem(uri: str) -> str | None:
     return None
 
 
+def missing_sqlite_file(uri: str) -> Path | None:
+    """The file a sqlite:/// URI names when it does not exist (None for any other store, or when it
+    does): reading such a URI would make MLflow create an empty store in its place."""
+    if not uri.startswith("sqlite:///"):
+        return None
+    path = Path(uri[len("sqlite:///") :])
+    return None if path.is_file() else path
+
+
 def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> str:
     """How to look at a store's runs in MLflow's UI. MLflow 3's UI opens an experiment on its GenAI pages
     (whatever the experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""

@@ -47,6 +47,7 @@ from copilot_ray.keys import (
     result_value,
 )
 from copilot_ray.privileges import tag_value
+from copilot_ray.store import missing_sqlite_file
 from copilot_ray.trials.description import describe_trial, env_params, trial_config_yaml
 
 MLFLOW_PARAM_LIMIT = 500  # MLflow rejects longer param values
@@ -261,14 +262,14 @@ def sweep_runs_in_store(tracking_uri: str, experiment: str, sweep: str) -> tuple
 
     A store copied to another machine without Tune's folders (a long comparison carried from one session
     to the next) tells ``--resume`` which parts are done; it opens an existing SQLite file only."""
-    if tracking_uri.startswith("sqlite:///") and not Path(tracking_uri[len("sqlite:///") :]).is_file():
+    if missing_sqlite_file(tracking_uri) is not None:
         return None, []
     client = _client(tracking_uri)
     exp = client.get_experiment_by_name(experiment)
     if exp is None:
         return None, []
-    parents = find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_SWEEP})
     everything = find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep})
+    parents = [r for r in everything if r.data.tags.get(ROLE_TAG) == ROLE_SWEEP]
     finished = parents[-1].info.run_id if parents and parents[-1].info.status == "FINISHED" else None
     return finished, [r.info.run_id for r in everything]
 

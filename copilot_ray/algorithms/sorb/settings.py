@@ -14,8 +14,9 @@ from dataclasses import replace
 
 from copilot_ray import keys
 from copilot_ray.algorithms.sac.her_settings import SEARCH_SPACE as HER_SEARCH_SPACE
-from copilot_ray.algorithms.sac.settings import (
+from copilot_ray.algorithms.sac.settings import (  # GPU_LEARNER: HER's agent, on the same learner
     AGENT,
+    GPU_LEARNER,
     HINDSIGHT,
     combination_problems,
     max_iteration_env_steps,
@@ -63,9 +64,6 @@ _HINDSIGHT = [
     for s in HINDSIGHT
 ]
 SETTINGS = {s.key: s for s in (*AGENT, *_HINDSIGHT, *SEARCH)}
-# An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
-GPU_LEARNER = True
-
 METRICS: tuple[str, ...] = (
     *keys.validation_metrics(
         keys.EVAL_SUCCESS, keys.SUCCESS_PLANNED, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN
@@ -82,4 +80,11 @@ METRICS: tuple[str, ...] = (
 # HER's space (SoRB trains HER's agent) plus the search's edge cutoff.
 SEARCH_SPACE: dict[str, dict] = {**HER_SEARCH_SPACE, "sorb.max_edge_steps": {"categorical": [25, 50, 100]}}
 
-__all__ = ["METRICS", "SEARCH_SPACE", "SETTINGS", "combination_problems", "max_iteration_env_steps"]
+__all__ = [
+    "GPU_LEARNER",
+    "METRICS",
+    "SEARCH_SPACE",
+    "SETTINGS",
+    "combination_problems",
+    "max_iteration_env_steps",
+]
