@@ -26,7 +26,7 @@ def test_rrt_star_solves_test_tasks_with_collision_free_paths(agent):
     env = make(f"maze-{agent}", layout="u-maze")
     maze = env.unwrapped
     starts, goals = (x.astype(np.float64)[:3] for x in maze.tasks("test"))
-    rrt = rrt_star_for_env(env, time_limit_s=0.6)  # wall time: a loaded machine gets less of it
+    rrt = rrt_star_for_env(env, time_limit_s=1.0)  # wall time: RRT* is time-bound, so its sample count varies
     for start, goal in zip(starts, goals, strict=True):
         result = rrt.plan(start, goal, maze.success_radius)
         assert result.solved, (agent, start, goal)
