@@ -26,7 +26,8 @@
   their last checkpoint, the same MLflow parent and child runs are reused (no duplicates; metric rows
   already logged are not logged again). A file of several parts also resumes from its MLflow store alone
   (copied to a new machine without ``tune/``): parts the store records finished are skipped, the others
-  start over (an unfinished attempt's runs are discarded first).
+  start over (an unfinished attempt's runs are discarded first). ``python -m copilot_ray.carry`` packs
+  the store with the interrupted part's Tune folder, so that part continues from its checkpoints instead.
 """
 
 from __future__ import annotations

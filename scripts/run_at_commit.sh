@@ -5,9 +5,11 @@
 #
 #   bash scripts/run_at_commit.sh [--commit REV] [--carry STORE.tar.gz] SPEC.yaml [sweep flags, e.g. --resume]
 #
-# --carry: a results archive from another machine or session (made with `tar -czf STORE.tar.gz results/
-# --exclude='*/tune'` in the old worktree: the MLflow store and its artifacts, not Tune's folders) is
-# unpacked into a new worktree first; with --resume the sweep skips the parts the store records finished.
+# --carry: a results archive from another machine or session (made in the old worktree with `python -m
+# copilot_ray.carry SPEC.yaml STORE.tar.gz`: the MLflow store, its artifacts and the unfinished parts' Tune
+# folders) is unpacked into a new worktree first; with --resume the sweep skips the parts the store
+# records finished and continues the unfinished one from its trials' checkpoints. The archive must come
+# from the same commit and the same worktree path (checked before anything is made).
 #
 # REV defaults to HEAD (which must hold no uncommitted change to copilot_ray/, analysis/ or sweeps/).
 # The sweep's output goes to <worktree>/results/<spec name>.log; the results stay in the worktree's
@@ -45,6 +47,24 @@ git cat-file -e "$sha:$spec" 2>/dev/null || {
   exit 2
 }
 tree="$(cd .. && pwd)/$(basename "$PWD")-at-${sha:0:7}"
+if [ -n "$carry" ]; then
+  # An archive from `python -m copilot_ray.carry` says where and at which commit it was packed: its store
+  # continues only at that commit (one experiment, one commit) and at that path (Tune's state and the
+  # trials' configs name absolute paths). An archive without that manifest is a store alone.
+  manifest="$(tar -tzf "$carry" | grep -m1 -E '(^|/)carry\.json$' || true)"
+  if [ -n "$manifest" ]; then
+    read -r packed_root packed_commit < <(tar -xzOf "$carry" "$manifest" |
+      python3 -c 'import json, sys; m = json.load(sys.stdin); print(m["root"], m["commit"])')
+    if [ "$packed_commit" != "$sha" ]; then
+      echo "error: --carry $carry was packed at commit ${packed_commit:0:7}, not ${sha:0:7}: a store continues only at the commit that began it" >&2
+      exit 2
+    fi
+    if [ "$packed_root" != "$tree" ]; then
+      echo "error: --carry $carry was packed in $packed_root; its Tune state resumes only there, and this checkout would put it in $tree" >&2
+      exit 2
+    fi
+  fi
+fi
 if [ ! -d "$tree" ]; then
   git worktree add --detach "$tree" "$sha" >/dev/null
 fi

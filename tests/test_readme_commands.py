@@ -39,10 +39,20 @@ SWEEPS = [c for c in COMMANDS if "-m copilot_ray.sweep " in c]
 REPORTS = [c for c in COMMANDS if "-m analysis.report " in c]
 TRAINS = [c for c in COMMANDS if "-m copilot_ray.train" in c]
 BENCHMARKS = [c for c in COMMANDS if "benchmarks/" in c and "<" not in c]
+CARRIES = [c for c in COMMANDS if "-m copilot_ray.carry " in c]
 
 
 def test_the_readme_shows_each_kind_of_command():
-    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS
+    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS and CARRIES
+
+
+@pytest.mark.parametrize("command", CARRIES)
+def test_carry_commands_name_a_valid_spec_and_an_archive(command):
+    from copilot_ray.carry import parse_args
+    from copilot_ray.sweep_spec import load_specs
+
+    args = parse_args(_args(command, "-m copilot_ray.carry "))
+    assert load_specs(ROOT / args.spec) and args.out.endswith(".tar.gz")
 
 
 @pytest.mark.parametrize("command", SWEEPS)

@@ -36,3 +36,35 @@ def test_bad_arguments_exit_2_naming_them_and_create_no_worktree(tmp_path):
         done = _run(*args)
         assert done.returncode == 2 and message in done.stderr, (args, done.stderr)
     assert _worktrees() == before
+
+
+def _archive(path: Path, manifest: dict) -> Path:
+    import io
+    import json
+    import tarfile
+
+    data = json.dumps(manifest).encode()
+    info = tarfile.TarInfo("results/carry.json")
+    info.size = len(data)
+    with tarfile.open(path, "w:gz") as tar:
+        tar.addfile(info, io.BytesIO(data))
+    return path
+
+
+@pytest.mark.skipif(not IN_GIT, reason="a git checkout: the script pins a commit")
+def test_a_carried_store_continues_only_at_its_commit_and_its_path(tmp_path):
+    """An archive from `python -m copilot_ray.carry` names the commit and folder it was packed in: another
+    commit (one experiment, one commit) or another path (Tune's state names absolute paths) is refused
+    before any worktree is made."""
+    before = _worktrees()
+    head = subprocess.run(
+        ["git", "rev-parse", "HEAD"], capture_output=True, text=True, cwd=ROOT
+    ).stdout.strip()
+    tree = f"{ROOT.parent}/{ROOT.name}-at-{head[:7]}"
+    other_commit = _archive(tmp_path / "a.tar.gz", {"root": tree, "commit": "0" * 40})
+    done = _run("--commit", head, "--carry", str(other_commit), "sweeps/smoke.yaml")
+    assert done.returncode == 2 and "packed at commit 0000000, not " + head[:7] in done.stderr, done.stderr
+    other_root = _archive(tmp_path / "b.tar.gz", {"root": "/elsewhere/main-at-x", "commit": head})
+    done = _run("--commit", head, "--carry", str(other_root), "sweeps/smoke.yaml")
+    assert done.returncode == 2 and "was packed in /elsewhere/main-at-x" in done.stderr, done.stderr
+    assert _worktrees() == before

@@ -1,0 +1,201 @@
+"""Pack a sweep file's results into one archive that another machine (or session) resumes from.
+
+    python -m copilot_ray.carry SPEC.yaml OUT.tar.gz [--root DIR] [--final-checkpoints]
+
+A comparison runs for longer than one machine may live. The archive holds what ``--resume`` needs:
+
+* the MLflow store: the SQLite file (a consistent snapshot, taken with SQLite's backup API, so even a
+  store being written packs whole) and every part's folder (its artifacts, ``spec.yaml``, ``optuna.db``),
+  without the final checkpoints logged as run artifacts unless ``--final-checkpoints``;
+* the Tune folder (Tune's state, trial folders, their last checkpoints) of every part the store does not
+  record finished: ``--resume`` then continues those trials from their checkpoints instead of starting
+  the part over (a stage-2 part of five 200k-step seeds is longer than a session); finished parts go
+  without theirs (``--resume`` skips them by the store);
+* the sweep's log, ``<storage>/<file stem>.log``, when there is one;
+* ``<storage>/carry.json``: the folder and the commit it was packed from, which
+  ``scripts/run_at_commit.sh --carry`` checks: a store continues only at the commit that began it, and
+  at the same path (Tune's state and every trial's config name absolute paths).
+
+Stop the sweep first (SIGTERM: Tune saves its state). Paths in the archive are relative to ``--root``
+(default: the current folder), the folder the sweep was started from. Bad input exits 2 and packs
+nothing. No Ray; MLflow is imported to read the store.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sqlite3
+import subprocess
+import sys
+import tarfile
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from copilot_ray import tracking
+from copilot_ray.store import missing_sqlite_file
+from copilot_ray.sweep import sweep_root
+from copilot_ray.sweep_spec import SpecError, load_specs
+
+MANIFEST = "carry.json"
+FINAL_CHECKPOINT = ("artifacts", "checkpoint")  # a run's final checkpoint, as the sweep logs it
+
+
+class CarryError(RuntimeError):
+    """The results cannot be packed as asked (no store, a store outside the folder, ...)."""
+
+
+@dataclass(frozen=True)
+class PartState:
+    name: str
+    finished: bool
+    has_tune: bool
+
+    @property
+    def label(self) -> str:
+        return "finished" if self.finished else "unfinished" if self.has_tune else "not started"
+
+    def line(self) -> str:
+        if self.finished:
+            return f"{self.name}: finished in the store (its Tune folder left out; --resume skips it)"
+        if self.has_tune:
+            return f"{self.name}: unfinished, with its Tune folder (--resume continues from its checkpoints)"
+        return f"{self.name}: not started"
+
+
+def _store_file(specs, root: Path) -> Path:
+    uris = {spec.tracking.uri for spec in specs}
+    if len(uris) != 1:
+        raise CarryError(
+            f"the parts write to {len(uris)} stores ({', '.join(sorted(uris))}); carry packs one"
+        )
+    uri = uris.pop()
+    if not uri.startswith("sqlite:///"):
+        raise CarryError(
+            f"tracking.uri {uri!r} is not a SQLite file; only a file store travels in an archive"
+        )
+    if (missing := missing_sqlite_file(uri)) is not None:
+        raise CarryError(f"tracking.uri {uri!r}: {missing} does not exist (nothing has run from {root}?)")
+    path = Path(uri[len("sqlite:///") :]).resolve()
+    if not path.is_relative_to(root):
+        raise CarryError(f"tracking.uri {uri!r}: {path} is outside --root {root}")
+    return path
+
+
+def part_states(specs) -> list[PartState]:
+    uri = specs[0].tracking.uri
+    states = []
+    for spec in specs:
+        finished, _ = tracking.sweep_runs_in_store(uri, spec.experiment, spec.name)
+        states.append(PartState(spec.name, finished is not None, (sweep_root(spec) / "tune").is_dir()))
+    return states
+
+
+def _commit(root: Path) -> str:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def _snapshot(db: Path, into: Path) -> Path:
+    """A consistent copy of a SQLite file, even while a sweep writes to it."""
+    copy = into / db.name
+    source, target = sqlite3.connect(f"file:{db}?mode=ro", uri=True), sqlite3.connect(copy)
+    try:
+        source.backup(target)
+    finally:
+        source.close()
+        target.close()
+    return copy
+
+
+def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool = False) -> list[PartState]:
+    """Writes the archive (see the module's doc) and returns each part's state as packed."""
+    specs = load_specs(spec_path)  # relative storage and store paths resolve against the current folder
+    db = _store_file(specs, root)
+    states = part_states(specs)
+    unfinished_tune = {sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if not st.finished}
+
+    def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
+        path = root / info.name
+        if path.name.startswith(db.name):  # the store (and its -wal, -shm): its snapshot goes in instead
+            return None
+        if (
+            path.name == "tune"
+            and path.parent in {sweep_root(s) for s in specs}
+            and path not in unfinished_tune
+        ):
+            return None
+        if not final_checkpoints and path.parts[-2:] == FINAL_CHECKPOINT:
+            return None
+        return info
+
+    storage = db.parent
+    log = storage / f"{Path(spec_path).stem}.log"
+    manifest = {
+        "root": str(root),
+        "commit": _commit(root),
+        "spec": str(spec_path),
+        "parts": {s.name: s.label for s in states},
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp, tarfile.open(out, "w:gz") as archive:
+        archive.add(_snapshot(db, Path(tmp)), arcname=str(db.relative_to(root)))
+        for spec in specs:
+            folder = sweep_root(spec)
+            if folder.is_dir():
+                archive.add(folder, arcname=str(folder.relative_to(root)), filter=keep)
+        if log.is_file():
+            archive.add(log, arcname=str(log.relative_to(root)))
+        (Path(tmp) / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+        archive.add(Path(tmp) / MANIFEST, arcname=str((storage / MANIFEST).relative_to(root)))
+    return states
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m copilot_ray.carry", description=__doc__.split("\n\n")[0])
+    p.add_argument("spec", help="the sweep file whose results to pack (as it was run)")
+    p.add_argument("out", help="the archive to write (.tar.gz)")
+    p.add_argument("--root", default=".", help="the folder the sweep was started from (default: here)")
+    p.add_argument(
+        "--final-checkpoints", action="store_true", help="keep the final checkpoints logged as run artifacts"
+    )
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    root = Path(args.root).expanduser().resolve()
+    out = Path(args.out).expanduser().resolve()
+    if not root.is_dir():
+        print(f"error: --root {args.root!r} is not a folder", file=sys.stderr)
+        return 2
+    if not out.name.endswith((".tar.gz", ".tgz")):
+        print(f"error: out {args.out!r} must name a .tar.gz file", file=sys.stderr)
+        return 2
+    spec = Path(args.spec)
+    spec = spec if spec.is_absolute() else (Path.cwd() / spec).resolve()
+    try:
+        with contextlib.chdir(root):  # the spec's relative storage and store resolve where it was started
+            states = pack(spec, out, root, args.final_checkpoints)
+    except SpecError as err:
+        for line in err.problems:
+            print(line, file=sys.stderr)
+        return 2
+    except CarryError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    for state in states:
+        print(state.line())
+    print(f"packed {out} ({out.stat().st_size / 1e6:.1f} MB) from {root}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

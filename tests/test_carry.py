@@ -1,0 +1,134 @@
+"""`python -m copilot_ray.carry` packs what --resume needs on another machine: the store (a snapshot), the
+parts' folders, the Tune folders of unfinished parts only, no final checkpoints unless asked; unpacked in
+place, --resume skips the finished part and continues the unfinished one through Tune."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sqlite3
+import tarfile
+from pathlib import Path
+from types import SimpleNamespace
+
+import yaml
+
+from copilot_ray import carry, sweep, tracking
+from copilot_ray.keys import PARENT_TAG, ROLE_TAG, ROLE_TRIAL, SWEEP_TAG
+from copilot_ray.sweep_spec import load_specs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _three_parts(tmp_path: Path):
+    """A spec file of three parts with a store: `done` finished, `cut` interrupted with its Tune folder,
+    `fresh` never started; each started part has a Tune checkpoint and a run with a final checkpoint."""
+    uri = f"sqlite:///{tmp_path}/results/carried.db"
+    base = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
+    base["tracking"] = {"storage": str(tmp_path / "results"), "uri": uri}
+    path = tmp_path / "three.yaml"
+    parts = [{**base, "name": name} for name in ("done", "cut", "fresh")]
+    path.write_text("---\n".join(yaml.safe_dump(p, sort_keys=False) for p in parts))
+    (tmp_path / "results").mkdir()
+    done, cut, fresh = load_specs(path)
+    _, parent, _ = tracking.open_sweep_run(uri, done.experiment, done.name, resume=False)
+    tracking.end_sweep_run(uri, parent, "FINISHED")
+    _, cut_parent, _ = tracking.open_sweep_run(uri, cut.experiment, cut.name, resume=False)
+    client = tracking._client(uri)
+    exp_id = client.get_experiment_by_name(cut.experiment).experiment_id
+    client.create_run(exp_id, tags={SWEEP_TAG: cut.name, ROLE_TAG: ROLE_TRIAL, PARENT_TAG: cut_parent})
+    for spec in (done, cut):
+        folder = tmp_path / "results" / spec.name
+        checkpoint = folder / "tune" / sweep.experiment_names(spec)[0][0] / "trial_1" / "checkpoint_000002"
+        checkpoint.mkdir(parents=True)
+        (checkpoint / "state.pkl").write_bytes(b"weights")
+        artifacts = folder / "mlartifacts" / "run1" / "artifacts"
+        (artifacts / "checkpoint").mkdir(parents=True)
+        (artifacts / "checkpoint" / "algorithm_state.pkl").write_bytes(b"final")
+        (artifacts / "config.yaml").write_text("trial: {}\n")
+        (folder / "optuna.db").write_bytes(b"studies")
+    (tmp_path / "results" / "three.log").write_text("=== part 1 of 3\n")
+    return path, uri, (done, cut, fresh)
+
+
+def _forget_open_stores(under: str) -> None:
+    """This process keeps an engine per store URI (MLflow's cache); a new machine opens the unpacked file
+    afresh, so the test drops the engines of the stores it replaced."""
+    from mlflow.store.tracking.sqlalchemy_store import SqlAlchemyStore
+
+    for uri in [u for u in SqlAlchemyStore._engine_map if under in u]:
+        SqlAlchemyStore._engine_map.pop(uri).dispose()
+
+
+def _names(archive: Path) -> set[str]:
+    with tarfile.open(archive) as tar:
+        return set(tar.getnames())
+
+
+def test_pack_keeps_the_store_and_unfinished_tune_folders_and_leaves_out_the_rest(tmp_path):
+    path, uri, _ = _three_parts(tmp_path)
+    out = tmp_path / "carried.tar.gz"
+    states = carry.pack(path, out, tmp_path)
+    assert [(s.name, s.label) for s in states] == [
+        ("done", "finished"),
+        ("cut", "unfinished"),
+        ("fresh", "not started"),
+    ]
+    names = _names(out)
+    assert "results/carried.db" in names and "results/three.log" in names
+    assert "results/cut/tune/cut/trial_1/checkpoint_000002/state.pkl" in names
+    assert not any(n.startswith("results/done/tune") for n in names)
+    assert "results/done/mlartifacts/run1/artifacts/config.yaml" in names
+    assert "results/done/optuna.db" in names and "results/cut/optuna.db" in names
+    assert not any("/artifacts/checkpoint" in n for n in names)
+    with tarfile.open(out) as tar:
+        manifest = json.loads(tar.extractfile("results/carry.json").read())
+        tar.extract("results/carried.db", tmp_path / "unpacked", filter="data")
+    assert manifest["root"] == str(tmp_path)
+    assert manifest["parts"] == {"done": "finished", "cut": "unfinished", "fresh": "not started"}
+    # The snapshot is a whole store: both parents and the cut trial.
+    with sqlite3.connect(tmp_path / "unpacked" / "results" / "carried.db") as db:
+        assert db.execute("select count(*) from runs").fetchone()[0] == 3
+
+    with_final = tmp_path / "with_final.tar.gz"
+    carry.pack(path, with_final, tmp_path, final_checkpoints=True)
+    assert "results/done/mlartifacts/run1/artifacts/checkpoint/algorithm_state.pkl" in _names(with_final)
+
+
+def test_unpacked_in_place_resume_skips_the_finished_part_and_continues_the_cut_one(tmp_path, monkeypatch):
+    path, uri, (done, cut, fresh) = _three_parts(tmp_path)
+    out = tmp_path / "carried.tar.gz"
+    carry.pack(path, out, tmp_path)
+    shutil.rmtree(tmp_path / "results")  # a new machine: only the archive is left
+    _forget_open_stores(str(tmp_path))
+    with tarfile.open(out) as tar:
+        tar.extractall(tmp_path, filter="data")
+
+    ran = []
+    monkeypatch.setattr(sweep, "_import_runtime", lambda: SimpleNamespace(start_ray=lambda a: False))
+    monkeypatch.setattr(sweep, "_run_one", lambda spec, args, resume: ran.append((spec.name, resume)) or 0)
+    assert sweep.main([str(path), "--resume"]) == 0
+    # cut resumes through its Tune state (resume=True): its runs stay, its Optuna studies too.
+    assert ran == [("cut", True), ("fresh", False)]
+    assert len(tracking.sweep_runs_in_store(uri, cut.experiment, cut.name)[1]) == 2
+    assert (tmp_path / "results" / "cut" / "optuna.db").read_bytes() == b"studies"
+
+
+def test_bad_input_exits_2_naming_it_and_writes_nothing(tmp_path, capsys):
+    path, uri, _ = _three_parts(tmp_path)
+    out = tmp_path / "out.tar.gz"
+    assert carry.main([str(path), str(tmp_path / "out.zip"), "--root", str(tmp_path)]) == 2
+    assert "out.zip" in capsys.readouterr().err
+    assert carry.main([str(path), str(out), "--root", str(tmp_path / "nowhere")]) == 2
+    assert "--root" in capsys.readouterr().err
+    assert carry.main([str(tmp_path / "missing.yaml"), str(out), "--root", str(tmp_path)]) == 2
+    assert "missing.yaml" in capsys.readouterr().err
+    inner = tmp_path / "inner"
+    inner.mkdir()
+    assert carry.main([str(path), str(out), "--root", str(inner)]) == 2
+    assert "is outside --root" in capsys.readouterr().err
+    (tmp_path / "results" / "carried.db").unlink()
+    _forget_open_stores(str(tmp_path))
+    assert carry.main([str(path), str(out), "--root", str(tmp_path)]) == 2
+    assert f"tracking.uri {uri!r}" in capsys.readouterr().err
+    assert not out.exists()
