@@ -5,6 +5,7 @@ metrics.csv.gz` was written by hand before).
 Columns: run (name), config (the report's label), seed, metric, env_steps (MLflow's step), value. Kept:
 the namespaces copilot/ and paths/ and the env-step counter; every logged row, as logged (no fresh-only
 filter: the `copilot/eval/fresh` column says which rows of the evaluation metrics are real evaluations).
+A report on validation tasks (a search's) leaves out the test tasks' copilot/eval/ figures.
 """
 
 from __future__ import annotations
@@ -13,15 +14,18 @@ from pathlib import Path
 
 import pandas as pd
 
-from copilot_ray.keys import COPILOT_PREFIX, ENV_STEPS, PATHS_PREFIX
+from copilot_ray.keys import COPILOT_PREFIX, ENV_STEPS, EVAL_FRESH, EVAL_PREFIX, PATHS_PREFIX
 
-from .load import Sweep, metric_histories
+from .load import TEST, VALIDATION, Sweep, metric_histories
 
 METRICS_CSV = "metrics.csv.gz"
 COLUMNS = ("run", "config", "seed", "metric", "env_steps", "value")
 
 
-def exported(key: str) -> bool:
+def exported(key: str, tasks: str = TEST) -> bool:
+    """A report on validation tasks (a search's) exports nothing measured on the test tasks."""
+    if tasks == VALIDATION and key.startswith(EVAL_PREFIX) and key != EVAL_FRESH:
+        return False
     return key.startswith((COPILOT_PREFIX, PATHS_PREFIX)) or key == ENV_STEPS
 
 
@@ -30,7 +34,7 @@ def metrics_frame(sweep: Sweep, labels: dict[str, str]) -> pd.DataFrame:
     run id -> configuration label (the config key when a run has none)."""
     parts = []
     for t in sweep.trials:
-        keys = sorted(k for k in t.latest if exported(k))
+        keys = sorted(k for k in t.latest if exported(k, sweep.tasks))
         histories = metric_histories(t.tracking_uri or sweep.tracking_uri, t.run_id, keys)
         for key, (steps, values) in histories.items():
             parts.append(

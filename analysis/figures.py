@@ -247,6 +247,7 @@ def final_success(
     metrics: tuple[str, ...] = PLANNED_AND_DIRECT,
     paper: str = "",
     notes: list[str] | None = None,
+    tasks: str = "test",
 ) -> Path | None:
     """Grouped bars (one per metric some configuration has: planned and direct, or `BY_METHOD`'s common
     success) of final success, each seed as a dot: the IQM with its 95 % CI from 5 seeds on, else the
@@ -302,7 +303,7 @@ def final_success(
     extra = f"; {dropped} more configurations not drawn" if dropped else ""
     _suptitle(
         fig,
-        f"Final test success by {axis_name}{f' ({paper})' if paper else ''}\n"
+        f"Final {tasks} success by {axis_name}{f' ({paper})' if paper else ''}\n"
         f"n >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM, 95% bootstrap CI; fewer: mean, no CI; "
         f"dots: seeds (their range){extra}",
     )
@@ -428,7 +429,7 @@ _DIAG_PANELS = (
     ),
     ("critic's mean Q", ((DIAG_Q_MEAN, "-", "mean Q"),)),
     (
-        "test: planned path collision-free / followed",
+        "{tasks}: planned path collision-free / followed",
         (
             (PLANNED_COLLISION_FREE, ":", "plan collision-free"),
             (eval_by_action(REACHED_PLANNED, "deterministic"), "--", "reached (collisions allowed)"),
@@ -436,7 +437,7 @@ _DIAG_PANELS = (
         ),
     ),
     (
-        "test success: deterministic vs sampled actions",
+        "{tasks} success: deterministic vs sampled actions",
         (
             (eval_by_action(SUCCESS_PLANNED, "deterministic"), "-", "deterministic, planned"),
             (eval_by_action(SUCCESS_PLANNED, "sampled"), "--", "sampled, planned"),
@@ -451,7 +452,9 @@ def depth_of(trial) -> int:
     return max(layers, default=0)
 
 
-def diagnostics(configs: list[ConfigSummary], path: Path, notes: list[str] | None = None) -> Path | None:
+def diagnostics(
+    configs: list[ConfigSummary], path: Path, notes: list[str] | None = None, tasks: str = "test"
+) -> Path | None:
     """Why runs (do not) learn: the `copilot/diag/...` curves and their evaluation counterparts against
     env steps, one panel per question some run has data for (the others are named in `notes`). Returns
     None when no run logged diagnostics."""
@@ -465,12 +468,13 @@ def diagnostics(configs: list[ConfigSummary], path: Path, notes: list[str] | Non
         K = depth_of(t)
         return [(metric.format(K=K, K2=max(K - 2, 1)), style) for metric, style, _ in lines]
 
+    named = [(title.format(tasks=tasks), lines) for title, lines in _DIAG_PANELS]
     panels = [
         (title, lines)
-        for title, lines in _DIAG_PANELS
+        for title, lines in named
         if any(k in t.curves for _, t in trials for k, _ in keys(t, lines))
     ]
-    empty = [title for title, _ in _DIAG_PANELS if title not in {p[0] for p in panels}]
+    empty = [title for title, _ in named if title not in {p[0] for p in panels}]
     if empty:
         notes.append(f"{path.name}: panels left out (no run logged their metrics): {'; '.join(empty)}.")
     if not panels:

@@ -53,6 +53,7 @@ from copilot_ray.keys import (
     TIME_TOTAL_S,
     TREES_DIR,
     VALIDATION_PREFIX,
+    validation_key,
 )
 
 # Curves for the diagnostics page (copilot_ray.algorithms.copilot.diagnostics): every metric under these
@@ -76,6 +77,12 @@ EVALUATION_PREFIXES = (EVAL_PREFIX, VALIDATION_PREFIX)
 
 
 ALL_SWEEPS = "all"  # --parent-run all: the trials of every sweep run of the experiment
+# Which tasks' evaluations a report shows. "auto": the validation tasks when every sweep of the report
+# is a search (its parent run's `searcher` param is one of SEARCHES: it chose by validation figures, so
+# showing it test figures would invite choosing by them), else the test tasks.
+TEST, VALIDATION, AUTO = "test", "validation", "auto"
+TASK_SETS = (AUTO, TEST, VALIDATION)
+SEARCHER_PARAM, SEARCHES = "searcher", ("optuna",)
 
 
 class AnalysisError(Exception):
@@ -140,6 +147,7 @@ class Sweep:
     other_parent_ids: list[str] = field(default_factory=list)
     # (tracking URI, run id, sweep name) of every sweep (parent) run whose trials are included
     parents: list[tuple[str, str, str]] = field(default_factory=list)
+    tasks: str = TEST  # whose evaluations the trials' copilot/eval/ figures are (`on_validation_tasks`)
 
     def axes(self) -> list[str]:
         """What the configuration labels name (`axis_value`): the axis tags and env-config keys that take more
@@ -308,7 +316,7 @@ def _trial_order(t: Trial):
 def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
     """Adds every trial run of the same experiment in another store (runs that ran apart, e.g. two
     sweeps side by side with their own SQLite files); returns how many. Run ids must not repeat."""
-    other = load_sweep(tracking_uri, sweep.experiment, ALL_SWEEPS)
+    other = load_sweep(tracking_uri, sweep.experiment, ALL_SWEEPS, tasks=sweep.tasks)
     known = {t.run_id for t in sweep.trials}
     twice = sorted(known & {t.run_id for t in other.trials})
     if twice:
@@ -322,13 +330,18 @@ def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
     return len(other.trials)
 
 
-def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = None) -> Sweep:
+def load_sweep(
+    tracking_uri: str, experiment: str, parent_run_id: str | None = None, tasks: str = TEST
+) -> Sweep:
     """All child runs of one sweep with their success curves and wall time.
 
     With several sweep (parent) runs in the experiment, the newest is used unless `parent_run_id` says
     otherwise (`"all"`: every one of them, e.g. the parts of a several-spec file; the report is logged to
     the newest); the others are reported. Without any parent run, every trial run in the experiment is used.
+    `tasks` (TASK_SETS): whose evaluations the trials' copilot/eval/ figures hold (`on_validation_tasks`).
     """
+    if tasks not in TASK_SETS:
+        raise AnalysisError(f"tasks {tasks!r} is not one of {', '.join(TASK_SETS)}")
     client = _client(tracking_uri)
     exp = client.get_experiment_by_name(experiment)
     if exp is None:
@@ -347,10 +360,12 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         children = [r for r in runs if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
         if not children:
             raise AnalysisError(f"experiment {experiment!r} has no child (trial) runs at {tracking_uri}")
-        trials = [_trial(client, r) for r in children]
+        tasks = _resolve_tasks(tasks, parents)
+        trials = [_trial(client, r, tasks) for r in children]
         trials.sort(key=_trial_order)
         names = sorted({p.data.tags.get(SWEEP_TAG, p.info.run_id) for p in parents})
         return Sweep(
+            tasks=tasks,
             tracking_uri=tracking_uri,
             experiment=experiment,
             experiment_id=exp.experiment_id,
@@ -378,7 +393,8 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
         where = f"sweep run {parent.info.run_id}" if parent else f"experiment {experiment!r}"
         raise AnalysisError(f"{where} has no child (trial) runs at {tracking_uri}")
 
-    trials = [_trial(client, r) for r in children]
+    tasks = _resolve_tasks(tasks, [parent] if parent is not None else [])
+    trials = [_trial(client, r, tasks) for r in children]
     trials.sort(key=lambda t: (t.config_key, natural_key(t.seed), t.run_id))
     sweep_name = (parent.data.tags.get(SWEEP_TAG) if parent else None) or (
         children[0].data.tags.get(SWEEP_TAG, experiment)
@@ -394,7 +410,15 @@ def load_sweep(tracking_uri: str, experiment: str, parent_run_id: str | None = N
             p.info.run_id for p in parents if parent is None or p.info.run_id != parent.info.run_id
         ],
         parents=[_parent_entry(tracking_uri, parent)] if parent else [],
+        tasks=tasks,
     )
+
+
+def _resolve_tasks(tasks: str, parents: list) -> str:
+    if tasks != AUTO:
+        return tasks
+    searches = bool(parents) and all(p.data.params.get(SEARCHER_PARAM) in SEARCHES for p in parents)
+    return VALIDATION if searches else TEST
 
 
 def _parent_entry(tracking_uri: str, run) -> tuple[str, str, str]:
@@ -411,7 +435,7 @@ def spec_artifacts(tracking_uri: str, run_id: str) -> list[str]:
     return [n for n in (RESOLVED_SPEC_ARTIFACT, SPEC_ARTIFACT) if n in names]
 
 
-def _trial(client, run) -> Trial:
+def _trial(client, run, tasks: str = TEST) -> Trial:
     tags = dict(run.data.tags)
     trial = Trial(
         run_id=run.info.run_id,
@@ -424,13 +448,14 @@ def _trial(client, run) -> Trial:
         latest=dict(run.data.metrics),
         params=dict(run.data.params),
     )
-    wanted = set(CURVE_METRICS) | {
-        k for k in run.data.metrics if k.startswith((*DIAGNOSTIC_PREFIXES, PATHS_PREFIX))
-    }
+    prefixes = (*DIAGNOSTIC_PREFIXES, PATHS_PREFIX, *((VALIDATION_PREFIX,) if tasks == VALIDATION else ()))
+    wanted = set(CURVE_METRICS) | {k for k in run.data.metrics if k.startswith(prefixes)}
     for key in sorted(wanted):
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
             trial.curves[key] = metric_curve(client, run.info.run_id, key)
     trial.curves = fresh_only(trial.curves, trial.curves.get(EVAL_FRESH))  # loaded above: under copilot/eval/
+    if tasks == VALIDATION:
+        on_validation_tasks(trial)
     trial.wall_time_s = float(run.data.metrics.get(TIME_TOTAL_S, float("nan")))
     try:
         trial.tree_artifacts = sorted(
@@ -439,6 +464,18 @@ def _trial(client, run) -> Trial:
     except Exception:  # an unreachable artifact store must not cost the whole report its tables
         trial.tree_artifacts = []
     return trial
+
+
+def on_validation_tasks(trial: Trial) -> None:
+    """Puts the validation tasks' figures where the report reads the test tasks': each copilot/eval/<x>
+    (curve and last value) becomes its copilot/validation/<x> twin, or goes where there is none, so that a
+    report on validation tasks holds nothing measured on the test tasks. copilot/eval/fresh (which rows
+    evaluated: both sets are evaluated together) stays."""
+    for figures in (trial.curves, trial.latest):
+        for key in [k for k in figures if k.startswith(EVAL_PREFIX) and k != EVAL_FRESH]:
+            del figures[key]
+            if (twin := validation_key(key)) in figures:
+                figures[key] = figures[twin]
 
 
 def metric_curve(client, run_id: str, key: str) -> tuple[np.ndarray, np.ndarray]:

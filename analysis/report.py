@@ -71,6 +71,9 @@ from . import figures, paths, stats, tables
 from .aggregate import ConfigSummary, Missing, privileges_label, summarise
 from .export import METRICS_CSV, write_metrics_csv
 from .load import (
+    AUTO,
+    TASK_SETS,
+    VALIDATION,
     AnalysisError,
     Sweep,
     Trial,
@@ -84,6 +87,10 @@ from .load import (
 )
 
 MAX_TREE_FIGURES = 8
+_VALIDATION_WHY = (
+    "every sweep here is a search, which chose by these tasks; its test figures are not shown, so that "
+    "nothing is chosen by them: the comparison's second stage reports the test tasks"
+)
 OWNED = (
     "*.png",
     "report.md",
@@ -118,6 +125,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="another tracking store whose trial runs of the same experiment join the comparison "
         "(sweeps that ran side by side, each with its own SQLite file); repeatable",
     )
+    p.add_argument(
+        "--tasks",
+        choices=TASK_SETS,
+        default=AUTO,
+        help="whose success the report shows: 'auto' (default): the validation tasks when every sweep is "
+        "a search (it chose by them: a test figure beside it would invite choosing by the test tasks), "
+        "else the test tasks",
+    )
     p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
     p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
     p.add_argument("--bootstrap-reps", type=int, default=stats.DEFAULT_REPS)
@@ -142,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         uri = resolve_tracking_uri(args.tracking_uri, experiment=args.experiment)
-        sweep = load_sweep(uri, args.experiment, args.parent_run)
+        sweep = load_sweep(uri, args.experiment, args.parent_run, tasks=args.tasks)
         for extra in args.also_from:
             add_trials_from(sweep, resolve_tracking_uri(extra, experiment=args.experiment))
     except AnalysisError as e:
@@ -164,6 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     notes: list[str] = []
     left_out: list[str] = []  # what a figure leaves out, and why
     several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
+    tasks = sweep.tasks
+    if tasks == VALIDATION:
+        print(f"tasks: {tasks} ({_VALIDATION_WHY})")
     if any(c.metrics for c in configs):
         caption = _privilege_caption(configs)
 
@@ -173,13 +191,19 @@ def main(argv: list[str] | None = None) -> int:
 
         add(
             "Success against environment steps",
-            figures.success_curves(configs, axes_shown, out / "success_vs_env_steps.png", notes=left_out),
+            figures.success_curves(
+                configs,
+                axes_shown,
+                out / "success_vs_env_steps.png",
+                title=f"{tasks.capitalize()} success against environment steps",
+                notes=left_out,
+            ),
         )
         k_label = paper_label(configs, maze="paper Fig. 2b") if sweep.axes() == ["K"] else ""
         add(
             _titled("Final success", k_label),
             figures.final_success(
-                configs, axes_shown, out / "final_success.png", paper=k_label, notes=left_out
+                configs, axes_shown, out / "final_success.png", paper=k_label, notes=left_out, tasks=tasks
             ),
         )
         if several:
@@ -193,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
                     "method",
                     out / "success_by_method.png",
                     by,
-                    title=_titled("Test success against environment steps", curves),
+                    title=_titled(f"{tasks.capitalize()} success against environment steps", curves),
                     notes=left_out,
                 ),
             )
@@ -201,7 +225,13 @@ def main(argv: list[str] | None = None) -> int:
             add(
                 _titled("Final success by method", bars),
                 figures.final_success(
-                    configs, "method", out / "final_success_by_method.png", by, paper=bars, notes=left_out
+                    configs,
+                    "method",
+                    out / "final_success_by_method.png",
+                    by,
+                    paper=bars,
+                    notes=left_out,
+                    tasks=tasks,
                 ),
             )
         by = "method" if several else axes_shown
@@ -235,13 +265,13 @@ def main(argv: list[str] | None = None) -> int:
                 f"mastered_vs_env_steps.png: no run logged {EVAL_MASTERED} (the stump-track walker's measure)."
             )
     else:
-        notes.append("No run has the agent's test success (copilot/eval/success*) yet: no success figures.")
+        notes.append(f"No run has the agent's {tasks} success yet: no success figures.")
     planner_figs, planner_table, planner_frame, planner_title = _planner_section(configs, out, left_out)
     figs += planner_figs
     tree_figs, snapshots = _tree_figures(sweep, configs, args, out, notes)
-    diag_figs = _diagnostic_figures(configs, snapshots, out, notes, left_out)
+    diag_figs = _diagnostic_figures(configs, snapshots, out, notes, left_out, tasks)
 
-    frame = tables.summary_frame(configs)
+    frame = tables.summary_frame(configs, tasks)
     tables.write_csv(frame, out / "summary.csv")
     (out / "summary.md").write_text(tables.markdown(frame))
     improvement = tables.improvement_frame(configs, reps=args.bootstrap_reps, seed=args.seed)
@@ -454,11 +484,11 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
 
 
 def _diagnostic_figures(
-    configs: list[ConfigSummary], snapshots, out: Path, notes: list[str], left_out: list[str]
+    configs: list[ConfigSummary], snapshots, out: Path, notes: list[str], left_out: list[str], tasks: str
 ):
     """The diagnostics page: why runs do or do not learn (copilot/diag/... curves, tau_hat profiles)."""
     result = []
-    path = figures.diagnostics(configs, out / "diagnostics.png", notes=left_out)
+    path = figures.diagnostics(configs, out / "diagnostics.png", notes=left_out, tasks=tasks)
     if path is None:
         notes.append("No run logged copilot/diag/... metrics: no diagnostics figure.")
     else:
@@ -541,7 +571,7 @@ def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
     return [head, ("p", why), ("table", tables.improvement_table(frame))]
 
 
-def _summary_text(configs: list[ConfigSummary]) -> str:
+def _summary_text(configs: list[ConfigSummary], tasks: str) -> str:
     windows = []
     for metric, short in tables.SHORT.items():
         m = next((c.metrics[metric] for c in configs if metric in c.metrics), None)
@@ -549,7 +579,8 @@ def _summary_text(configs: list[ConfigSummary]) -> str:
             lo, hi = m.auc_window
             windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
     return (
-        "Test tasks only. Final = each seed's last evaluation (rows that only repeat an earlier "
+        (f"Validation tasks only ({_VALIDATION_WHY}). " if tasks == VALIDATION else "Test tasks only. ")
+        + "Final = each seed's last evaluation (rows that only repeat an earlier "
         "evaluation are left out everywhere). AUC = area under each seed's success curve, linear between "
         "evaluations, over one env-step window for every configuration (from the latest first evaluation "
         "to the earliest last evaluation among the finished seeds: no success is assumed before an "
@@ -613,7 +644,7 @@ def _document(
         doc.append(("h2", "Left out of the figures"))
         doc.append(("ul", left_out))
     doc.append(("h2", "Summary"))
-    doc.append(("p", _summary_text(configs)))
+    doc.append(("p", _summary_text(configs, sweep.tasks)))
     doc.append(("table", tables.headline_table(frame)))
     details = tables.details_table(frame)
     if details.rows:

@@ -42,7 +42,8 @@ COUNTS = {
 NOT_REACHED = "not reached"
 
 
-def summary_frame(configs: list[ConfigSummary]) -> pd.DataFrame:
+def summary_frame(configs: list[ConfigSummary], tasks: str = "test") -> pd.DataFrame:
+    """One row per configuration (its figures on `tasks`' evaluations: `frame.attrs["tasks"]`)."""
     rows = []
     for c in configs:
         row: dict[str, object] = {
@@ -58,7 +59,9 @@ def summary_frame(configs: list[ConfigSummary]) -> pd.DataFrame:
             row.update(_metric_columns(c.metrics.get(metric), short))
         row["wall_time_s_mean"] = c.wall_time_s
         rows.append(row)
-    return pd.DataFrame(rows)
+    frame = pd.DataFrame(rows)
+    frame.attrs["tasks"] = tasks
+    return frame
 
 
 def _metric_columns(m: MetricSummary | None, short: str) -> dict[str, object]:
@@ -152,7 +155,10 @@ def headline_table(frame: pd.DataFrame) -> Table:
         "resets",
         "map queries",
     ]
-    table = Table(header + ([f"final test success{what}", f"test success AUC{what}"] if success else []))
+    tasks = frame.attrs.get("tasks", "test")
+    table = Table(
+        header + ([f"final {tasks} success{what}", f"{tasks} success AUC{what}"] if success else [])
+    )
     for _, r in frame.iterrows():
         cells = [str(r["configuration"]), str(r["n_seeds"]), str(r["privileges"]), _steps(r["env_steps"])]
         cells += [_steps(r[name]) for name in COUNTS.values()]

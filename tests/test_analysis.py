@@ -1063,3 +1063,53 @@ def test_figures_without_data_are_not_drawn(tmp_path):
         in report
     )
     assert "final_success.png: not drawn" in report and "return_vs_env_steps.png: no run logged" in report
+
+
+def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_test_tasks(tmp_path):
+    """A report on sweeps that searched (parent param searcher = optuna) shows the validation figures, and
+    nothing measured on the test tasks (tables, export); a grid sweep's report shows the test figures;
+    --tasks overrides either way."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import EVAL_FRESH, EVAL_SUCCESS, validation_key
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    now = int(time.time() * 1000)
+    test_values, validation_values = [0.91, 0.93, 0.97], [0.11, 0.13, 0.17]
+    for experiment, searcher in (("search", "optuna"), ("comparison", "grid")):
+        exp_id = client.create_experiment(experiment, artifact_location=(tmp_path / experiment).as_uri())
+        pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: experiment}).info.run_id
+        client.log_param(pid, "searcher", searcher)
+        for seed in ("0", "1"):
+            tags = {PARENT_TAG: pid, ROLE_TAG: ROLE_TRIAL, SWEEP_TAG: experiment, SEED_TAG: seed}
+            tags |= {CONFIG_KEY_TAG: "default", ALGORITHM_TAG: "copilot", ENV_TAG: "maze-point"}
+            rid = client.create_run(exp_id, tags=tags).info.run_id
+            ms = [Metric(EVAL_FRESH, 1.0, now, s) for s in STEPS[:3]]
+            ms += [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS, test_values, strict=False)]
+            ms += [
+                Metric(validation_key(EVAL_SUCCESS), v, now, s)
+                for s, v in zip(STEPS, validation_values, strict=False)
+            ]
+            ms += [Metric(ENV_STEPS, s, now, s) for s in STEPS[:3]]
+            client.log_batch(rid, metrics=ms)
+            client.set_terminated(rid, "FINISHED")
+
+    def report(experiment, *flags):
+        out = tmp_path / f"{experiment}{''.join(flags)}"
+        assert main([experiment, "--tracking-uri", uri, "--out", str(out), "--no-log", *flags]) == 0
+        summary = (out / "summary.md").read_text()
+        return summary, pd.read_csv(out / "metrics.csv.gz"), (out / "report.md").read_text()
+
+    summary, csv, text = report("search")
+    assert "| final validation success | validation success AUC |" in summary
+    assert "mean 0.170" in summary and "0.97" not in summary and "Validation tasks only" in text
+    assert not csv.metric.eq(EVAL_SUCCESS).any() and csv.metric.eq(validation_key(EVAL_SUCCESS)).any()
+    summary, csv, text = report("comparison")
+    assert "| final test success | test success AUC |" in summary and "mean 0.970" in summary
+    assert "Test tasks only" in text and csv.metric.eq(EVAL_SUCCESS).any()
+    summary, _, _ = report("search", "--tasks", "test")
+    assert "mean 0.970" in summary
+    summary, _, _ = report("comparison", "--tasks", "validation")
+    assert "mean 0.170" in summary and "0.97" not in summary
