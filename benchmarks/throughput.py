@@ -17,6 +17,13 @@ Prints per (algorithm, N): env steps/s per trial and in aggregate, SAC updates/s
 trials per hour at `--budget` env steps. `--write` stores the env steps/s of N = 1 and 2 in
 copilot_ray/measured_throughput.json, which `python -m copilot_ray.sweep --check` turns into wall-time
 estimates. Run it on an otherwise idle machine: another job on the cores halves every figure.
+
+    PYTHONPATH=. python benchmarks/throughput.py --from-store URI [--experiment NAME] --concurrent N
+        [--algorithms all] [--write]
+
+runs nothing: it reads the same figures from a sweep that already ran (every finished trial run of the
+experiment, per algorithm, N of them at a time), e.g. a comparison's stage 1 at its real evaluation
+cadence, and `--write` stores them as N's slot.
 """
 
 from __future__ import annotations
@@ -66,7 +73,6 @@ def _histories(client, run_id: str, names) -> dict[str, dict[int, float]]:
 def measure(algorithm: str, n: int, args, cores: int, tmp: Path) -> dict:
     from mlflow.tracking import MlflowClient
 
-    from copilot_ray import keys
     from copilot_ray.sweep import run_sweep
     from copilot_ray.sweep_spec import load_spec
 
@@ -78,75 +84,83 @@ def measure(algorithm: str, n: int, args, cores: int, tmp: Path) -> dict:
     outcome = run_sweep(load_spec(path))
     sweep_wall = time.perf_counter() - t0
     client = MlflowClient(f"sqlite:///{store}")
-    runs = [
+    rows = rates(client, _trial_runs(client))
+    if not rows:
+        raise SystemExit(
+            f"{algorithm} N={n}: no trial logged 3 iterations (status {outcome.status}); raise --env-steps"
+        )
+    row = rows[algorithm]
+    return {
+        **row,
+        "n": n,
+        "cpus_per_trial": cpus,
+        "aggregate_env_steps_per_s": row["env_steps_per_s"] * n,
+        "trials_per_hour": row["env_steps_per_s"] * n * 3600 / args.budget,
+        "sweep_wall_s": sweep_wall,
+    }
+
+
+def _trial_runs(client, experiment: str | None = None, finished_only: bool = False) -> list:
+    from copilot_ray import keys
+
+    experiments = client.search_experiments()
+    return [
         r
-        for e in client.search_experiments()
-        for r in client.search_runs([e.experiment_id])
+        for e in experiments
+        if experiment is None or e.name == experiment
+        for r in client.search_runs([e.experiment_id], max_results=5000)
         if r.data.tags.get(keys.ROLE_TAG) == keys.ROLE_TRIAL
+        and (not finished_only or r.info.status == "FINISHED")
     ]
+
+
+def rates(client, runs) -> dict[str, dict]:
+    """Per algorithm (the runs' tag): env steps/s per trial (mean over runs), SAC updates/s and the phase
+    shares, from each run's iterations after its first (Ray and the trial starting, CO-PILOT's planner
+    warm start)."""
+    from copilot_ray import keys
+
     names = (
         keys.ENV_STEPS,
         keys.TIME_TOTAL_S,
         keys.AGENT_SAC_UPDATES,
         *(keys.TIME_PREFIX + p for p in PHASES),
     )
-    steps_s, updates_s, shares = [], [], {p: [] for p in (*PHASES, "other")}
+    by_algorithm: dict[str, list[tuple[float, float, dict]]] = {}
     for run in runs:
         h = _histories(client, run.info.run_id, names)
         steps, wall = h[keys.ENV_STEPS], h[keys.TIME_TOTAL_S]
-        if len(steps) < 3:
+        if len(steps) < 3 or len(wall) != len(steps):
             continue
         d_steps = steps[-1] - steps[0]
         d_wall = wall[-1] - wall[0]
-        steps_s.append(d_steps / d_wall)
         updates = h[keys.AGENT_SAC_UPDATES][1:]
-        updates_s.append(sum(updates) / d_wall if updates else float("nan"))
         spent = {p: sum(h[keys.TIME_PREFIX + p][1:]) for p in PHASES}
+        shares = {}
         for p in PHASES:
             # agent_updates_s is inside agent_s: shown as its own share, taken out of agent_s's.
-            share = spent[p] - (spent["agent_updates_s"] if p == "agent_s" else 0.0)
-            shares[p].append(share / d_wall)
+            shares[p] = (spent[p] - (spent["agent_updates_s"] if p == "agent_s" else 0.0)) / d_wall
         outside = spent["agent_s"] + spent["planner_s"] + spent["cost_model_s"] + spent["eval_s"]
-        shares["other"].append(max(0.0, d_wall - outside) / d_wall)
-    if not steps_s:
-        raise SystemExit(
-            f"{algorithm} N={n}: no trial logged 3 iterations (status {outcome.status}); raise --env-steps"
-        )
-    per_trial = statistics.mean(steps_s)
-    return {
-        "algorithm": algorithm,
-        "n": n,
-        "cpus_per_trial": cpus,
-        "trials": len(steps_s),
-        "env_steps_per_s": per_trial,
-        "aggregate_env_steps_per_s": per_trial * len(steps_s),
-        "sac_updates_per_s": statistics.mean(updates_s),
-        "shares": {p: statistics.mean(v) for p, v in shares.items()},
-        "trials_per_hour": per_trial * len(steps_s) * 3600 / args.budget,
-        "sweep_wall_s": sweep_wall,
-    }
+        shares["other"] = max(0.0, d_wall - outside) / d_wall
+        rate = (d_steps / d_wall, sum(updates) / d_wall if updates else float("nan"), shares)
+        by_algorithm.setdefault(run.data.tags.get(keys.ALGORITHM_TAG, "?"), []).append(rate)
+    out = {}
+    for algorithm, measured in by_algorithm.items():
+        per_trial = statistics.mean(m[0] for m in measured)
+        out[algorithm] = {
+            "algorithm": algorithm,
+            "trials": len(measured),
+            "env_steps_per_s": per_trial,
+            "sac_updates_per_s": statistics.mean(m[1] for m in measured),
+            "shares": {p: statistics.mean(m[2][p] for m in measured) for p in (*PHASES, "other")},
+        }
+    return out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--algorithms", nargs="+", default=["copilot", "sac"])
-    parser.add_argument("--concurrent", nargs="+", type=int, default=[1, 2])
-    parser.add_argument("--env-steps", type=int, default=40000, help="per trial")
-    parser.add_argument("--eval-every", type=int, default=10000, help="env steps between evaluations")
-    parser.add_argument("--budget", type=int, default=200000, help="env steps per trial for trials/hour")
-    parser.add_argument("--layout", default="four-rooms")
-    parser.add_argument("--write", action="store_true", help="store N = 1 and 2 in measured_throughput.json")
-    args = parser.parse_args()
-    bad = [n for n in args.concurrent if n < 1]
-    if bad or args.env_steps < 1000 or args.budget < 1:
-        raise SystemExit(
-            f"error: --concurrent {bad or args.concurrent} / --env-steps {args.env_steps}: "
-            "N >= 1, env steps >= 1000"
-        )
+def run_and_measure(args, cores: int) -> list[dict]:
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     import ray
 
-    cores = os.cpu_count() or 1
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         ray.init(num_cpus=cores, include_dashboard=False, log_to_driver=False)
@@ -159,9 +173,90 @@ def main() -> None:
                     rows.append(measure(algorithm, n, args, cores, Path(tmp)))
         finally:
             ray.shutdown()
+    return rows
+
+
+def from_store(args, cores: int) -> list[dict]:
+    """The rates of a sweep that already ran (e.g. a comparison's parts, N = --concurrent side by side):
+    every FINISHED trial run of `--experiment` (or of every experiment) in the store, per algorithm."""
+    from mlflow.tracking import MlflowClient
+
+    from copilot_ray.store import missing_sqlite_file
+
+    if (missing := missing_sqlite_file(args.from_store)) is not None:
+        raise SystemExit(f"error: --from-store {args.from_store}: {missing} does not exist")
+    client = MlflowClient(args.from_store)
+    runs = _trial_runs(client, args.experiment, finished_only=True)
+    found = rates(client, runs)
+    if not found:
+        raise SystemExit(
+            f"error: --from-store {args.from_store}: no finished trial run"
+            + (f" of experiment {args.experiment!r}" if args.experiment else "")
+            + " logged 3 iterations"
+        )
+    (n,) = args.concurrent
+    return [
+        {
+            **row,
+            "n": n,
+            "cpus_per_trial": max(1, cores // n),
+            "aggregate_env_steps_per_s": row["env_steps_per_s"] * n,
+            "trials_per_hour": row["env_steps_per_s"] * n * 3600 / args.budget,
+        }
+        for algorithm, row in sorted(found.items())
+        if algorithm in args.algorithms or args.algorithms == ["all"]
+    ]
+
+
+def _commits(args) -> list[str]:
+    from mlflow.tracking import MlflowClient
+
+    from copilot_ray import keys
+
+    runs = _trial_runs(MlflowClient(args.from_store), args.experiment, finished_only=True)
+    return sorted({r.data.tags.get(keys.GIT_COMMIT_TAG, "?")[:7] for r in runs})
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--algorithms", nargs="+", default=["copilot", "sac"], help="('all' with --from-store)"
+    )
+    parser.add_argument("--concurrent", nargs="+", type=int, default=[1, 2])
+    parser.add_argument("--env-steps", type=int, default=40000, help="per trial")
+    parser.add_argument("--eval-every", type=int, default=10000, help="env steps between evaluations")
+    parser.add_argument("--budget", type=int, default=200000, help="env steps per trial for trials/hour")
+    parser.add_argument("--layout", default="four-rooms")
+    parser.add_argument(
+        "--from-store",
+        metavar="URI",
+        help="run nothing: read the rates of a sweep that ran (its finished trials, --concurrent N at a time)",
+    )
+    parser.add_argument("--experiment", help="with --from-store: only this MLflow experiment's runs")
+    parser.add_argument("--write", action="store_true", help="store N = 1 and 2 in measured_throughput.json")
+    args = parser.parse_args()
+    bad = [n for n in args.concurrent if n < 1]
+    if bad or args.env_steps < 1000 or args.budget < 1:
+        raise SystemExit(
+            f"error: --concurrent {bad or args.concurrent} / --env-steps {args.env_steps}: "
+            "N >= 1, env steps >= 1000"
+        )
+    if args.from_store is not None and len(args.concurrent) != 1:
+        raise SystemExit(
+            f"error: --from-store needs one --concurrent N (how many ran at a time), not {args.concurrent}"
+        )
+    if args.experiment is not None and args.from_store is None:
+        raise SystemExit("error: --experiment reads a store: give --from-store URI")
+    cores = os.cpu_count() or 1
+    if args.from_store is not None:
+        rows = from_store(args, cores)
+    else:
+        rows = run_and_measure(args, cores)
     print(f"command: PYTHONPATH=. python benchmarks/throughput.py {shlex.join(sys.argv[1:])}")
     print(
-        f"machine: {cores} cores, no GPU used; maze-point {args.layout}; trials/hour at {args.budget:,} env steps"
+        f"machine: {cores} cores, no GPU used; "
+        + (f"store {args.from_store}" if args.from_store else f"maze-point {args.layout}")
+        + f"; trials/hour at {args.budget:,} env steps"
     )
     head = ("algorithm", "N", "CPUs/trial", "env steps/s", "aggregate", "updates/s", "trials/h")
     print("  ".join(f"{h:>11}" for h in head) + "  shares: " + " ".join(f"{p}" for p in (*PHASES, "other")))
@@ -184,8 +279,9 @@ def main() -> None:
             if slot:
                 data["env_steps_per_s"].setdefault(r["algorithm"], {})[slot] = round(r["env_steps_per_s"])
         data["source"] = (
-            f"benchmarks/throughput.py {shlex.join(sys.argv[1:])} on {time.strftime('%Y-%m-%d')}; "
-            "refresh with benchmarks/throughput.py --write"
+            f"benchmarks/throughput.py {shlex.join(sys.argv[1:])} on {time.strftime('%Y-%m-%d')}"
+            + (f" (commits of its runs: {', '.join(_commits(args))})" if args.from_store else "")
+            + "; refresh with benchmarks/throughput.py --write"
         )
         data["machine"] = f"{cores}-core CPU, no GPU"
         THROUGHPUT_FILE.write_text(json.dumps(data, indent=2) + "\n")
