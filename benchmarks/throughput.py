@@ -18,7 +18,8 @@ trials per hour at `--budget` env steps. `--write` stores the env steps/s of N =
 copilot_ray/measured_throughput.json, which `python -m copilot_ray.sweep --check` turns into wall-time
 estimates. Run it on an otherwise idle machine: another job on the cores halves every figure.
 
-    PYTHONPATH=. python benchmarks/throughput.py --from-store URI [--experiment NAME] --concurrent N
+    PYTHONPATH=. python benchmarks/throughput.py --from-store URI [--experiment NAME] [--sweeps NAME ...]
+        --concurrent N
         [--algorithms all] [--write]
 
 runs nothing: it reads the same figures from a sweep that already ran (every finished trial run of the
@@ -100,7 +101,9 @@ def measure(algorithm: str, n: int, args, cores: int, tmp: Path) -> dict:
     }
 
 
-def _trial_runs(client, experiment: str | None = None, finished_only: bool = False) -> list:
+def _trial_runs(
+    client, experiment: str | None = None, finished_only: bool = False, sweeps: list[str] | None = None
+) -> list:
     from copilot_ray import keys
 
     experiments = client.search_experiments()
@@ -111,6 +114,7 @@ def _trial_runs(client, experiment: str | None = None, finished_only: bool = Fal
         for r in client.search_runs([e.experiment_id], max_results=5000)
         if r.data.tags.get(keys.ROLE_TAG) == keys.ROLE_TRIAL
         and (not finished_only or r.info.status == "FINISHED")
+        and (not sweeps or r.data.tags.get(keys.SWEEP_TAG) in sweeps)
     ]
 
 
@@ -186,12 +190,13 @@ def from_store(args, cores: int) -> list[dict]:
     if (missing := missing_sqlite_file(args.from_store)) is not None:
         raise SystemExit(f"error: --from-store {args.from_store}: {missing} does not exist")
     client = MlflowClient(args.from_store)
-    runs = _trial_runs(client, args.experiment, finished_only=True)
+    runs = _trial_runs(client, args.experiment, finished_only=True, sweeps=args.sweeps)
     found = rates(client, runs)
     if not found:
         raise SystemExit(
             f"error: --from-store {args.from_store}: no finished trial run"
             + (f" of experiment {args.experiment!r}" if args.experiment else "")
+            + (f" in sweeps {args.sweeps}" if args.sweeps else "")
             + " logged 3 iterations"
         )
     (n,) = args.concurrent
@@ -213,7 +218,7 @@ def _commits(args) -> list[str]:
 
     from copilot_ray import keys
 
-    runs = _trial_runs(MlflowClient(args.from_store), args.experiment, finished_only=True)
+    runs = _trial_runs(MlflowClient(args.from_store), args.experiment, finished_only=True, sweeps=args.sweeps)
     return sorted({r.data.tags.get(keys.GIT_COMMIT_TAG, "?")[:7] for r in runs})
 
 
@@ -233,6 +238,9 @@ def main() -> None:
         help="run nothing: read the rates of a sweep that ran (its finished trials, --concurrent N at a time)",
     )
     parser.add_argument("--experiment", help="with --from-store: only this MLflow experiment's runs")
+    parser.add_argument(
+        "--sweeps", nargs="+", help="with --from-store: only these sweeps' runs (their names)"
+    )
     parser.add_argument("--write", action="store_true", help="store N = 1 and 2 in measured_throughput.json")
     args = parser.parse_args()
     bad = [n for n in args.concurrent if n < 1]
@@ -245,8 +253,8 @@ def main() -> None:
         raise SystemExit(
             f"error: --from-store needs one --concurrent N (how many ran at a time), not {args.concurrent}"
         )
-    if args.experiment is not None and args.from_store is None:
-        raise SystemExit("error: --experiment reads a store: give --from-store URI")
+    if (args.experiment is not None or args.sweeps) and args.from_store is None:
+        raise SystemExit("error: --experiment and --sweeps read a store: give --from-store URI")
     cores = os.cpu_count() or 1
     if args.from_store is not None:
         rows = from_store(args, cores)
