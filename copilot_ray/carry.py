@@ -16,8 +16,11 @@ A comparison runs for longer than one machine may live. The archive holds what `
   ``scripts/run_at_commit.sh --carry`` checks: a store continues only at the commit that began it, and
   at the same path (Tune's state and every trial's config name absolute paths).
 
-Stop the sweep first (SIGTERM: Tune saves its state). Paths in the archive are relative to ``--root``
-(default: the current folder), the folder the sweep was started from. Bad input exits 2 and packs
+Stop the sweep first (SIGTERM: Tune saves its state). ``--root`` (default: the current folder) is the
+folder the sweep was started from, e.g. the worktree of ``scripts/run_at_commit.sh``: SPEC is read there
+(the copy that ran) and paths in the archive are relative to it, so a checkout at a later commit packs an
+older worktree's results: ``python -m copilot_ray.carry sweeps/fair_maze.yaml out.tar.gz --root
+../main-at-<sha>``. Bad input exits 2 and packs
 nothing. No Ray; MLflow is imported to read the store.
 """
 
@@ -160,7 +163,9 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m copilot_ray.carry", description=__doc__.split("\n\n")[0])
-    p.add_argument("spec", help="the sweep file whose results to pack (as it was run)")
+    p.add_argument(
+        "spec", help="the sweep file whose results to pack, relative to --root (the copy that ran)"
+    )
     p.add_argument("out", help="the archive to write (.tar.gz)")
     p.add_argument("--root", default=".", help="the folder the sweep was started from (default: here)")
     p.add_argument(
@@ -179,8 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     if not out.name.endswith((".tar.gz", ".tgz")):
         print(f"error: out {args.out!r} must name a .tar.gz file", file=sys.stderr)
         return 2
-    spec = Path(args.spec)
-    spec = spec if spec.is_absolute() else (Path.cwd() / spec).resolve()
+    spec = Path(args.spec).expanduser()
+    spec = spec if spec.is_absolute() else root / spec  # the file as it ran there, not this checkout's
     try:
         with contextlib.chdir(root):  # the spec's relative storage and store resolve where it was started
             states = pack(spec, out, root, args.final_checkpoints)

@@ -132,3 +132,17 @@ def test_bad_input_exits_2_naming_it_and_writes_nothing(tmp_path, capsys):
     assert carry.main([str(path), str(out), "--root", str(tmp_path)]) == 2
     assert f"tracking.uri {uri!r}" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_spec_is_read_where_the_sweep_ran(tmp_path, monkeypatch, capsys):
+    """SPEC relative to --root: a checkout at a later commit packs an older worktree's results with that
+    worktree's copy of the file."""
+    path, _, _ = _three_parts(tmp_path)
+    elsewhere = tmp_path / "checkout"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    out = tmp_path / "packed.tar.gz"
+    assert carry.main([path.name, str(out), "--root", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "cut: unfinished, with its Tune folder" in printed and f"packed {out}" in printed
+    assert "results/cut/tune/cut/trial_1/checkpoint_000002/state.pkl" in _names(out)
