@@ -24,7 +24,9 @@ COLUMNS = ("run", "config", "seed", "metric", "env_steps", "value")
 
 def exported(key: str, tasks: str = TEST) -> bool:
     """A report on validation tasks (a search's) exports nothing measured on the test tasks."""
-    if tasks == VALIDATION and key.startswith(EVAL_PREFIX) and key != EVAL_FRESH:
+    if tasks == VALIDATION and (
+        key.startswith(PATHS_PREFIX) or (key.startswith(EVAL_PREFIX) and key != EVAL_FRESH)
+    ):
         return False
     return key.startswith((COPILOT_PREFIX, PATHS_PREFIX)) or key == ENV_STEPS
 

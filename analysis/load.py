@@ -45,6 +45,8 @@ from copilot_ray.keys import (
     ROLE_SWEEP,
     ROLE_TAG,
     ROLE_TRIAL,
+    SEARCHER_PARAM,
+    SEARCHES,
     SEED_PARAM,
     SEED_TAG,
     SPEC_ARTIFACT,
@@ -78,11 +80,10 @@ EVALUATION_PREFIXES = (EVAL_PREFIX, VALIDATION_PREFIX)
 
 ALL_SWEEPS = "all"  # --parent-run all: the trials of every sweep run of the experiment
 # Which tasks' evaluations a report shows. "auto": the validation tasks when every sweep of the report
-# is a search (its parent run's `searcher` param is one of SEARCHES: it chose by validation figures, so
+# is a search (its parent run's SEARCHER_PARAM is one of SEARCHES: it chose by validation figures, so
 # showing it test figures would invite choosing by them), else the test tasks.
 TEST, VALIDATION, AUTO = "test", "validation", "auto"
 TASK_SETS = (AUTO, TEST, VALIDATION)
-SEARCHER_PARAM, SEARCHES = "searcher", ("optuna",)
 
 
 class AnalysisError(Exception):
@@ -454,8 +455,6 @@ def _trial(client, run, tasks: str = TEST) -> Trial:
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
             trial.curves[key] = metric_curve(client, run.info.run_id, key)
     trial.curves = fresh_only(trial.curves, trial.curves.get(EVAL_FRESH))  # loaded above: under copilot/eval/
-    if tasks == VALIDATION:
-        on_validation_tasks(trial)
     trial.wall_time_s = float(run.data.metrics.get(TIME_TOTAL_S, float("nan")))
     try:
         trial.tree_artifacts = sorted(
@@ -463,19 +462,25 @@ def _trial(client, run, tasks: str = TEST) -> Trial:
         )
     except Exception:  # an unreachable artifact store must not cost the whole report its tables
         trial.tree_artifacts = []
+    if tasks == VALIDATION:
+        on_validation_tasks(trial)
     return trial
 
 
 def on_validation_tasks(trial: Trial) -> None:
     """Puts the validation tasks' figures where the report reads the test tasks': each copilot/eval/<x>
     (curve and last value) becomes its copilot/validation/<x> twin, or goes where there is none, so that a
-    report on validation tasks holds nothing measured on the test tasks. copilot/eval/fresh (which rows
-    evaluated: both sets are evaluated together) stays."""
+    report on validation tasks holds nothing measured on the test tasks; so do the paths' figures
+    (paths/*) and the sub-goal tree snapshots, which exist for test tasks only. copilot/eval/fresh (which
+    rows evaluated: both sets are evaluated together) stays."""
     for figures in (trial.curves, trial.latest):
+        for key in [k for k in figures if k.startswith(PATHS_PREFIX)]:
+            del figures[key]
         for key in [k for k in figures if k.startswith(EVAL_PREFIX) and k != EVAL_FRESH]:
             del figures[key]
             if (twin := validation_key(key)) in figures:
                 figures[key] = figures[twin]
+    trial.tree_artifacts = []
 
 
 def metric_curve(client, run_id: str, key: str) -> tuple[np.ndarray, np.ndarray]:

@@ -155,6 +155,10 @@ SWEEP_TAG = "copilot.sweep"
 ROLE_TAG = "copilot.role"
 ROLE_SWEEP = "sweep"  # ROLE_TAG of the parent run, one per sweep
 ROLE_TRIAL = "trial"  # ROLE_TAG of a child run, one per trial
+# The parent run's param naming its searcher; searchers in SEARCHES choose configurations (by validation
+# figures), so what a search shows (its summary, its report) holds no test-task figure.
+SEARCHER_PARAM = "searcher"
+SEARCHES = ("optuna",)
 TRIAL_ID_TAG = "copilot.trial_id"
 ERROR_TAG = "copilot.error"  # a FAILED trial run: the last line of its error (exception and message)
 CONFIG_KEY_TAG = "copilot.config_key"

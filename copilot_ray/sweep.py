@@ -58,6 +58,8 @@ from copilot_ray.keys import (
     PATH_SUCCESS,
     PATHS_PREFIX,
     RESOLVED_SPEC_ARTIFACT,
+    SEARCHER_PARAM,
+    SEARCHES,
     SEED_PARAM,
     SPEC_ARTIFACT,
     SUCCESS_DIRECT,
@@ -144,7 +146,8 @@ class SweepOutcome:
 
 # The summary's columns, where any trial logged them: every agent's headline, CO-PILOT's pair (on the
 # VALIDATION tasks: what one may look at while choosing; the report shows the test tasks'), the
-# planners' (Fig. 4b/4c, test tasks: they have no validation figure).
+# planners' (Fig. 4b/4c, test tasks: they have no validation figure; left out of a search's summary,
+# which must show nothing it could choose by on the test tasks: `summary_keys`).
 SUMMARY_METRICS = {
     validation_key(EVAL_SUCCESS): "validation success",
     validation_key(EVAL_SUCCESS_AUC): "validation AUC",
@@ -202,14 +205,20 @@ def rows_from_grid(grid) -> list[TrialRow]:
     return rows
 
 
-def summary_metrics(rows: Sequence[TrialRow]) -> dict[str, float]:
+def summary_keys(searched: bool) -> list[str]:
+    """SUMMARY_METRICS' keys a sweep shows: a search (Optuna) shows no test-task figure."""
+    return [k for k in SUMMARY_METRICS if not (searched and k.startswith(PATHS_PREFIX))]
+
+
+def summary_metrics(rows: Sequence[TrialRow], searched: bool = False) -> dict[str, float]:
     """The parent run's metrics: per configuration, the mean over its seeds of each summary figure
     (`summary/<configuration>/<figure>`), and the best configuration's of each (`summary/best/...`)."""
     groups: dict[str, list[TrialRow]] = {}
     for row in rows:
         groups.setdefault(row.config_key, []).append(row)
     out: dict[str, float] = {}
-    for key, label in SUMMARY_METRICS.items():
+    for key in summary_keys(searched):
+        label = SUMMARY_METRICS[key]
         name = label.replace(" / ", "_per_").replace(" ", "_").replace("*", "")
         means = {}
         for config, group in groups.items():
@@ -238,13 +247,16 @@ def _mean_std(values: Sequence[float]) -> str:
     return f"{mean:.2f} ± {std:.2f}"
 
 
-def summary_table(rows: Sequence[TrialRow]) -> str:
-    """A markdown table per configuration: seeds, mean ± sample std over seeds of the final success."""
+def summary_table(rows: Sequence[TrialRow], searched: bool = False) -> str:
+    """A markdown table per configuration: seeds, mean ± sample std over seeds of the final success
+    (`searched`: a search's, without test-task figures)."""
     groups: dict[str, list[TrialRow]] = {}
     for row in rows:
         groups.setdefault(row.config_key, []).append(row)
     shown = [
-        key for key in SUMMARY_METRICS if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
+        key
+        for key in summary_keys(searched)
+        if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
     ] or [validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT)]
     header = ["configuration", "seeds", *(SUMMARY_METRICS[key] for key in shown)]
     header += ["env steps", "wall s/trial", "status"]
@@ -419,7 +431,7 @@ def _sweep_params(spec) -> dict[str, Any]:
     return {
         "algorithm": spec.algorithm,
         **env_params(spec, ",".join(spec.env.ids)),
-        "searcher": spec.searcher.type,
+        SEARCHER_PARAM: spec.searcher.type,
         "seeds": list(spec.seeds),
         "trials": len(spec.trial_plan()),
         "stop.env_steps": spec.stop.env_steps,
@@ -489,7 +501,8 @@ def report_sweep(
 ) -> SweepOutcome:
     """Ends the parent run with the summary table and prints it, where the results are and what next."""
     spec, uri = run.spec, run.uri
-    summary = summary_table(rows)
+    searched = spec.searcher.type in SEARCHES
+    summary = summary_table(rows, searched)
     errored = any(r.status == "error" for r in rows)
     status = "interrupted" if interrupted else ("errored" if errored else "finished")
     header = (
@@ -498,7 +511,9 @@ def report_sweep(
         "mean ± sample std over seeds.\n\n"
     )
     mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
-    tracking.end_sweep_run(uri, parent_id, mlflow_status, header + summary + "\n", summary_metrics(rows))
+    tracking.end_sweep_run(
+        uri, parent_id, mlflow_status, header + summary + "\n", summary_metrics(rows, searched)
+    )
     _say("")
     _say(summary)
     _say("")

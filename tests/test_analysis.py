@@ -1072,7 +1072,7 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
     import mlflow
     from mlflow.entities import Metric
 
-    from copilot_ray.keys import EVAL_FRESH, EVAL_SUCCESS, validation_key
+    from copilot_ray.keys import EVAL_FRESH, EVAL_SUCCESS, PATH_SUCCESS, validation_key
 
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     client = mlflow.MlflowClient(uri)
@@ -1093,6 +1093,7 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
                 for s, v in zip(STEPS, validation_values, strict=False)
             ]
             ms += [Metric(ENV_STEPS, s, now, s) for s in STEPS[:3]]
+            ms += [Metric(PATH_SUCCESS, 0.5, now, s) for s in STEPS[:3]]  # the planner's, on test tasks
             client.log_batch(rid, metrics=ms)
             client.set_terminated(rid, "FINISHED")
 
@@ -1106,9 +1107,11 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
     assert "| final validation success | validation success AUC |" in summary
     assert "mean 0.170" in summary and "0.97" not in summary and "Validation tasks only" in text
     assert not csv.metric.eq(EVAL_SUCCESS).any() and csv.metric.eq(validation_key(EVAL_SUCCESS)).any()
+    assert not csv.metric.eq(PATH_SUCCESS).any() and not (tmp_path / "search" / "planners.md").exists()
     summary, csv, text = report("comparison")
     assert "| final test success | test success AUC |" in summary and "mean 0.970" in summary
     assert "Test tasks only" in text and csv.metric.eq(EVAL_SUCCESS).any()
+    assert csv.metric.eq(PATH_SUCCESS).any() and (tmp_path / "comparison" / "planners.md").exists()
     summary, _, _ = report("search", "--tasks", "test")
     assert "mean 0.970" in summary
     summary, _, _ = report("comparison", "--tasks", "validation")

@@ -318,7 +318,7 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
 
 def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
     from copilot_ray.keys import PATH_LENGTH_VS_RRT, PATH_SUCCESS, SUCCESS_DIRECT
-    from copilot_ray.sweep import TrialRow, summary_table
+    from copilot_ray.sweep import TrialRow, summary_metrics, summary_table
 
     nan = float("nan")
 
@@ -337,6 +337,13 @@ def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
     assert "path success" in header and "length / RRT*" in header and "planned" not in header
     assert "0.80 ± 0.14" in point and "2.50 ± 0.71" in point
     assert rigid.split("|")[4].strip() == "-"  # no successful path at the end: no length ratio
+    # A search (Optuna) chooses by validation figures: its summary shows no test-task (paths) figure.
+    searched = summary_table([row("env.id=maze-point", 0, 0.7, 3.0)], searched=True)
+    assert "path success" not in searched and "length / RRT*" not in searched
+    assert not any(
+        k.startswith("summary/") and "path" in k for k in summary_metrics([row("a", 0, 0.7, 3.0)], True)
+    )
+    assert "summary/best/path_success" in summary_metrics([row("a", 0, 0.7, 3.0)])
 
 
 def test_check_prints_the_store_the_run_would_use(tmp_path, capsys):
