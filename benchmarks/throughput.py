@@ -15,7 +15,7 @@ the trial starting) is left out of the rates.
 
 Prints per (algorithm, N): env steps/s per trial and in aggregate, SAC updates/s, the phase shares and
 trials per hour at `--budget` env steps. `--write` stores the env steps/s of N = 1 and 2 in
-copilot_ray/measured_throughput.json, which `python -m copilot_ray.sweep --check` turns into wall-time
+copilot_ray/measured_throughput.json (each figure with the command that measured it), which `python -m copilot_ray.sweep --check` turns into wall-time
 estimates. Run it on an otherwise idle machine: another job on the cores halves every figure.
 
     PYTHONPATH=. python benchmarks/throughput.py --from-store URI [--experiment NAME] [--sweeps NAME ...]
@@ -282,15 +282,14 @@ def main() -> None:
         print("  ".join(f"{c!s:>11}" for c in cells) + "  " + shares)
     if args.write:
         data = json.loads(THROUGHPUT_FILE.read_text())
+        source = f"benchmarks/throughput.py {shlex.join(sys.argv[1:])} on {time.strftime('%Y-%m-%d')}"
+        if args.from_store:
+            source += f" (its runs' commits: {', '.join(_commits(args))})"
         for r in rows:
             slot = {1: "lone", 2: "side_by_side"}.get(r["n"])
             if slot:
                 data["env_steps_per_s"].setdefault(r["algorithm"], {})[slot] = round(r["env_steps_per_s"])
-        data["source"] = (
-            f"benchmarks/throughput.py {shlex.join(sys.argv[1:])} on {time.strftime('%Y-%m-%d')}"
-            + (f" (commits of its runs: {', '.join(_commits(args))})" if args.from_store else "")
-            + "; refresh with benchmarks/throughput.py --write"
-        )
+                data.setdefault("sources", {})[f"{r['algorithm']}.{slot}"] = source
         data["machine"] = f"{cores}-core CPU, no GPU"
         THROUGHPUT_FILE.write_text(json.dumps(data, indent=2) + "\n")
         print(f"wrote {THROUGHPUT_FILE.relative_to(ROOT)}")

@@ -109,8 +109,10 @@ def measured_rate(algorithm: str, concurrent: int) -> tuple[float, str] | None:
     rates = data.get("env_steps_per_s", {}).get(algorithm)
     if not rates:
         return None
-    rate = rates["lone"] if concurrent <= 1 else rates["side_by_side"]
-    return float(rate), f"{THROUGHPUT_FILE.name}: {data.get('machine', '?')}; {data.get('source', '?')}"
+    slot = "lone" if concurrent <= 1 else "side_by_side"
+    # A figure measured apart from the others names its own source (`sources`: "<algorithm>.<slot>").
+    source = data.get("sources", {}).get(f"{algorithm}.{slot}", data.get("source", "?"))
+    return float(rates[slot]), f"{THROUGHPUT_FILE.name}: {data.get('machine', '?')}; {source}"
 
 
 def wall_seconds(spec: SweepSpec) -> float | None:
