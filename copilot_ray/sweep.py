@@ -71,6 +71,7 @@ from copilot_ray.keys import (
 )
 from copilot_ray.store import tracking_uri_problem, ui_hint
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
+from copilot_ray.sweep_spec.comparison import overshoot_warnings
 from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
 from copilot_ray.trials.description import config_key, env_params, trial_flat
 
@@ -577,6 +578,8 @@ def main(argv: list[str] | None = None) -> int:
         print("\n\n".join(format_plan(spec, args.tracking_uri, cpus, where) for spec in specs))
         if len(specs) > 1:
             print(f"\n{total_wall_time_line(specs)}")
+            for line in overshoot_warnings(specs):
+                print(line)
         for why in no_gpus:
             print(f"warning: {why}")
         return 0

@@ -56,3 +56,31 @@ def test_no_measured_rate_no_estimate(rates_file):
     rates_file.write_text(json.dumps({"env_steps_per_s": {}}))
     assert estimate.wall_seconds(_spec(2, [0, 1])) is None
     assert "not estimated" in estimate.wall_time_line(_spec(2, [0, 1]))
+
+
+def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warning():
+    """Tune checks stop.env_steps when an iteration ends: a part whose iterations are large may run that
+    much further (CO-PILOT's iterations of up to 15,750 env steps against SAC's 3,200); a comparison whose
+    parts differ in it by more than 5 % of the budget is warned about at --check."""
+    from copilot_ray.sweep_spec.comparison import overshoot_warnings
+
+    def part(name, algorithm, budget):
+        return parse_spec(
+            {
+                "name": name,
+                "experiment": "cmp",
+                "env": {"id": "maze-point", "config": {"layout": "four-rooms"}},
+                "algorithm": algorithm,
+                "config": {"eval_every_env_steps": 10000},
+                "seeds": [0],
+                "stop": {"env_steps": budget},
+                "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},
+            },
+            "cmp.yaml",
+        )
+
+    sac, copilot = part("s", "sac", 50000), part("c", "copilot", 50000)
+    assert estimate.budget_overshoot(sac) == 3199 and estimate.budget_overshoot(copilot) == 15749
+    (warning,) = overshoot_warnings([sac, copilot])
+    assert "experiment 'cmp'" in warning and "s 6 %" in warning and "c 31 %" in warning
+    assert overshoot_warnings([part("s", "sac", 1_000_000), part("c", "copilot", 1_000_000)]) == []

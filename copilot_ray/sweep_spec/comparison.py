@@ -81,6 +81,33 @@ def comparison_problems(specs: Sequence[SweepSpec]) -> list[str]:
     return problems
 
 
+OVERSHOOT_GAP = 0.05  # of the budget: a larger difference in how far parts may run past it is said
+
+
+def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
+    """Warnings (not refusals: it is the iterations' size, a method's own) where the parts of a comparison
+    may run unequally far past their common env-step budget, which Tune checks when an iteration ends."""
+    from copilot_ray.sweep_spec.estimate import budget_overshoot
+
+    groups: dict[str, list[SweepSpec]] = defaultdict(list)
+    for spec in specs:
+        if _learns_from_env_steps(spec) and spec.stop.env_steps:
+            groups[spec.experiment].append(spec)
+    out = []
+    for experiment, parts in groups.items():
+        shares = {p.name: (budget_overshoot(p) or 0) / p.stop.env_steps for p in parts}
+        if len(parts) < 2 or max(shares.values()) - min(shares.values()) <= OVERSHOOT_GAP:
+            continue
+        shown = ", ".join(f"{name} {100 * share:.0f} %" for name, share in shares.items())
+        out.append(
+            f"warning: experiment {experiment!r}: its parts may run past the {parts[0].stop.env_steps:,} "
+            f"env-step budget by up to: {shown} (the budget is checked when an iteration ends), so their "
+            "env steps may differ by that much: raise the budget or shrink the large iterations "
+            "(task_batch_size, repetitions) to narrow it; the report shows each run's env steps"
+        )
+    return out
+
+
 def _differences(experiment: str, parts: list[SweepSpec]) -> list[str]:
     out = []
     first = parts[0]

@@ -100,6 +100,15 @@ def too_few_evaluations(spec: SweepSpec) -> list[str]:
     return out
 
 
+def budget_overshoot(spec: SweepSpec) -> int | None:
+    """How far past `stop.env_steps` a trial may run (env steps): Tune checks the budget when an iteration
+    ends, so a trial that crosses it by one step finishes that iteration. None without a budget."""
+    estimates = trial_estimates(spec)
+    if spec.stop.env_steps is None or not estimates:
+        return None
+    return max(e.max_iteration_env_steps for e in estimates) - 1
+
+
 def measured_rate(algorithm: str, concurrent: int) -> tuple[float, str] | None:
     """(env steps per second of one trial, where the figure comes from), or None without one."""
     try:

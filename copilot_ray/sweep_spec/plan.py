@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from copilot_ray import keys
-from copilot_ray.sweep_spec.estimate import cpu_warning, trial_estimates, wall_time_line
+from copilot_ray.sweep_spec.estimate import budget_overshoot, cpu_warning, trial_estimates, wall_time_line
 
 if TYPE_CHECKING:  # annotations only: models imports this module
     from copilot_ray.sweep_spec.models import ParamSearch, SweepSpec
@@ -106,6 +106,11 @@ def format_plan(
     for est in trial_estimates(spec):
         evals = "" if est.min_evaluations is None else f"; evaluations per trial >= {est.min_evaluations}"
         lines.append(f"  {est.label}: env steps per iteration <= {est.max_iteration_env_steps:,}{evals}")
+    if (over := budget_overshoot(spec)) is not None:
+        lines.append(
+            f"  the budget is checked when an iteration ends: a trial may run up to {over:,} env steps "
+            f"({100 * over / spec.stop.env_steps:.0f} %) past stop.env_steps"
+        )
     lines.append(wall_time_line(spec))
     if warning := cpu_warning(spec, cpus_available, where):
         lines.append(warning)
