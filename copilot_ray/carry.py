@@ -30,7 +30,6 @@ import argparse
 import contextlib
 import json
 import sqlite3
-import subprocess
 import sys
 import tarfile
 import tempfile
@@ -96,16 +95,6 @@ def part_states(specs) -> list[PartState]:
     return states
 
 
-def _commit(root: Path) -> str:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
-        )
-    except (OSError, subprocess.SubprocessError):
-        return ""
-    return out.stdout.strip() if out.returncode == 0 else ""
-
-
 def _snapshot(db: Path, into: Path) -> Path:
     """A consistent copy of a SQLite file, even while a sweep writes to it."""
     copy = into / db.name
@@ -123,17 +112,14 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
     specs = load_specs(spec_path)  # relative storage and store paths resolve against the current folder
     db = _store_file(specs, root)
     states = part_states(specs)
-    unfinished_tune = {sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if not st.finished}
+    # The Tune folders of finished parts stay behind (--resume skips those parts by the store).
+    finished_tune = {sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if st.finished}
 
     def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
         path = root / info.name
         if path.name.startswith(db.name):  # the store (and its -wal, -shm): its snapshot goes in instead
             return None
-        if (
-            path.name == "tune"
-            and path.parent in {sweep_root(s) for s in specs}
-            and path not in unfinished_tune
-        ):
+        if path in finished_tune:
             return None
         if not final_checkpoints and path.parts[-2:] == FINAL_CHECKPOINT:
             return None
@@ -143,7 +129,7 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
     log = storage / f"{Path(spec_path).stem}.log"
     manifest = {
         "root": str(root),
-        "commit": _commit(root),
+        "commit": tracking.git_commit(root),
         "spec": str(spec_path),
         "parts": {s.name: s.label for s in states},
     }

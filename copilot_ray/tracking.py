@@ -80,9 +80,10 @@ def metrics_from_result(result: Mapping[str, Any], rllib_timers: bool = False) -
     return out
 
 
-def git_commit() -> str:
+def git_commit(checkout: str | Path | None = None) -> str:
+    """HEAD of `checkout` (default: the one this package runs from), or "" outside git."""
     try:
-        root = Path(__file__).resolve().parent.parent
+        root = Path(__file__).resolve().parent.parent if checkout is None else Path(checkout)
         return subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
         ).stdout.strip()
