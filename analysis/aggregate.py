@@ -67,12 +67,12 @@ class CurveSummary:
 @dataclass
 class MetricSummary:
     n_seeds: int  # seeds with at least one evaluation of this metric
-    finals: np.ndarray  # each seed's last evaluation
+    finals: np.ndarray  # each seed's success at the budget, or its last evaluation (`final_values`)
     final: stats.SeedSummary
     aucs: np.ndarray  # each seed's normalised area under the curve over `auc_window` (NaN: not covered)
     auc: stats.SeedSummary
     auc_window: tuple[float, float]  # env steps, the same for every configuration
-    final_step: float  # mean over seeds of the step of each seed's last evaluation
+    final_step: float  # mean over seeds of the env step each final is read at (the budget if reached)
     # threshold -> (IQM, or mean with fewer than 5 seeds, of steps to reach it, inf = not reached;
     # seeds that reached it)
     to_threshold: dict[float, tuple[float, int]]
@@ -201,8 +201,10 @@ def summarise(
     # The AUC window is set by the finished seeds (they ran to the budget): a running one must not cut
     # everyone's window short; it gets an AUC once it covers the window.
     finished = [t for t in included if t.status == "FINISHED"] or included
+    budget = common_budget(included)
     windows = {
-        m: stats.auc_window([t.curves[m][0] for t in finished if m in t.curves]) for m in CURVE_METRICS
+        m: _capped(stats.auc_window([t.curves[m][0] for t in finished if m in t.curves]), budget)
+        for m in CURVE_METRICS
     }
     all_seeds = sorted({t.seed for t in sweep.trials}, key=natural_key)
 
@@ -216,7 +218,9 @@ def summarise(
             missing.short_configs.append((label, lacking))
         metrics = {}
         for m in CURVE_METRICS:
-            ms = _metric_summary([t for t in use if m in t.curves], m, grids[m], windows[m], reps, seed)
+            ms = _metric_summary(
+                [t for t in use if m in t.curves], m, grids[m], windows[m], budget, reps, seed
+            )
             if ms is not None:
                 metrics[m] = ms
                 if ms.curve is not None and ms.curve.single_point:
@@ -304,11 +308,10 @@ def improvement_pairs(configs: list[ConfigSummary], metric: str) -> list[tuple[C
     return [(c, best) for c in configs if c.is_copilot_default and metric in c.metrics]
 
 
-def _metric_summary(trials, metric: str, grid: np.ndarray, window, reps: int, seed: int):
+def _metric_summary(trials, metric: str, grid: np.ndarray, window, budget: float, reps: int, seed: int):
     if not trials:
         return None
-    finals = np.array([t.curves[metric][1][-1] for t in trials])
-    final_steps = np.array([t.curves[metric][0][-1] for t in trials])
+    finals, final_steps = final_values(trials, metric, budget)
     aucs = np.array([stats.normalised_auc(*t.curves[metric], *window) for t in trials])
     to_thr = {}
     for thr in THRESHOLDS:
@@ -325,6 +328,43 @@ def _metric_summary(trials, metric: str, grid: np.ndarray, window, reps: int, se
         to_threshold=to_thr,
         curve=_curve(trials, metric, grid, reps, seed),
     )
+
+
+def common_budget(trials: list[Trial]) -> float:
+    """The env-step budget every trial's sweep had (the smallest, should they differ); NaN when a
+    trial's sweep had none (stopped by iterations, or runs older than the param)."""
+    budgets = [t.budget for t in trials]
+    return float(min(budgets)) if budgets and all(np.isfinite(budgets)) else float("nan")
+
+
+def _capped(window: tuple[float, float], budget: float) -> tuple[float, float]:
+    """The AUC window ending at the budget at the latest: experience past it is not scored."""
+    start, end = window
+    if np.isfinite(budget) and np.isfinite(end) and end > budget:
+        end = budget
+    return (start, end) if np.isfinite(end) and end > start else (np.nan, np.nan)
+
+
+def final_values(trials: list[Trial], metric: str, budget: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each seed's final success and the env step it is read at: its curve at the env-step budget,
+    linear between the evaluations on either side; a seed whose evaluations do not reach the budget
+    (still running), or a sweep without one: its last evaluation.
+
+    Why not simply the last evaluation: a trial stops at the end of the first iteration past the
+    budget, so a method with long iterations (CO-PILOT's are ~16k env steps) would be scored after up
+    to an iteration more experience than one with short iterations.
+    """
+    finals, steps = [], []
+    for t in trials:
+        s, v = t.curves[metric]
+        at = stats.interpolate(s, v, np.array([budget]))[0] if np.isfinite(budget) else np.nan
+        if np.isfinite(at):
+            finals.append(float(at))
+            steps.append(float(budget))
+        else:
+            finals.append(float(v[-1]))
+            steps.append(float(s[-1]))
+    return np.array(finals), np.array(steps)
 
 
 def _curve(trials: list[Trial], metric: str, grid: np.ndarray, reps: int, seed: int) -> CurveSummary:

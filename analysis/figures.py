@@ -288,7 +288,7 @@ def final_success(
             points = [f.point for f in finals]
             ax.errorbar(x[with_ci] + offset, points, yerr=err, fmt="none", ecolor="black", capsize=4)
         for j in have:
-            seeds = [t.curves[metric][1][-1] for t in shown[j].trials if metric in t.curves]
+            seeds = shown[j].metrics[metric].finals
             # dots beside the error bar, not on it, so both stay readable
             ax.scatter(np.full(len(seeds), x[j] + offset + bar * 0.3), seeds, s=10, color="black", zorder=3)
     ax.set_xticks(
@@ -296,7 +296,7 @@ def final_success(
     )
     ax.set_xlim(-0.6, len(shown) - 0.4)
     ax.set_ylim(0, 1.05)
-    ax.set_ylabel("final success rate (last evaluation)")
+    ax.set_ylabel("final success rate (at the common end step)")
     ax.set_xlabel(axis_name)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)

@@ -29,6 +29,7 @@ from copilot_ray.keys import (
     AGENT_SUBTASK_SUCCESS_LAYER,
     ALGORITHM_TAG,
     AXIS_TAGS,
+    BUDGET_PARAM,
     CONFIG_KEY_TAG,
     CURVE_METRICS,
     DIAG_PREFIX,
@@ -108,6 +109,7 @@ class Trial:
     latest: dict[str, float] = field(default_factory=dict)  # every metric's last logged value
     # MLflow params: env.id, env.config.*, the settings' effective values, seed
     params: dict[str, str] = field(default_factory=dict)
+    budget: float = float("nan")  # its sweep's env-step budget (parent param stop.env_steps); NaN: none
 
     @property
     def env_id(self) -> str:
@@ -362,7 +364,7 @@ def load_sweep(
         if not children:
             raise AnalysisError(f"experiment {experiment!r} has no child (trial) runs at {tracking_uri}")
         tasks = _resolve_tasks(tasks, parents)
-        trials = [_trial(client, r, tasks) for r in children]
+        trials = [_trial(client, r, tasks, _budgets(parents)) for r in children]
         trials.sort(key=_trial_order)
         names = sorted({p.data.tags.get(SWEEP_TAG, p.info.run_id) for p in parents})
         return Sweep(
@@ -395,7 +397,7 @@ def load_sweep(
         raise AnalysisError(f"{where} has no child (trial) runs at {tracking_uri}")
 
     tasks = _resolve_tasks(tasks, [parent] if parent is not None else [])
-    trials = [_trial(client, r, tasks) for r in children]
+    trials = [_trial(client, r, tasks, _budgets([parent] if parent is not None else [])) for r in children]
     trials.sort(key=lambda t: (t.config_key, natural_key(t.seed), t.run_id))
     sweep_name = (parent.data.tags.get(SWEEP_TAG) if parent else None) or (
         children[0].data.tags.get(SWEEP_TAG, experiment)
@@ -422,6 +424,17 @@ def _resolve_tasks(tasks: str, parents: list) -> str:
     return VALIDATION if searches else TEST
 
 
+def _budgets(parents: list) -> dict[str, float]:
+    """Sweep (parent) run id -> its env-step budget; sweeps stopped by iterations alone have none."""
+    out = {}
+    for p in parents:
+        try:
+            out[p.info.run_id] = float(p.data.params.get(BUDGET_PARAM, "nan"))
+        except ValueError:  # "None": stopped by iterations
+            pass
+    return out
+
+
 def _parent_entry(tracking_uri: str, run) -> tuple[str, str, str]:
     return tracking_uri, run.info.run_id, run.data.tags.get(SWEEP_TAG, run.info.run_id)
 
@@ -436,7 +449,7 @@ def spec_artifacts(tracking_uri: str, run_id: str) -> list[str]:
     return [n for n in (RESOLVED_SPEC_ARTIFACT, SPEC_ARTIFACT) if n in names]
 
 
-def _trial(client, run, tasks: str = TEST) -> Trial:
+def _trial(client, run, tasks: str = TEST, budgets: dict[str, float] | None = None) -> Trial:
     tags = dict(run.data.tags)
     trial = Trial(
         run_id=run.info.run_id,
@@ -448,6 +461,7 @@ def _trial(client, run, tasks: str = TEST) -> Trial:
         tracking_uri=str(client.tracking_uri),
         latest=dict(run.data.metrics),
         params=dict(run.data.params),
+        budget=(budgets or {}).get(tags.get(PARENT_TAG, ""), float("nan")),
     )
     prefixes = (*DIAGNOSTIC_PREFIXES, PATHS_PREFIX, *((VALIDATION_PREFIX,) if tasks == VALIDATION else ()))
     wanted = set(CURVE_METRICS) | {k for k in run.data.metrics if k.startswith(prefixes)}

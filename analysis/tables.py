@@ -7,7 +7,8 @@ Two tables, so that each fits a page: the headline (`headline_table`: configurat
 steps and privilege counts, final test success and its area under the curve, the success every method
 reports) and the details (`details_table`: one row per configuration and success metric, the planned /
 direct pair where an algorithm has it, steps to thresholds, wall time). Headline figures are final success
-(each seed's last evaluation) and the normalised area under the success curve; never the best evaluation.
+(each seed's success at one common env step, about the budget) and the normalised area under the success
+curve; never the best evaluation.
 """
 
 from __future__ import annotations
@@ -170,8 +171,8 @@ def headline_table(frame: pd.DataFrame) -> Table:
 
 def details_table(frame: pd.DataFrame) -> Table:
     """One row per configuration and success metric it has (success; planned and direct where it has
-    them): final, AUC, env steps to each threshold (seeds that reached it), the step of the last
-    evaluation, wall time. A metric that equals another in every figure is one row ("success = planned")."""
+    them): final, AUC, env steps to each threshold (seeds that reached it), the env step the final is
+    read at, wall time. A metric that equals another in every figure is one row ("success = planned")."""
     table = Table(
         [
             "configuration",
@@ -179,7 +180,7 @@ def details_table(frame: pd.DataFrame) -> Table:
             "final",
             "AUC",
             *(f"env steps to {thr:g} (seeds)" for thr in THRESHOLDS),
-            "last evaluation (env steps)",
+            "final at (env steps)",
             "wall time (mean)",
         ]
     )

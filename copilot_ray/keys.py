@@ -159,6 +159,8 @@ ROLE_TRIAL = "trial"  # ROLE_TAG of a child run, one per trial
 # figures), so what a search shows (its summary, its report) holds no test-task figure.
 SEARCHER_PARAM = "searcher"
 SEARCHES = ("optuna",)
+# The parent run's param holding the sweep's env-step budget (the report reads final success there).
+BUDGET_PARAM = "stop.env_steps"
 TRIAL_ID_TAG = "copilot.trial_id"
 ERROR_TAG = "copilot.error"  # a FAILED trial run: the last line of its error (exception and message)
 CONFIG_KEY_TAG = "copilot.config_key"

@@ -156,7 +156,7 @@ def tuning_table(trials: list[TunedTrial], metric: str, winner: Winner | None) -
     """A markdown table of one stage-1 sweep, in trial order, the winner marked."""
     chosen = set(winner.run_ids) if winner else set()
     lines = [
-        f"| trial | status | searched values | {metric} | final validation success | env steps "
+        f"| trial | status | searched values | {metric} | last validation success | env steps "
         "| collision checks | resets |",
         "|---|---|---|---|---|---|---|---|",
     ]

@@ -49,6 +49,7 @@ import yaml
 from copilot_ray import tracking
 from copilot_ray.keys import (
     ALGORITHM_TAG,
+    BUDGET_PARAM,
     ENV_STEPS,
     ENV_TAG,
     EVAL_FRESH,
@@ -435,7 +436,7 @@ def _sweep_params(spec) -> dict[str, Any]:
         SEARCHER_PARAM: spec.searcher.type,
         "seeds": list(spec.seeds),
         "trials": len(spec.trial_plan()),
-        "stop.env_steps": spec.stop.env_steps,
+        BUDGET_PARAM: spec.stop.env_steps,
         "stop.iterations": spec.stop.iterations,
         "searched": ",".join(spec.searched_keys) or "-",
         **(

@@ -775,6 +775,50 @@ def test_headline_table_final_auc_and_ci_only_from_five_seeds(honest):
     assert "mean 0.125, range over 2 seeds: [0.100, 0.150]" in md
 
 
+def test_final_success_is_read_at_the_budget(tmp_path):
+    """Two sweeps with a 3,000-env-step budget: CO-PILOT's long iterations end at 2,000 and 4,000 (its
+    last evaluation 1,000 steps past the budget), HER's at 1,000, 2,000, 3,000 and 3,100. Final is each
+    seed's success at 3,000 (CO-PILOT's read halfway between 0.2 and 0.8), the AUC ends there, and a
+    sweep without a budget keeps the last evaluation."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from analysis.aggregate import summarise
+    from analysis.load import load_sweep
+    from copilot_ray.keys import BUDGET_PARAM, EVAL_SUCCESS
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("budget", artifact_location=(tmp_path / "art").as_uri())
+    now = int(time.time() * 1000)
+    curves = {"copilot": ([2000, 4000], [0.2, 0.8]), "her": ([1000, 2000, 3000, 3100], [0.1, 0.3, 0.5, 0.9])}
+    for algorithm, (steps, values) in curves.items():
+        pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: algorithm}).info.run_id
+        client.log_param(pid, BUDGET_PARAM, 3000)
+        tags = {PARENT_TAG: pid, ROLE_TAG: ROLE_TRIAL, SWEEP_TAG: algorithm, ALGORITHM_TAG: algorithm}
+        rid = client.create_run(exp_id, tags={**tags, CONFIG_KEY_TAG: "default", SEED_TAG: "0"}).info.run_id
+        client.log_batch(
+            rid, metrics=[Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(steps, values, strict=True)]
+        )
+        client.set_terminated(rid, "FINISHED")
+    configs, _ = summarise(load_sweep(uri, "budget", parent_run_id="all"), reps=50)
+    got = {c.algorithm: c.metrics[EVAL_SUCCESS] for c in configs}
+    assert got["copilot"].finals.tolist() == pytest.approx([0.5])  # not its 0.8 after 4,000 env steps
+    assert got["her"].finals.tolist() == pytest.approx([0.5])  # not its 0.9 after 3,100
+    assert got["copilot"].final_step == got["her"].final_step == 3000
+    assert got["her"].auc_window == (2000, 3000)  # from the latest first evaluation to the budget
+    assert got["her"].aucs.tolist() == pytest.approx([0.4])
+
+    # without a budget (stopped by iterations, or older stores): the last evaluation
+    sweep = load_sweep(uri, "budget", parent_run_id="all")
+    for t in sweep.trials:
+        t.budget = float("nan")
+    configs, _ = summarise(sweep, reps=50)
+    got = {c.algorithm: c.metrics[EVAL_SUCCESS] for c in configs}
+    assert got["copilot"].finals.tolist() == [0.8] and got["copilot"].final_step == 4000
+    assert got["her"].auc_window == (2000, 3100)
+
+
 def test_curves_have_a_band_only_from_five_seeds(honest):
     from analysis.aggregate import summarise
     from analysis.load import load_sweep
