@@ -101,9 +101,11 @@ def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
         shown = ", ".join(f"{name} {100 * share:.0f} %" for name, share in shares.items())
         out.append(
             f"warning: experiment {experiment!r}: its parts may run past the {parts[0].stop.env_steps:,} "
-            f"env-step budget by up to: {shown} (the budget is checked when an iteration ends), so their "
-            "env steps may differ by that much: raise the budget or shrink the large iterations "
-            "(task_batch_size, repetitions) to narrow it; the report shows each run's env steps"
+            f"env-step budget by up to: {shown} (the budget is checked when an iteration ends), and the "
+            "large iterations space their evaluations that far apart: the report reads final success and "
+            "the AUC at the budget (between the evaluations on either side), so the extra env steps do not "
+            "reach them, but the coarser curve stays; raise the budget or shrink the large iterations "
+            "(task_batch_size, repetitions) to narrow it"
         )
     return out
 
