@@ -12,6 +12,9 @@ starts) and provide:
     combination_problems(values)          optional: [(keys, value, why)] for values that clash together
     max_iteration_env_steps(values)       optional: the most env steps one iteration can take (--check's
                                           evaluations per trial); none for an algorithm without env steps
+    max_env_steps_past_budget(values)     optional: the most env steps a run can take past its env-step
+                                          budget (RunContext.env_step_budget), for an algorithm that ends
+                                          its last iteration early there; default: one iteration's less 1
     SEARCH_SPACE: dict[str, dict]         optional: what a comparison tunes (`search: declared` in a spec),
                                           in the spec's domain syntax, every default inside its range
     PRIVILEGES: tuple[str, ...]           optional: what the method always uses that agents learning from
@@ -97,8 +100,8 @@ class UnknownAlgorithmError(ValueError):
 
 @dataclass(frozen=True)
 class RunContext:
-    """What a run adds to an algorithm's settings: the env, the seed, the CPUs of its process and the
-    GPUs of its learner (0: the CPU, as on a machine without one)."""
+    """What a run adds to an algorithm's settings: the env, the seed, the CPUs of its process, the
+    GPUs of its learner (0: the CPU, as on a machine without one) and its env-step budget."""
 
     env_id: str
     env_config: Mapping[str, Any] = field(default_factory=dict)
@@ -106,6 +109,10 @@ class RunContext:
     num_env_runners: int = 0
     num_cpus_for_main_process: int = 1
     num_gpus: float = 0.0
+    # The run's env-step budget (a sweep's stop.env_steps, train's --stop-env-steps), or None. An
+    # algorithm whose iterations hold several traversals ends its last one at the traversal that
+    # reaches it, so that methods with long iterations do not run far past a shared budget.
+    env_step_budget: int | None = None
 
 
 @dataclass(frozen=True)
@@ -121,6 +128,7 @@ class AlgorithmEntry:
     always_privileges: tuple[str, ...] = ()
     search_space: Mapping[str, Any] = field(default_factory=dict)  # raw domains (spec syntax)
     max_iteration_env_steps: Callable[[Mapping[str, Any]], int] | None = None
+    max_env_steps_past_budget: Callable[[Mapping[str, Any]], int] | None = None
     # What its runs are labelled by in progress lines, MLflow tags and the report: label -> setting key
     # (K: tree_depth, b: repetitions, alpha_schedule); the settings module's LABELS.
     labels: Mapping[str, str] = field(default_factory=dict)
@@ -191,6 +199,7 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         always_privileges=tuple(getattr(module, "PRIVILEGES", ())),
         search_space=dict(getattr(module, "SEARCH_SPACE", {})),
         max_iteration_env_steps=getattr(module, "max_iteration_env_steps", None),
+        max_env_steps_past_budget=getattr(module, "max_env_steps_past_budget", None),
         labels=dict(getattr(module, "LABELS", {})),
         gpu_learner=bool(getattr(module, "GPU_LEARNER", False)),
     )

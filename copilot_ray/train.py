@@ -188,6 +188,7 @@ def build_config(args: argparse.Namespace):
         # Sampling (without runners) and the learner share this process: give it the cores the
         # runners leave free; CoPilotConfig sizes torch's thread pool from this.
         num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners),
+        env_step_budget=args.stop_env_steps,
     )
     config = entry.build_config(values, run)
     config.copy(copy_frozen=False).validate()

@@ -164,6 +164,41 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
         algo.stop()
 
 
+def test_the_last_iteration_ends_at_the_repetition_that_reaches_the_budget(ray_session):
+    """With an env-step budget the iteration that reaches it stops after that repetition (here the
+    first of b = 2): a method with long iterations does not run far past a shared budget. The budget
+    comes from the run (a sweep's stop.env_steps, train's --stop-env-steps)."""
+    from copilot_ray.registry import RunContext
+    from copilot_ray.sweep_spec.models import build_algorithm_config, parse_spec
+
+    assert CoPilotConfig.from_settings({}, RunContext("maze-point", env_step_budget=7)).env_step_budget == 7
+    spec = parse_spec(
+        {
+            "name": "budget",
+            "env": {"id": "maze-point"},
+            "algorithm": "copilot",
+            "seeds": [0],
+            "stop": {"env_steps": 1234, "min_evaluations": 1},
+            "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},
+        },
+        "budget.yaml",
+    )
+    assert build_algorithm_config({}, spec).env_step_budget == 1234
+
+    steps, phases = {}, {}
+    for budget in (None, 1):
+        config = tiny_config(num_env_runners=0)
+        config.env_step_budget = budget
+        algo = config.build_algo()
+        try:
+            algo.train()
+            steps[budget], phases[budget] = algo._env_steps(), algo._planner_phases
+        finally:
+            algo.stop()
+    assert phases == {None: 3 + 2, 1: 3 + 1}  # warm start, then one planner phase per repetition
+    assert 1 <= steps[1] < steps[None]  # the same seed: the first repetition alone
+
+
 def test_non_finite_planner_weights_stop_the_run_naming_them(ray_session, monkeypatch):
     from copilot_ray.algorithms.copilot.health import FAULT_ENV, NonFiniteStateError
 

@@ -58,20 +58,22 @@ def test_no_measured_rate_no_estimate(rates_file):
     assert "not estimated" in estimate.wall_time_line(_spec(2, [0, 1]))
 
 
-def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warning():
-    """Tune checks stop.env_steps when an iteration ends: a part whose iterations are large may run that
-    much further (CO-PILOT's iterations of up to 15,750 env steps against SAC's 3,200); a comparison whose
-    parts differ in it by more than 5 % of the budget is warned about at --check."""
+def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warnings():
+    """Tune checks stop.env_steps when an iteration ends; CO-PILOT also stops between the repetitions of
+    its last iteration, so it may run one repetition past (3,150 env steps of its 15,750) like SAC one
+    iteration (3,200). A comparison whose parts differ in it by more than 5 % of the budget is warned
+    about at --check, and so is one whose parts are evaluated at unequal spacing (CO-PILOT evaluates at
+    the end of its iterations, 15,750 env steps apart, SAC every 10,000)."""
     from copilot_ray.sweep_spec.comparison import overshoot_warnings
 
-    def part(name, algorithm, budget):
+    def part(name, algorithm, budget, **config):
         return parse_spec(
             {
                 "name": name,
                 "experiment": "cmp",
                 "env": {"id": "maze-point", "config": {"layout": "four-rooms"}},
                 "algorithm": algorithm,
-                "config": {"eval_every_env_steps": 10000},
+                "config": {"eval_every_env_steps": 10000, **config},
                 "seeds": [0],
                 "stop": {"env_steps": budget},
                 "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},
@@ -80,7 +82,15 @@ def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warning():
         )
 
     sac, copilot = part("s", "sac", 50000), part("c", "copilot", 50000)
-    assert estimate.budget_overshoot(sac) == 3199 and estimate.budget_overshoot(copilot) == 15749
-    (warning,) = overshoot_warnings([sac, copilot])
-    assert "experiment 'cmp'" in warning and "s 6 %" in warning and "c 31 %" in warning
-    assert overshoot_warnings([part("s", "sac", 1_000_000), part("c", "copilot", 1_000_000)]) == []
+    assert estimate.budget_overshoot(sac) == 3199 and estimate.budget_overshoot(copilot) == 3149
+    (spacing,) = overshoot_warnings([sac, copilot])  # the same overshoot, unequal evaluation spacing
+    assert "evaluations may be up to" in spacing and "s 10,000" in spacing and "c 15,750" in spacing
+    # one repetition of 10 tasks: 15,750 env steps between budget checks
+    wide = part("c", "copilot", 50000, repetitions=1, task_batch_size=10)
+    assert estimate.budget_overshoot(wide) == 15749
+    overshoot, spacing = overshoot_warnings([sac, wide])
+    assert "experiment 'cmp'" in overshoot and "s 6 %" in overshoot and "c 31 %" in overshoot
+    assert "c 15,750" in spacing
+    (only,) = overshoot_warnings([part("s", "sac", 1_000_000), part("c", "copilot", 1_000_000)])
+    assert "evaluations may be up to" in only  # a large budget hides the overshoot, not the spacing
+    assert overshoot_warnings([sac, part("h", "her", 50000)]) == []

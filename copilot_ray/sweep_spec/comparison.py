@@ -86,8 +86,10 @@ OVERSHOOT_GAP = 0.05  # of the budget: a larger difference in how far parts may 
 
 def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
     """Warnings (not refusals: it is the iterations' size, a method's own) where the parts of a comparison
-    may run unequally far past their common env-step budget, which Tune checks when an iteration ends."""
-    from copilot_ray.sweep_spec.estimate import budget_overshoot
+    may run unequally far past their common env-step budget, or be evaluated unequally often: an
+    algorithm evaluates when an iteration ends, so iterations longer than ``eval_every_env_steps`` space
+    its evaluations further apart."""
+    from copilot_ray.sweep_spec.estimate import budget_overshoot, trial_estimates
 
     groups: dict[str, list[SweepSpec]] = defaultdict(list)
     for spec in specs:
@@ -95,18 +97,33 @@ def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
             groups[spec.experiment].append(spec)
     out = []
     for experiment, parts in groups.items():
-        shares = {p.name: (budget_overshoot(p) or 0) / p.stop.env_steps for p in parts}
-        if len(parts) < 2 or max(shares.values()) - min(shares.values()) <= OVERSHOOT_GAP:
+        if len(parts) < 2:
             continue
-        shown = ", ".join(f"{name} {100 * share:.0f} %" for name, share in shares.items())
-        out.append(
-            f"warning: experiment {experiment!r}: its parts may run past the {parts[0].stop.env_steps:,} "
-            f"env-step budget by up to: {shown} (the budget is checked when an iteration ends), and the "
-            "large iterations space their evaluations that far apart: the report reads final success and "
-            "the AUC at the budget (between the evaluations on either side), so the extra env steps do not "
-            "reach them, but the coarser curve stays; raise the budget or shrink the large iterations "
-            "(task_batch_size, repetitions) to narrow it"
-        )
+        budget = parts[0].stop.env_steps
+        shares = {p.name: (budget_overshoot(p) or 0) / p.stop.env_steps for p in parts}
+        if max(shares.values()) - min(shares.values()) > OVERSHOOT_GAP:
+            shown = ", ".join(f"{name} {100 * share:.0f} %" for name, share in shares.items())
+            out.append(
+                f"warning: experiment {experiment!r}: its parts may run past the {budget:,} env-step budget "
+                f"by up to: {shown} (the budget is checked when an iteration ends, or a repetition where "
+                "an algorithm stops there), so their env steps may differ by that much; the report reads "
+                "final success and the AUC at the budget, so the extra env steps do not reach them: raise "
+                "the budget or shrink the large iterations (task_batch_size, repetitions) to narrow it"
+            )
+        spacing = {
+            p.name: max(
+                [int(_effective(p, CADENCE) or 0)] + [e.max_iteration_env_steps for e in trial_estimates(p)]
+            )
+            for p in parts
+        }
+        if max(spacing.values()) > min(spacing.values()) * (1 + OVERSHOOT_GAP):
+            shown = ", ".join(f"{name} {steps:,}" for name, steps in spacing.items())
+            out.append(
+                f"warning: experiment {experiment!r}: its parts' evaluations may be up to this many env "
+                f"steps apart: {shown} (one at the end of the first iteration past each multiple of "
+                f"{CADENCE}, and some iterations are longer than that), so some curves have fewer points; "
+                "shrink the large iterations (task_batch_size, repetitions) to even them out"
+            )
     return out
 
 

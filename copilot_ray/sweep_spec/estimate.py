@@ -102,10 +102,14 @@ def too_few_evaluations(spec: SweepSpec) -> list[str]:
 
 def budget_overshoot(spec: SweepSpec) -> int | None:
     """How far past `stop.env_steps` a trial may run (env steps): Tune checks the budget when an iteration
-    ends, so a trial that crosses it by one step finishes that iteration. None without a budget."""
+    ends, so a trial that crosses it by one step finishes that iteration, or, for an algorithm that stops
+    there itself (`max_env_steps_past_budget`), that repetition. None without a budget."""
     estimates = trial_estimates(spec)
     if spec.stop.env_steps is None or not estimates:
         return None
+    past = get_algorithm(spec.algorithm).max_env_steps_past_budget
+    if past is not None:  # it ends its last iteration early, at the budget
+        return max(int(past(spec.merged(point))) for point in _points(spec))
     return max(e.max_iteration_env_steps for e in estimates) - 1
 
 

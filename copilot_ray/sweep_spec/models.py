@@ -925,6 +925,7 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
         num_env_runners=spec.resources.num_env_runners,
         num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners,
         num_gpus=spec.resources.gpus_per_trial,
+        env_step_budget=spec.stop.env_steps,
     )
     return entry.build_config(spec.merged(flat), run)
 

@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from copilot_ray import keys
+from copilot_ray.registry import get_algorithm
 from copilot_ray.sweep_spec.estimate import budget_overshoot, cpu_warning, trial_estimates, wall_time_line
 
 if TYPE_CHECKING:  # annotations only: models imports this module
@@ -108,8 +109,12 @@ def format_plan(
         lines.append(f"  {est.label}: env steps per iteration <= {est.max_iteration_env_steps:,}{evals}")
     if (over := budget_overshoot(spec)) is not None:
         lines.append(
-            f"  the budget is checked when an iteration ends: a trial may run up to {over:,} env steps "
-            f"({100 * over / spec.stop.env_steps:.0f} %) past stop.env_steps"
+            f"  a trial may run up to {over:,} env steps ({100 * over / spec.stop.env_steps:.0f} %) past "
+            + (
+                "stop.env_steps (its last iteration ends at the first repetition past it)"
+                if get_algorithm(spec.algorithm).max_env_steps_past_budget is not None
+                else "stop.env_steps (the budget is checked when an iteration ends)"
+            )
         )
     lines.append(wall_time_line(spec))
     if warning := cpu_warning(spec, cpus_available, where):

@@ -479,6 +479,12 @@ def max_iteration_env_steps(values: Mapping[str, Any]) -> int:
     return int(v["task_batch_size"]) * int(v["repetitions"]) * per_tree
 
 
+def max_env_steps_past_budget(values: Mapping[str, Any]) -> int:
+    """The most env steps a run can take past its env-step budget: the iteration that reaches it ends
+    after the repetition that does, so one repetition's worth (task_batch_size trees), less one."""
+    return max_iteration_env_steps(values) // int(effective_values(values)["repetitions"]) - 1
+
+
 def combination_problems(values: Mapping[str, Any]) -> list[tuple[tuple[str, ...], Any, str]]:
     """Values valid one by one that clash together: (the keys involved, their values, why)."""
     out = agent_settings.combination_problems(values)

@@ -114,6 +114,7 @@ class GoalSACConfig(SACConfig):
         self.num_env_runners = 0
         self.goal_env: str | None = None  # set by validate(): the env the user named
         self.goal_env_config: dict[str, Any] = {}
+        self.env_step_budget: int | None = None  # RunContext.env_step_budget: see training_step
         # The tree-traversal readings the traversal env implements (their defaults: no tree here).
         for s in agent_settings.TREE_TRAVERSAL:
             setattr(self, s.key, s.default)
@@ -157,6 +158,7 @@ class GoalSACConfig(SACConfig):
             .learners(num_gpus_per_learner=run.num_gpus)
             .debugging(seed=run.seed)
         )
+        config.env_step_budget = run.env_step_budget
         config._set_values(values)
         return config
 
@@ -379,7 +381,8 @@ class GoalSAC(SAC):
     @override(DQN)
     def training_step(self) -> None:
         """One iteration (module docstring): draw the tasks, run `repetitions` traversals of their
-        trees with SAC updates in between, log, evaluate when due. Subclasses plan the trees
+        trees with SAC updates in between (fewer once the run's env-step budget is reached), log,
+        evaluate when due. Subclasses plan the trees
         (`_trees`) and learn from the finished sub-tasks (`_after_traversal`)."""
         cfg = self.config
         self._before_iteration()
@@ -401,6 +404,10 @@ class GoalSAC(SAC):
             self._after_traversal(subtasks, stats, timing)
             for key, value in traversal_stats(subtasks, cfg.tree_depth).items():
                 stats[key].append(value)
+            if cfg.env_step_budget and self._env_steps() >= cfg.env_step_budget:
+                # The run ends with this iteration: its other repetitions would only be experience past
+                # the budget that a method with short iterations never gets.
+                break
         self._after_iteration()
 
         for key, values in stats.items():
