@@ -275,6 +275,18 @@ def sweep_runs_in_store(tracking_uri: str, experiment: str, sweep: str) -> tuple
     return finished, [r.info.run_id for r in everything]
 
 
+def trial_runs_in_store(tracking_uri: str, experiment: str, sweep: str) -> list:
+    """The trial (child) runs of a sweep in the store, oldest first; [] when there is no such store or
+    experiment (nothing has run). Opens an existing SQLite file only."""
+    if missing_sqlite_file(tracking_uri) is not None:
+        return []
+    client = _client(tracking_uri)
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None:
+        return []
+    return find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_TRIAL})
+
+
 def discard_runs(tracking_uri: str, run_ids: Sequence[str]) -> None:
     """Marks runs deleted (MLflow's soft delete: reports, best_of and the UI's default view skip them)."""
     client = _client(tracking_uri)

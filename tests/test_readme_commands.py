@@ -40,10 +40,11 @@ REPORTS = [c for c in COMMANDS if "-m analysis.report " in c]
 TRAINS = [c for c in COMMANDS if "-m copilot_ray.train" in c]
 BENCHMARKS = [c for c in COMMANDS if "benchmarks/" in c and "<" not in c]
 CARRIES = [c for c in COMMANDS if "-m copilot_ray.carry " in c]
+PROGRESSES = [c for c in COMMANDS if "-m copilot_ray.progress " in c]
 
 
 def test_the_readme_shows_each_kind_of_command():
-    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS and CARRIES
+    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS and CARRIES and PROGRESSES
 
 
 @pytest.mark.parametrize("command", CARRIES)
@@ -53,6 +54,14 @@ def test_carry_commands_name_a_valid_spec_and_an_archive(command):
 
     args = parse_args(_args(command, "-m copilot_ray.carry "))
     assert load_specs(ROOT / args.spec) and args.out.endswith(".tar.gz")
+
+
+@pytest.mark.parametrize("command", PROGRESSES)
+def test_progress_commands_name_a_valid_spec(command):
+    from copilot_ray.progress import parse_args
+    from copilot_ray.sweep_spec import load_specs
+
+    assert load_specs(ROOT / parse_args(_args(command, "-m copilot_ray.progress ")).spec)
 
 
 @pytest.mark.parametrize("command", SWEEPS)

@@ -145,7 +145,7 @@ def total_wall_time_line(specs: list[SweepSpec]) -> str:
     known = [w for w in (wall_seconds(s) for s in specs) if w is not None]
     missing = len(specs) - len(known)
     tail = f" ({missing} part(s) without an estimate not counted)" if missing else ""
-    return f"all {len(specs)} parts, one after another: about {_duration(sum(known))} in all{tail}"
+    return f"all {len(specs)} parts, one after another: about {duration_text(sum(known))} in all{tail}"
 
 
 def wall_time_line(spec: SweepSpec) -> str:
@@ -161,13 +161,13 @@ def wall_time_line(spec: SweepSpec) -> str:
     waves = math.ceil(len(spec.trial_plan()) / concurrent)
     seconds = waves * budget / rate
     return (
-        f"  wall time: about {_duration(seconds)} ({waves} wave(s) x {budget:,} env steps at ~{rate:.0f} env "
+        f"  wall time: about {duration_text(seconds)} ({waves} wave(s) x {budget:,} env steps at ~{rate:.0f} env "
         f"steps/s per trial{' side by side' if concurrent > 1 else ''}; measured on maze-point, other envs "
         f"differ; {source})"
     )
 
 
-def _duration(seconds: float) -> str:
+def duration_text(seconds: float) -> str:
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:
