@@ -347,8 +347,9 @@ def _capped(window: tuple[float, float], budget: float) -> tuple[float, float]:
 
 def final_values(trials: list[Trial], metric: str, budget: float) -> tuple[np.ndarray, np.ndarray]:
     """Each seed's final success and the env step it is read at: its curve at the env-step budget,
-    linear between the evaluations on either side; a seed whose evaluations do not reach the budget
-    (still running), or a sweep without one: its last evaluation.
+    linear between the evaluations on either side; a seed whose evaluations end before the budget (still
+    running) gives its last one, one whose evaluations all come after it its first; a sweep without a
+    budget: the last evaluation.
 
     Why not simply the last evaluation: a trial stops at the end of the first iteration past the
     budget, so a method with long iterations (CO-PILOT's are ~16k env steps) would be scored after up
@@ -357,13 +358,9 @@ def final_values(trials: list[Trial], metric: str, budget: float) -> tuple[np.nd
     finals, steps = [], []
     for t in trials:
         s, v = t.curves[metric]
-        at = stats.interpolate(s, v, np.array([budget]))[0] if np.isfinite(budget) else np.nan
-        if np.isfinite(at):
-            finals.append(float(at))
-            steps.append(float(budget))
-        else:
-            finals.append(float(v[-1]))
-            steps.append(float(s[-1]))
+        at = float(np.clip(budget, s[0], s[-1])) if np.isfinite(budget) else float(s[-1])
+        finals.append(float(np.interp(at, s, v)))
+        steps.append(at)
     return np.array(finals), np.array(steps)
 
 

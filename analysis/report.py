@@ -580,14 +580,16 @@ def _summary_text(configs: list[ConfigSummary], tasks: str) -> str:
             windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
     return (
         (f"Validation tasks only ({_VALIDATION_WHY}). " if tasks == VALIDATION else "Test tasks only. ")
-        + "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method of "
-        "a comparison), linear between its evaluations on either side; a seed whose evaluations do not "
-        "reach it (still running) or a sweep without one: its last evaluation. Not simply the last "
-        "evaluation: a trial stops at the first iteration end past the budget, so long iterations would "
-        "buy extra env steps. Rows that only repeat an earlier evaluation are left out everywhere. AUC = area under each seed's success curve, linear between "
+        + "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method "
+        "of a comparison), linear between its evaluations on either side; a seed whose evaluations end "
+        "before it (still running) or a sweep without one: its last evaluation; one first evaluated "
+        "after it: its first. Not simply the last evaluation: a trial stops at the first iteration end "
+        "past the budget, so long iterations would buy extra env steps. Rows that only repeat an earlier "
+        "evaluation are left out everywhere. AUC = area under each seed's success curve, linear between "
         "evaluations, over one env-step window for every configuration (from the latest first evaluation "
         "to the earliest last evaluation among the finished seeds, and at the budget at the latest: no "
-        "success is assumed before an evaluation or after a seed's last; a seed that does not cover it, e.g. one still running, has "
+        "success is assumed before an evaluation or after a seed's last; a seed that does not cover it, "
+        "e.g. one still running, has "
         "no AUC), divided by its length; windows: "
         + (", ".join(windows) or "none")
         + f". No best-over-evaluations figure. With >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM over seeds "

@@ -808,6 +808,15 @@ def test_final_success_is_read_at_the_budget(tmp_path):
     assert got["copilot"].final_step == got["her"].final_step == 3000
     assert got["her"].auc_window == (2000, 3000)  # from the latest first evaluation to the budget
     assert got["her"].aucs.tolist() == pytest.approx([0.4])
+    # a seed evaluated only after the budget gives its first evaluation, the closest to it
+    from analysis.aggregate import final_values
+
+    late = load_sweep(uri, "budget", parent_run_id="all").trials
+    finals, steps = final_values(late, EVAL_SUCCESS, 1500.0)
+    assert {t.tags[ALGORITHM_TAG]: (f, s) for t, f, s in zip(late, finals, steps, strict=True)} == {
+        "copilot": (0.2, 2000.0),
+        "her": (pytest.approx(0.2), 1500.0),
+    }
 
     # without a budget (stopped by iterations, or older stores): the last evaluation
     sweep = load_sweep(uri, "budget", parent_run_id="all")
