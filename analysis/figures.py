@@ -37,6 +37,7 @@ from copilot_ray.keys import (  # noqa: E402
     REACHED_PLANNED,
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
+    SWEEP_TAG,
     eval_by_action,
 )
 
@@ -71,6 +72,9 @@ def _colors(n: int):
 
 
 def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
+    """At most MAX_CURVES configurations: each method's best by final success first (a method is an
+    algorithm in one sweep: a comparison's parts), so that none vanishes from a crowded figure, then
+    the best of the rest. (the ones kept, in their order; how many were left out)"""
     if len(configs) <= MAX_CURVES:
         return configs, 0
 
@@ -78,8 +82,20 @@ def _select(configs: list[ConfigSummary]) -> tuple[list[ConfigSummary], int]:
         m = c.metrics.get(EVAL_SUCCESS) or c.metrics.get(SUCCESS_PLANNED)
         return m.final.point if m and np.isfinite(m.final.point) else -1.0
 
-    keep = set(id(c) for c in sorted(configs, key=score, reverse=True)[:MAX_CURVES])
-    return [c for c in configs if id(c) in keep], len(configs) - MAX_CURVES
+    def method(c):
+        return c.algorithm, c.all_trials[0].tags.get(SWEEP_TAG, "")
+
+    ranked = sorted(configs, key=score, reverse=True)
+    keep, methods = [], set()
+    for c in ranked:
+        if method(c) not in methods:
+            methods.add(method(c))
+            keep.append(c)
+    keep = keep[:MAX_CURVES]
+    kept = {id(c) for c in keep}
+    keep += [c for c in ranked if id(c) not in kept][: MAX_CURVES - len(keep)]
+    kept = {id(c) for c in keep}
+    return [c for c in configs if id(c) in kept], len(configs) - MAX_CURVES
 
 
 def wrap(text: str, width_in: float, fontsize: float) -> str:
@@ -189,13 +205,14 @@ def success_curves(
                 handles[lab] = h
                 labels.append(lab)
     if labels:
+        wrapped = [wrap(lab, 3.0, 8) for lab in labels]
         fig.legend(
-            [handles[lab] for lab in labels],
-            [wrap(lab, 3.0, 8) for lab in labels],
-            loc="outside right center",
-            fontsize=8,
-            title=axis_name,
+            [handles[lab] for lab in labels], wrapped, loc="outside right center", fontsize=8, title=axis_name
         )
+        # Long labels (a search's configurations) stack taller than the panels: the figure grows with
+        # them, so that the legend does not run over the title.
+        lines = sum(w.count("\n") + 1 for w in wrapped) + 2
+        fig.set_figheight(max(fig.get_figheight(), 0.16 * lines + 1.6))
     note = INTERVAL_NOTE + "; dashed: not all seeds have reached this step"
     if dropped:
         note += f"; {dropped} more configurations not drawn"

@@ -1169,3 +1169,24 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
     assert "mean 0.970" in summary
     summary, _, _ = report("comparison", "--tasks", "validation")
     assert "mean 0.170" in summary and "0.97" not in summary
+
+
+def test_a_crowded_figure_keeps_every_methods_best_configuration():
+    """14 configurations, 12 drawn: the best of each method (algorithm and sweep) is kept even when
+    twelve of another method score higher; the rest by final success."""
+    from types import SimpleNamespace
+
+    from analysis.figures import MAX_CURVES, _select
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    def config(algorithm, sweep, final):
+        m = SimpleNamespace(final=SimpleNamespace(point=final))
+        trial = SimpleNamespace(tags={SWEEP_TAG: sweep})
+        return SimpleNamespace(algorithm=algorithm, all_trials=[trial], metrics={EVAL_SUCCESS: m})
+
+    her = [config("her", "tune_her", 0.5 + i / 100) for i in range(12)]
+    copilot = [config("copilot", "tune_copilot", 0.01), config("copilot", "tune_paper_literal", 0.0)]
+    shown, dropped = _select(her + copilot)
+    assert MAX_CURVES == 12 and dropped == 2 and len(shown) == 12
+    assert copilot[0] in shown and copilot[1] in shown
+    assert her[0] not in shown and her[1] not in shown  # the two lowest HER configurations make room
