@@ -284,14 +284,18 @@ def final_success(
         notes.append(f"{path.name}: no bars (no evaluation of {_leaves(drawn)}): {'; '.join(blank)}.")
     shown = [c for c in shown if c.label not in blank]
     # Tick labels: one line per axis value, so that they stack instead of running into each other.
-    ticks = [c.label.replace(", ", "\n") + f"\n(n = {c.n_seeds})" for c in shown]
+    # One line per axis value (a search's config key: per searched value), so that they stack.
+    ticks = [c.label.replace(", ", "\n").replace(",", "\n") + f"\n(n = {c.n_seeds})" for c in shown]
     longest = max(len(line) for t in ticks for line in t.split("\n"))
     per_bar = max(0.9, 0.62 * BAR_FONT / 72 * longest + 0.25)  # inches a label needs
     width = per_bar * len(shown) + 2.2
     crowded = width > 20  # too many to stand side by side: slanted
+    lines = max(t.count("\n") + 1 for t in ticks)
+    # the labels' height below the axis (slanted: half their length more), so the bars keep theirs
+    height = 4.8 + 0.14 * lines + (0.5 * 0.62 * BAR_FONT / 72 * longest if crowded else 0.0)
     x = np.arange(len(shown))
     bar = 0.76 / len(drawn)
-    fig, ax = plt.subplots(figsize=(min(max(6.0, width), 20), 4.8), layout="constrained")
+    fig, ax = plt.subplots(figsize=(min(max(6.0, width), 20), height), layout="constrained")
     palette = ("tab:blue", "tab:orange", "tab:green")
     for i, metric in enumerate(drawn):
         offset, color = (i - (len(drawn) - 1) / 2) * bar, palette[i % len(palette)]
@@ -313,7 +317,7 @@ def final_success(
     )
     ax.set_xlim(-0.6, len(shown) - 0.4)
     ax.set_ylim(0, 1.05)
-    ax.set_ylabel("final success rate (at the common end step)")
+    ax.set_ylabel("final success rate (at the env-step budget)")
     ax.set_xlabel(axis_name)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)
