@@ -110,8 +110,8 @@ class RunContext:
     num_cpus_for_main_process: int = 1
     num_gpus: float = 0.0
     # The run's env-step budget (a sweep's stop.env_steps, train's --stop-env-steps), or None. An
-    # algorithm whose iterations hold several traversals ends its last one at the traversal that
-    # reaches it, so that methods with long iterations do not run far past a shared budget.
+    # algorithm whose iterations hold several repetitions (CO-PILOT's b) ends its last iteration at the
+    # repetition that reaches it, so that long iterations do not run far past a shared budget.
     env_step_budget: int | None = None
 
 

@@ -382,8 +382,8 @@ class GoalSAC(SAC):
     def training_step(self) -> None:
         """One iteration (module docstring): draw the tasks, run `repetitions` traversals of their
         trees with SAC updates in between (fewer once the run's env-step budget is reached), log,
-        evaluate when due. Subclasses plan the trees
-        (`_trees`) and learn from the finished sub-tasks (`_after_traversal`)."""
+        evaluate when due. Subclasses plan the trees (`_trees`) and learn from the finished sub-tasks
+        (`_after_traversal`)."""
         cfg = self.config
         self._before_iteration()
         self._subtasks_lost = 0
