@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,8 +62,7 @@ def part_progress(spec) -> PartProgress:
         steps += min(taken, budget) if budget else taken
     state = FINISHED if finished_part else RUNNING if runs else NOT_STARTED
     whole = wall_seconds(spec)
-    share = 1.0 if state == FINISHED else min(1.0, steps / planned_steps) if planned_steps else 0.0
-    return PartProgress(
+    part = PartProgress(
         name=spec.name,
         state=state,
         planned=planned,
@@ -71,8 +71,11 @@ def part_progress(spec) -> PartProgress:
         in_progress=sum(s in ("RUNNING", "KILLED", "SCHEDULED") for s in status),
         env_steps=steps,
         planned_env_steps=planned_steps,
-        seconds_left=None if whole is None else whole * (1.0 - share),
+        seconds_left=None,
     )
+    if whole is None:
+        return part
+    return dataclasses.replace(part, seconds_left=whole * (1.0 - (part.share or 0.0)))
 
 
 def _steps(x: float | None) -> str:
