@@ -51,12 +51,17 @@ class EvaluationSchedule:
     def due(self, iteration: int, env_steps: int) -> bool:
         """Whether to evaluate after iteration `iteration` (1-based) ending at `env_steps`."""
         if self.every_env_steps > 0:
-            bucket = int(env_steps) // self.every_env_steps
-            if bucket > self._last_bucket:
-                self._last_bucket = bucket
+            if self.point_passed(env_steps):
+                self._last_bucket = int(env_steps) // self.every_env_steps
                 return True
             return False
         return bool(self.every_iterations) and iteration % self.every_iterations == 0
+
+    def point_passed(self, env_steps: int) -> bool:
+        """Whether `env_steps` is past an env-step evaluation point not evaluated at yet (False on the
+        iterations cadence). Asks only: an algorithm whose iterations hold several rounds ends one early
+        where this turns True, so its evaluations keep the cadence."""
+        return self.every_env_steps > 0 and int(env_steps) // self.every_env_steps > self._last_bucket
 
     def get_state(self) -> dict[str, int]:
         return {"last_bucket": self._last_bucket}

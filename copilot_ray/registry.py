@@ -13,8 +13,9 @@ starts) and provide:
     max_iteration_env_steps(values)       optional: the most env steps one iteration can take (--check's
                                           evaluations per trial); none for an algorithm without env steps
     max_env_steps_past_budget(values)     optional: the most env steps a run can take past its env-step
-                                          budget (RunContext.env_step_budget), for an algorithm that ends
-                                          its last iteration early there; default: one iteration's less 1
+                                          budget (RunContext.env_step_budget) or an evaluation point, for an
+                                          algorithm that ends iterations early there (at a repetition);
+                                          default: one iteration's less 1
     SEARCH_SPACE: dict[str, dict]         optional: what a comparison tunes (`search: declared` in a spec),
                                           in the spec's domain syntax, every default inside its range
     PRIVILEGES: tuple[str, ...]           optional: what the method always uses that agents learning from

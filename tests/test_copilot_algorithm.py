@@ -199,6 +199,52 @@ def test_the_last_iteration_ends_at_the_repetition_that_reaches_the_budget(ray_s
     assert 1 <= steps[1] < steps[None]  # the same seed: the first repetition alone
 
 
+def _recording_planned_tasks(algo) -> list[tuple[int, ...]]:
+    """The training tasks of every planner phase from now on (the batch each repetition plans for)."""
+    seen, trees = [], algo._trees
+
+    def recording(idx, stats, timing):
+        seen.append(tuple(int(i) for i in idx))
+        return trees(idx, stats, timing)
+
+    algo._trees = recording
+    return seen
+
+
+def test_an_iteration_ends_at_the_repetition_past_an_evaluation_point_and_the_next_resumes_the_batch(
+    ray_session, tmp_path
+):
+    """With eval_every_env_steps below one repetition's env steps, each iteration is one repetition of
+    b = 2 and one evaluation (the cadence the short-iteration baselines get); the batch's second
+    repetition comes next iteration, also after a checkpoint round trip, on the same tasks, with the
+    alpha schedule in phase; only then is a new batch drawn."""
+    env_steps = EXPECTED_METRICS[-1]
+    algo = tiny_config(num_env_runners=0).copilot(eval_every_env_steps=1).build_algo()
+    try:
+        seen = _recording_planned_tasks(algo)
+        results = [algo.train()]
+        assert (algo.alpha_clock.episode, algo._batch_done) == (1, 1)
+        path = algo.save_to_path(str(tmp_path / "ckpt"))
+        results += [algo.train(), algo.train()]
+        assert seen[0] == seen[1] != seen[2]  # the batch's two repetitions, then a new draw
+        assert (algo.alpha_clock.episode, algo._batch_done) == (3, 1)
+        # One evaluation per iteration, at the env steps where that iteration ended.
+        assert algo.success_curves["test"].steps == [float(lookup(r, env_steps)) for r in results]
+
+        restored = tiny_config(num_env_runners=0).copilot(eval_every_env_steps=1).build_algo()
+        try:
+            restored.restore_from_path(path)
+            assert restored._batch_done == 1 and tuple(restored._batch.tolist()) == seen[0]
+            restored_seen = _recording_planned_tasks(restored)
+            restored.train()
+            assert restored_seen == [seen[0]] and restored._batch is None
+            assert restored.alpha_clock.episode == 2
+        finally:
+            restored.stop()
+    finally:
+        algo.stop()
+
+
 def test_non_finite_planner_weights_stop_the_run_naming_them(ray_session, monkeypatch):
     from copilot_ray.algorithms.copilot.health import FAULT_ENV, NonFiniteStateError
 

@@ -59,11 +59,11 @@ def test_no_measured_rate_no_estimate(rates_file):
 
 
 def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warnings():
-    """Tune checks stop.env_steps when an iteration ends; CO-PILOT also stops between the repetitions of
-    its last iteration, so it may run one repetition past (3,150 env steps of its 15,750) like SAC one
-    iteration (3,200). A comparison whose parts differ in it by more than 5 % of the budget is warned
-    about at --check, and so is one whose parts are evaluated at unequal spacing (CO-PILOT evaluates at
-    the end of its iterations, 15,750 env steps apart, SAC every 10,000)."""
+    """Tune checks stop.env_steps when an iteration ends; CO-PILOT also ends an iteration between its
+    repetitions at the budget or an evaluation point, so it may run one repetition past either (3,150 env
+    steps of its 15,750) like SAC one iteration (3,200), and both are evaluated every 10,000. A comparison
+    whose parts differ in how far past by more than 5 % of the budget is warned about at --check, and so
+    is one whose parts are evaluated at unequal spacing (a repetition of 10 tasks: 15,750 apart)."""
     from copilot_ray.sweep_spec.comparison import overshoot_warnings
 
     def part(name, algorithm, budget, **config):
@@ -83,14 +83,16 @@ def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warnings():
 
     sac, copilot = part("s", "sac", 50000), part("c", "copilot", 50000)
     assert estimate.budget_overshoot(sac) == 3199 and estimate.budget_overshoot(copilot) == 3149
-    (spacing,) = overshoot_warnings([sac, copilot])  # the same overshoot, unequal evaluation spacing
-    assert "evaluations may be up to" in spacing and "s 10,000" in spacing and "c 15,750" in spacing
+    assert overshoot_warnings([sac, copilot]) == []  # the same overshoot and evaluation spacing
+    (evals,) = [e.min_evaluations for e in estimate.trial_estimates(copilot)]
+    assert evals == 5  # 50,000 / max(10,000, one repetition of 3,150), not / its 15,750 iteration
     # one repetition of 10 tasks: 15,750 env steps between budget checks
     wide = part("c", "copilot", 50000, repetitions=1, task_batch_size=10)
     assert estimate.budget_overshoot(wide) == 15749
     overshoot, spacing = overshoot_warnings([sac, wide])
     assert "experiment 'cmp'" in overshoot and "s 6 %" in overshoot and "c 31 %" in overshoot
-    assert "c 15,750" in spacing
-    (only,) = overshoot_warnings([part("s", "sac", 1_000_000), part("c", "copilot", 1_000_000)])
+    assert "evaluations may be up to" in spacing and "s 10,000" in spacing and "c 15,750" in spacing
+    wide_long = part("c", "copilot", 1_000_000, repetitions=1, task_batch_size=10)
+    (only,) = overshoot_warnings([part("s", "sac", 1_000_000), wide_long])
     assert "evaluations may be up to" in only  # a large budget hides the overshoot, not the spacing
     assert overshoot_warnings([sac, part("h", "her", 50000)]) == []

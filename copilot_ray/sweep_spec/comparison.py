@@ -87,8 +87,8 @@ OVERSHOOT_GAP = 0.05  # of the budget: a larger difference in how far parts may 
 def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
     """Warnings (not refusals: it is the iterations' size, a method's own) where the parts of a comparison
     may run unequally far past their common env-step budget, or be evaluated unequally often: an
-    algorithm evaluates when an iteration ends, so iterations longer than ``eval_every_env_steps`` space
-    its evaluations further apart."""
+    algorithm evaluates when an iteration (or, for one that ends iterations early there, a repetition)
+    ends, so iterations longer than ``eval_every_env_steps`` space its evaluations further apart."""
     from copilot_ray.sweep_spec.estimate import budget_overshoot, trial_estimates
 
     groups: dict[str, list[SweepSpec]] = defaultdict(list)
@@ -112,7 +112,8 @@ def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
             )
         spacing = {
             p.name: max(
-                [int(_effective(p, CADENCE) or 0)] + [e.max_iteration_env_steps for e in trial_estimates(p)]
+                [int(_effective(p, CADENCE) or 0)]
+                + [e.max_env_steps_between_checks for e in trial_estimates(p)]
             )
             for p in parts
         }
@@ -121,7 +122,8 @@ def overshoot_warnings(specs: Sequence[SweepSpec]) -> list[str]:
             out.append(
                 f"warning: experiment {experiment!r}: its parts' evaluations may be up to this many env "
                 f"steps apart: {shown} (one at the end of the first iteration past each multiple of "
-                f"{CADENCE}, and some iterations are longer than that), so some curves have fewer points; "
+                f"{CADENCE}, and some iterations or repetitions are longer than that), so some curves have "
+                "fewer points; "
                 "shrink the large iterations (task_batch_size, repetitions) to even them out"
             )
     return out

@@ -2,7 +2,8 @@
 
 * Env steps per iteration: the most one iteration can take (every sub-task or episode to its step
   limit: the algorithm's `max_iteration_env_steps`), per configuration.
-* Evaluations per trial: the fewest a trial gets before its env-step budget ends, from that bound and
+* Evaluations per trial: the fewest a trial gets before its env-step budget ends, from that bound (or,
+  for an algorithm that ends an iteration at the repetition past an evaluation point, a repetition's) and
   the evaluation cadence (`eval_every_env_steps`, else `eval_interval` iterations). A plan in which a
   trial could end with fewer than `stop.min_evaluations` (default MIN_EVALUATIONS) is refused: its curve
   and its final figure would be one or two noisy points (or none).
@@ -34,6 +35,9 @@ THROUGHPUT_FILE = Path(__file__).resolve().parents[1] / "measured_throughput.jso
 class TrialEstimate:
     label: str  # the configuration (grid point or a corner of the sampled space)
     max_iteration_env_steps: int
+    # The most between two points where the trial can stop at its budget or be evaluated: an iteration,
+    # or a repetition for an algorithm that ends iterations there (its max_env_steps_past_budget + 1).
+    max_env_steps_between_checks: int
     min_evaluations: int | None  # None: no env-step budget to count against
     why: str  # how min_evaluations follows from the cadence
 
@@ -58,6 +62,8 @@ def trial_estimates(spec: SweepSpec) -> list[TrialEstimate]:
     for point in _points(spec):
         merged = spec.merged(point)
         per_iteration = int(entry.max_iteration_env_steps(merged))
+        past = entry.max_env_steps_past_budget
+        between = per_iteration if past is None else int(past(merged)) + 1
         cadence = int(_setting(entry, merged, "eval_every_env_steps") or 0)
         interval = int(_setting(entry, merged, "eval_interval") or 0)
         label = ", ".join(f"{k}={v}" for k, v in point.items() if k != "seed") or "every trial"
@@ -68,15 +74,16 @@ def trial_estimates(spec: SweepSpec) -> list[TrialEstimate]:
             if cadence:
                 evals, why = None, "by env steps, with no env-step budget to count against"
         elif cadence:
-            evals = budget // max(cadence, per_iteration)
-            why = f"{budget:,} env steps / max(eval_every_env_steps {cadence:,}, iteration {per_iteration:,})"
+            evals = budget // max(cadence, between)
+            unit = "iteration" if past is None else "repetition"
+            why = f"{budget:,} env steps / max(eval_every_env_steps {cadence:,}, {unit} {between:,})"
         else:
             done = math.ceil(budget / per_iteration)
             if iterations is not None:
                 done = min(done, iterations)
             evals = done // interval if interval else 0
             why = f"at least {done} iteration(s) of at most {per_iteration:,} env steps / eval_interval {interval}"
-        out.append(TrialEstimate(label, per_iteration, evals, why))
+        out.append(TrialEstimate(label, per_iteration, between, evals, why))
     return out
 
 
@@ -107,10 +114,7 @@ def budget_overshoot(spec: SweepSpec) -> int | None:
     estimates = trial_estimates(spec)
     if spec.stop.env_steps is None or not estimates:
         return None
-    past = get_algorithm(spec.algorithm).max_env_steps_past_budget
-    if past is not None:  # it ends its last iteration early, at the budget
-        return max(int(past(spec.merged(point))) for point in _points(spec))
-    return max(e.max_iteration_env_steps for e in estimates) - 1
+    return max(e.max_env_steps_between_checks for e in estimates) - 1
 
 
 def measured_rate(algorithm: str, concurrent: int) -> tuple[float, str] | None:

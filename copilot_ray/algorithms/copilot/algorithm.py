@@ -21,6 +21,9 @@ Every CO-PILOT setting (name, default, rule, doc) is declared once in `settings.
         alpha           the schedule advances one episode                                      (_after_traversal)
     every evaluation: success on validation and test tasks (planned and direct), paths, trees
 
+With `eval_every_env_steps`, an iteration ends at the repetition that passes an evaluation point and the
+next one takes up the same batch, so CO-PILOT is evaluated on the cadence of the short-iteration baselines.
+
 Besides the paper's metrics, `copilot/diag/...` says why a run does or does not learn (diagnostics.py).
 """
 

@@ -480,8 +480,9 @@ def max_iteration_env_steps(values: Mapping[str, Any]) -> int:
 
 
 def max_env_steps_past_budget(values: Mapping[str, Any]) -> int:
-    """The most env steps a run can take past its env-step budget: the iteration that reaches it ends
-    after the repetition that does, so one repetition's worth (task_batch_size trees), less one."""
+    """The most env steps a run can take past its env-step budget or an evaluation point: the iteration
+    that reaches one ends after the repetition that does, so one repetition's worth (task_batch_size
+    trees), less one."""
     return max_iteration_env_steps(values) // int(effective_values(values)["repetitions"]) - 1
 
 

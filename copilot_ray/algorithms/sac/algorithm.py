@@ -11,12 +11,17 @@ here every "tree" is the task itself, [s0, g]), whose learner is the fast goal-c
 (`copilot_ray.algorithms.gc_sac`, or RLlib's stock one with `fast_learner=False`), and which evaluates on
 the env's validation and test tasks. One `training_step`:
 
-    tasks    <- task_batch_size distinct training tasks (s0, g)
-    repeat `repetitions` times (1 here; CO-PILOT's b):
+    tasks    <- task_batch_size distinct training tasks (s0, g), or the batch an iteration left unfinished
+    repeat for its remaining repetitions (`repetitions`: 1 here; CO-PILOT's b):
         trees    <- _trees(tasks)                      [s0, g]; CO-PILOT: a planner phase
         traverse the trees on the env runners          one episode per sub-task, SAC updates in between
         _after_traversal(sub-tasks)                    nothing here; CO-PILOT: D_tau, tau_hat, alpha
+        stop early, keeping the batch, past an env-step evaluation point or the env-step budget
     log; evaluate when due (validation and test tasks)
+
+Ending an iteration at the repetition that passes an evaluation point (`eval_every_env_steps`) keeps a
+method with long iterations (CO-PILOT: b x its trees) on the same evaluation cadence as one with short
+ones; the sequence of draws, planner phases and traversals is the same as without it.
 
 HER is a replay buffer, as in Stable-Baselines3: `gc_sac.HindsightReplayBuffer` relabels goals when a
 batch is sampled and recomputes rewards with the goal env's `compute_reward` / `compute_terminated` under
@@ -336,6 +341,9 @@ class GoalSAC(SAC):
         self._privileged = {"resets": 0, "map_queries": 0}
         self.rules = cfg.traversal_rules()
         self._subtasks_lost = 0  # this iteration's, taken by env runners that died (AGENT_SUBTASKS_LOST)
+        # The task batch in progress and its repetitions done (an iteration may end mid-batch); checkpointed.
+        self._batch: np.ndarray | None = None
+        self._batch_done = 0
         self._update_seconds, self._updates_done = 0.0, 0
         self.agent_updater = self._make_agent_updater()
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
@@ -380,19 +388,22 @@ class GoalSAC(SAC):
     # --------------------------------------------------------------------------- training step
     @override(DQN)
     def training_step(self) -> None:
-        """One iteration (module docstring): draw the tasks, run `repetitions` traversals of their
-        trees with SAC updates in between (fewer once the run's env-step budget is reached), log,
+        """One iteration (module docstring): draw the tasks (or take up the unfinished batch), run their
+        remaining of `repetitions` traversals with SAC updates in between, ending early, with the batch
+        kept for the next iteration, past an env-step evaluation point or the run's env-step budget; log,
         evaluate when due. Subclasses plan the trees (`_trees`) and learn from the finished sub-tasks
         (`_after_traversal`)."""
         cfg = self.config
         self._before_iteration()
         self._subtasks_lost = 0
         self._update_seconds, self._updates_done = 0.0, 0  # this iteration's SAC updates (_learn)
-        idx = self._draw_tasks()
+        if self._batch is None:
+            self._batch, self._batch_done = self._draw_tasks(), 0
+        idx = self._batch
         n_tasks = min(cfg.task_batch_size, len(idx))
         stats: dict[str, list[float]] = defaultdict(list)  # averaged over the repetitions
         timing: dict[str, float] = defaultdict(float)
-        for _ in range(cfg.repetitions):
+        while self._batch_done < cfg.repetitions:
             trees = self._trees(idx, stats, timing)[:n_tasks]
             t0 = time.perf_counter()
             subtasks = self._traverse(trees, idx[:n_tasks])
@@ -404,10 +415,16 @@ class GoalSAC(SAC):
             self._after_traversal(subtasks, stats, timing)
             for key, value in traversal_stats(subtasks, cfg.tree_depth).items():
                 stats[key].append(value)
-            if cfg.env_step_budget and self._env_steps() >= cfg.env_step_budget:
+            self._batch_done += 1
+            env_steps = self._env_steps()
+            if cfg.env_step_budget and env_steps >= cfg.env_step_budget:
                 # The run ends with this iteration: its other repetitions would only be experience past
                 # the budget that a method with short iterations never gets.
                 break
+            if self.eval_schedule.point_passed(env_steps):
+                break  # evaluate now, on the cadence; the batch's other repetitions come next iteration
+        if self._batch_done >= cfg.repetitions:
+            self._batch = None
         self._after_iteration()
 
         for key, values in stats.items():
@@ -714,6 +731,9 @@ class GoalSAC(SAC):
             "eval_schedule": self.eval_schedule.get_state(),
             "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
             "privileged": dict(self._privileged),
+            "batch": None
+            if self._batch is None
+            else {"tasks": self._batch.tolist(), "done": self._batch_done},
         }
         state.update(self._own_state())
         return state
@@ -733,6 +753,9 @@ class GoalSAC(SAC):
         for split, curve in own.get("success_curves", {}).items():
             self.success_curves[split].set_state(curve)
         self._privileged.update(own.get("privileged", {}))
+        batch = own.get("batch")  # absent in checkpoints from before iterations could end mid-batch
+        self._batch = None if batch is None else np.asarray(batch["tasks"], dtype=np.int64)
+        self._batch_done = 0 if batch is None else int(batch["done"])
         self._set_own_state(state)
 
     def _own_state(self) -> dict[str, Any]:

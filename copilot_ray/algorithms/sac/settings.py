@@ -95,8 +95,9 @@ EVALUATION = [
         "eval_every_env_steps",
         "agent",
         0,
-        "evaluate at the end of every iteration that passes another multiple of this many env steps, so "
-        "that methods with different iteration sizes are evaluated on one cadence (0: use eval_interval)",
+        "evaluate at the end of every iteration that passes another multiple of this many env steps (an "
+        "iteration of several repetitions ends at the one that passes it), so that methods with different "
+        "iteration sizes are evaluated on one cadence (0: use eval_interval)",
         0,
     ),
     int_setting(
