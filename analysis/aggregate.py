@@ -73,6 +73,10 @@ class MetricSummary:
     auc: stats.SeedSummary
     auc_window: tuple[float, float]  # env steps, the same for every configuration
     final_step: float  # mean over seeds of the env step each final is read at (the budget if reached)
+    # mean over seeds of the evaluations up to the budget, and of the median env steps between two
+    # (through the first evaluation past the budget): the cadence a curve and its final rest on
+    evaluations: float
+    evaluation_gap: float
     # threshold -> (IQM, or mean with fewer than 5 seeds, of steps to reach it, inf = not reached;
     # seeds that reached it)
     to_threshold: dict[float, tuple[float, int]]
@@ -325,6 +329,7 @@ def _metric_summary(trials, metric: str, grid: np.ndarray, window, budget: float
         auc=stats.summarise_seeds(aucs, reps=reps, seed=seed),
         auc_window=window,
         final_step=float(np.mean(final_steps)),
+        **_cadence(trials, metric, budget),
         to_threshold=to_thr,
         curve=_curve(trials, metric, grid, reps, seed),
     )
@@ -362,6 +367,22 @@ def final_values(trials: list[Trial], metric: str, budget: float) -> tuple[np.nd
         finals.append(float(np.interp(at, s, v)))
         steps.append(at)
     return np.array(finals), np.array(steps)
+
+
+def _cadence(trials: list[Trial], metric: str, budget: float) -> dict[str, float]:
+    """`MetricSummary.evaluations` and `.evaluation_gap`: methods of one comparison should be evaluated
+    on one env-step cadence, and the report shows where they were not."""
+    counts, gaps = [], []
+    for t in trials:
+        s = np.asarray(t.curves[metric][0], dtype=float)
+        if np.isfinite(budget):
+            counts.append(int((s <= budget).sum()))
+            s = s[: int(np.searchsorted(s, budget, side="left")) + 1]  # through the first at/after it
+        else:
+            counts.append(len(s))
+        if len(s) > 1:
+            gaps.append(float(np.median(np.diff(s))))
+    return {"evaluations": float(np.mean(counts)), "evaluation_gap": _mean(gaps)}
 
 
 def _curve(trials: list[Trial], metric: str, grid: np.ndarray, reps: int, seed: int) -> CurveSummary:

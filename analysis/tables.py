@@ -77,6 +77,8 @@ def _metric_columns(m: MetricSummary | None, short: str) -> dict[str, object]:
         row[f"{short}_{what}_n_seeds"] = s.n
     row[f"{short}_auc_from"], row[f"{short}_auc_to"] = m.auc_window if m else (math.nan, math.nan)
     row[f"{short}_final_env_steps"] = m.final_step if m else math.nan
+    row[f"{short}_evaluations"] = m.evaluations if m else math.nan
+    row[f"{short}_evaluation_gap"] = m.evaluation_gap if m else math.nan
     for thr in THRESHOLDS:
         steps, reached = m.to_threshold[thr] if m else (math.nan, 0)
         # inf (not reached by the IQM's seeds) is written as text so a CSV reader cannot mistake it.
@@ -102,6 +104,11 @@ def _steps(x) -> str:
     if isinstance(x, str) or x is None or (isinstance(x, float) and math.isnan(x)):
         return _num(x, "")
     return f"{x:,.0f}"
+
+
+def _count(x) -> str:
+    """A mean count over seeds: 20, 12.5."""
+    return _num(x if isinstance(x, str) or math.isnan(x) else round(float(x), 1), "g")
 
 
 def _estimate(r, prefix: str) -> str:
@@ -172,7 +179,7 @@ def headline_table(frame: pd.DataFrame) -> Table:
 def details_table(frame: pd.DataFrame) -> Table:
     """One row per configuration and success metric it has (success; planned and direct where it has
     them): final, AUC, env steps to each threshold (seeds that reached it), the env step the final is
-    read at, wall time. A metric that equals another in every figure is one row ("success = planned")."""
+    read at, the evaluations up to it (and the median env steps between two: the cadence), wall time. A metric that equals another in every figure is one row ("success = planned")."""
     table = Table(
         [
             "configuration",
@@ -181,6 +188,7 @@ def details_table(frame: pd.DataFrame) -> Table:
             "AUC",
             *(f"env steps to {thr:g} (seeds)" for thr in THRESHOLDS),
             "final at (env steps)",
+            "evaluations to it (median gap)",
             "wall time (mean)",
         ]
     )
@@ -199,7 +207,11 @@ def details_table(frame: pd.DataFrame) -> Table:
                 cells.append(
                     f"{_steps(r[f'{s}_steps_to_{thr:g}'])} ({r[f'{s}_seeds_reaching_{thr:g}']}/{r['n_seeds']})"
                 )
-            cells += [_steps(r[f"{s}_final_env_steps"]), _duration(r["wall_time_s_mean"])]
+            cells += [
+                _steps(r[f"{s}_final_env_steps"]),
+                f"{_count(r[f'{s}_evaluations'])} ({_steps(r[f'{s}_evaluation_gap'])})",
+                _duration(r["wall_time_s_mean"]),
+            ]
             table.rows.append(cells)
     return table
 
@@ -207,6 +219,7 @@ def details_table(frame: pd.DataFrame) -> Table:
 def _same(r, a: str, b: str) -> bool:
     """Whether metrics `a` and `b` of one row agree in every figure the tables show."""
     cols = ["n_seeds", "final", "final_low", "final_high", "auc", "auc_low", "auc_high", "final_env_steps"]
+    cols += ["evaluations", "evaluation_gap"]
     cols += [f"steps_to_{thr:g}" for thr in THRESHOLDS] + [f"seeds_reaching_{thr:g}" for thr in THRESHOLDS]
     return all(_equal(r[f"{a}_{c}"], r[f"{b}_{c}"]) for c in cols)
 

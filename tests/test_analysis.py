@@ -785,6 +785,7 @@ def test_final_success_is_read_at_the_budget(tmp_path):
 
     from analysis.aggregate import summarise
     from analysis.load import load_sweep
+    from analysis.tables import details_table, summary_frame
     from copilot_ray.keys import BUDGET_PARAM, EVAL_SUCCESS
 
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
@@ -808,6 +809,15 @@ def test_final_success_is_read_at_the_budget(tmp_path):
     assert got["copilot"].final_step == got["her"].final_step == 3000
     assert got["her"].auc_window == (2000, 3000)  # from the latest first evaluation to the budget
     assert got["her"].aucs.tolist() == pytest.approx([0.4])
+    # the cadence each final rests on: evaluations up to the budget, median gap through the one past it
+    assert (got["copilot"].evaluations, got["copilot"].evaluation_gap) == (1, 2000)
+    assert (got["her"].evaluations, got["her"].evaluation_gap) == (3, 1000)
+    details = details_table(summary_frame(configs)).markdown()
+    assert (
+        "evaluations to it (median gap)" in details
+        and "| 1 (2,000) |" in details
+        and "| 3 (1,000) |" in details
+    )
     # a seed evaluated only after the budget gives its first evaluation, the closest to it
     from analysis.aggregate import final_values
 
