@@ -561,7 +561,8 @@ def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
     head = ("h2", "Probability of improvement over the best other method")
     why = (
         "P(X > Y) (Agarwal et al. 2021): the chance that a seed of CO-PILOT's default configuration "
-        "(algorithm copilot, no preset) scores higher than a seed of the best other method (highest final "
+        "(algorithm copilot, no preset; a variant such as the privileged after_failure restart is a row of "
+        "its own, its privileges beside it) scores higher than a seed of the best other method (highest final "
         "success), ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
         f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
         "seeds on each side."

@@ -258,6 +258,8 @@ def improvement_frame(
     for x, y in improvement_pairs(configs, metric):
         mx, my = x.metrics[metric], y.metrics[metric]
         row: dict[str, object] = {"copilot": x.label, "other": y.label, "metric": metric}
+        # a privileged CO-PILOT (after_failure restart) is paired too: its privileges stay beside it
+        row["copilot_privileges"], row["other_privileges"] = x.privileges, y.privileges
         for what, a, b in (("final", mx.finals, my.finals), ("auc", mx.aucs, my.aucs)):
             imp = stats.improvement(a, b, reps=reps, seed=seed)
             row[f"p_{what}"] = imp.p if imp.available else math.nan
@@ -268,9 +270,23 @@ def improvement_frame(
 
 
 def improvement_table(frame: pd.DataFrame) -> Table:
-    table = Table(["CO-PILOT (default)", "best other method", "P(final success higher)", "P(AUC higher)"])
+    table = Table(
+        [
+            "CO-PILOT (default preset; privileges)",
+            "best other method (privileges)",
+            "P(final success higher)",
+            "P(AUC higher)",
+        ]
+    )
     for _, r in frame.iterrows():
-        table.rows.append([str(r["copilot"]), str(r["other"]), str(r["p_final_text"]), str(r["p_auc_text"])])
+        table.rows.append(
+            [
+                f"{r['copilot']} ({r['copilot_privileges']})",
+                f"{r['other']} ({r['other_privileges']})",
+                str(r["p_final_text"]),
+                str(r["p_auc_text"]),
+            ]
+        )
     return table
 
 

@@ -881,8 +881,8 @@ def test_probability_of_improvement_in_the_report(honest):
     report = (honest["out"] / "report.md").read_text()
     section = report.split("## Probability of improvement over the best other method")[1].split("## ")[0]
     assert (
-        "| algorithm=copilot | algorithm=sac | 1.00 [95% CI 1.00, 1.00] | 1.00 [95% CI 1.00, 1.00] |"
-        in section
+        "| algorithm=copilot (collision_checks, map_queries, reset_to_state) | algorithm=sac (none) "
+        "| 1.00 [95% CI 1.00, 1.00] | 1.00 [95% CI 1.00, 1.00] |" in section
     )
     assert report.index("## Summary") < report.index("## Probability of improvement")
     imp = pd.read_csv(honest["out"] / "improvement.csv")
