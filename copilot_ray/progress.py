@@ -4,10 +4,12 @@
 
 One line per part: finished, running (or stopped, to be resumed) or not started; its trials finished,
 in progress and to come; the env steps its trials have taken of the ones it plans (each trial counted up
-to the budget); then the whole file's share done and the time left at the measured pace (`--check`'s
-rates, `copilot_ray/measured_throughput.json`, scaled by what is left of each part). A comparison of
-thirteen parts runs for a day on two cores; this is how a researcher sees how far it got without
-reading its log.
+to the budget); then the whole file's share done and the time left. The time left is read off the store
+where it can be: each part's own trials' pace (their env steps over their `time_total_s`, side by side as
+the spec runs them), else that of the part of the same algorithm that ran longest in the file, else
+`--check`'s rates (`copilot_ray/measured_throughput.json`); the trials left run on the part's
+`max_concurrent_trials` slots, begun ones first. A comparison of thirteen parts runs for a day on two
+cores; this is how a researcher sees how far it got without reading its log.
 
 ``--root`` (default: here) is the folder the sweep was started from (a `scripts/run_at_commit.sh`
 worktree): SPEC is read there, and its relative store and storage resolve there. Bad input exits 2.
@@ -27,7 +29,12 @@ from copilot_ray import keys, tracking
 from copilot_ray.sweep_spec import SpecError, load_specs
 from copilot_ray.sweep_spec.estimate import duration_text, wall_seconds
 
+TIME_TOTAL = "time_total_s"  # Tune's wall seconds of a trial, kept across restores
+
 FINISHED, RUNNING, NOT_STARTED = "finished", "running or stopped", "not started"
+# Where a part's time left comes from (`PartProgress.pace_from`).
+OWN, SAME_ALGORITHM, CHECK_RATES = "its own trials", "its algorithm's longest part here", "--check's rates"
+MIN_OBSERVED_S = 600.0  # less running than this gives too noisy a pace
 
 
 @dataclass(frozen=True)
@@ -40,7 +47,8 @@ class PartProgress:
     in_progress: int  # trial runs begun and not ended (RUNNING, or KILLED when a session ended)
     env_steps: float  # env steps taken, each trial counted up to the budget
     planned_env_steps: float | None  # planned trials x budget; None without an env-step budget
-    seconds_left: float | None  # at the measured pace; None without an estimate
+    seconds_left: float | None  # at the pace below; None without an estimate
+    pace_from: str | None = None  # OWN, SAME_ALGORITHM or CHECK_RATES
 
     @property
     def share(self) -> float | None:
@@ -49,19 +57,78 @@ class PartProgress:
         return 1.0 if self.state == FINISHED else min(1.0, self.env_steps / self.planned_env_steps)
 
 
-def part_progress(spec) -> PartProgress:
+def _runs(spec) -> list:
+    return tracking.trial_runs_in_store(spec.tracking.uri, spec.experiment, spec.name)
+
+
+@dataclass(frozen=True)
+class Pace:
+    """How a part's trials ran, side by side as its spec runs them (from their time_total_s against
+    env steps): `env_steps_per_s` after each trial's first result, and `setup_s`, what that first result
+    took beyond it (CO-PILOT's planner warm start, Ray's start)."""
+
+    env_steps_per_s: float
+    setup_s: float
+    longest_trial: float  # env steps of its longest trial: longer trials, a steadier figure
+
+    def trial_seconds(self, env_steps: float, begun: bool) -> float:
+        return (0.0 if begun else self.setup_s) + env_steps / self.env_steps_per_s
+
+
+def observed_pace(spec, runs) -> Pace | None:
+    """The pace of `runs` (one part's trials), from each trial's first result to its last; None
+    before MIN_OBSERVED_S of that in all."""
+    client = tracking._client(spec.tracking.uri) if runs else None
+    steps = seconds = setup = 0.0
+    begun, longest = 0, 0.0
+    for r in runs:
+        history = sorted((m.step, m.value) for m in client.get_metric_history(r.info.run_id, TIME_TOTAL))
+        if len(history) < 2:
+            continue
+        (s0, t0), (s1, t1) = history[0], history[-1]
+        steps, seconds = steps + s1 - s0, seconds + t1 - t0
+        setup += t0 - s0 * (t1 - t0) / max(s1 - s0, 1)
+        begun, longest = begun + 1, max(longest, s1)
+    if seconds < MIN_OBSERVED_S or steps <= 0:
+        return None
+    return Pace(steps / seconds, max(0.0, setup / begun), longest)
+
+
+def paces_by_algorithm(specs) -> dict[str, Pace]:
+    """Each algorithm's pace in this file, from its part with the longest trials (a part without
+    trials of its own yet borrows it)."""
+    best: dict[str, Pace] = {}
+    for spec in specs:
+        found = observed_pace(spec, _runs(spec))
+        if found is not None and found.longest_trial > getattr(best.get(spec.algorithm), "longest_trial", 0):
+            best[spec.algorithm] = found
+    return best
+
+
+def _seconds_left(spec, taken: list[float], pace: Pace) -> float:
+    """The trials left (begun ones first, then the planned ones not begun) in list scheduling on the
+    part's max_concurrent_trials slots."""
+    budget = float(spec.stop.env_steps)
+    trials = [pace.trial_seconds(max(0.0, budget - t), begun=t > 0) for t in taken]
+    trials += [pace.trial_seconds(budget, begun=False)] * max(0, len(spec.trial_plan()) - len(taken))
+    slots = [0.0] * max(1, spec.resources.max_concurrent_trials)
+    for seconds in trials:
+        slots[slots.index(min(slots))] += seconds
+    return max(slots)
+
+
+def part_progress(spec, paces: dict[str, Pace] | None = None) -> PartProgress:
+    """Where one part stands; its time left at its own trials' pace, else `paces[spec.algorithm]`, else
+    --check's rates."""
     planned = len(spec.trial_plan())
     budget = spec.stop.env_steps
     planned_steps = planned * budget if budget else None
-    runs = tracking.trial_runs_in_store(spec.tracking.uri, spec.experiment, spec.name)
+    runs = _runs(spec)
     finished_part, _ = tracking.sweep_runs_in_store(spec.tracking.uri, spec.experiment, spec.name)
     status = [r.info.status for r in runs]
-    steps = 0.0
-    for r in runs:
-        taken = float(r.data.metrics.get(keys.ENV_STEPS, 0.0))
-        steps += min(taken, budget) if budget else taken
+    taken = [float(r.data.metrics.get(keys.ENV_STEPS, 0.0)) for r in runs]
+    steps = sum(min(t, budget) if budget else t for t in taken)
     state = FINISHED if finished_part else RUNNING if runs else NOT_STARTED
-    whole = wall_seconds(spec)
     part = PartProgress(
         name=spec.name,
         state=state,
@@ -73,9 +140,16 @@ def part_progress(spec) -> PartProgress:
         planned_env_steps=planned_steps,
         seconds_left=None,
     )
+    if state == FINISHED:
+        return dataclasses.replace(part, seconds_left=0.0)
+    own = observed_pace(spec, runs)
+    if budget and (own is not None or spec.algorithm in (paces or {})):
+        pace, source = (own, OWN) if own is not None else (paces[spec.algorithm], SAME_ALGORITHM)
+        return dataclasses.replace(part, seconds_left=_seconds_left(spec, taken, pace), pace_from=source)
+    whole = wall_seconds(spec)
     if whole is None:
         return part
-    return dataclasses.replace(part, seconds_left=whole * (1.0 - (part.share or 0.0)))
+    return dataclasses.replace(part, seconds_left=whole * (1.0 - (part.share or 0.0)), pace_from=CHECK_RATES)
 
 
 def _steps(x: float | None) -> str:
@@ -87,7 +161,8 @@ def _steps(x: float | None) -> str:
 
 
 def report(specs) -> list[str]:
-    parts = [part_progress(spec) for spec in specs]
+    paces = paces_by_algorithm(specs)
+    parts = [part_progress(spec, paces) for spec in specs]
     width = max(len(p.name) for p in parts)
     lines = [
         f"  {'#':>2}  {'part':<{width}}  {'state':<18}  trials done/in progress/to come  env steps taken / planned"
@@ -110,7 +185,9 @@ def report(specs) -> list[str]:
         if planned
         else ""
     )
-    eta = f"; left: about {duration_text(sum(left))} at the measured pace (--check's rates)" if left else ""
+    sources = [p.pace_from for p in parts if p.state != FINISHED and p.pace_from]
+    paced = ", ".join(f"{s}: {sources.count(s)}" for s in (OWN, SAME_ALGORITHM, CHECK_RATES) if s in sources)
+    eta = f"; left: about {duration_text(sum(left))} (parts paced by {paced})" if left else ""
     if unknown:
         eta += f" ({unknown} part(s) without an estimate not counted)"
     lines.append(f"  {finished} of {len(parts)} parts finished{total}{eta}")

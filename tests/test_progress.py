@@ -17,10 +17,16 @@ from copilot_ray.sweep_spec import estimate, load_specs
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _file(tmp_path: Path) -> Path:
-    """Three parts of sweeps/smoke.yaml (2 trials of 1,500 env steps each), with a store: `done`
-    finished (one trial ran 1,700 env steps: past the budget), `cut` stopped with one trial finished and
-    one killed at 600 env steps, `fresh` never started. The store sits under results/, relative."""
+# cut's two trials' time_total_s at (env steps): 1,500 env steps in 750 s after their first results
+# (2 env steps/s), and 50 s and 10 s of setup before them (a mean of 30 s).
+CUT_TIMES = [[(500, 300.0), (1500, 800.0)], [(100, 60.0), (600, 310.0)]]
+
+
+def _file(tmp_path: Path, with_times: bool = False) -> Path:
+    """Three parts of sweeps/smoke.yaml (2 trials of 1,500 env steps each, one at a time), with a store:
+    `done` finished (one trial ran 1,700 env steps: past the budget), `cut` stopped with one trial
+    finished and one killed at 600 env steps (with `with_times`, its time_total_s: CUT_TIMES), `fresh`
+    never started. The store sits under results/, relative."""
     base = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
     base["tracking"] = {"storage": "results", "uri": "sqlite:///results/progress.db"}
     path = tmp_path / "three.yaml"
@@ -37,10 +43,12 @@ def _file(tmp_path: Path) -> Path:
         _, parent, _ = tracking.open_sweep_run(uri, spec.experiment, spec.name, resume=False)
         client = tracking._client(uri)
         exp_id = client.get_experiment_by_name(spec.experiment).experiment_id
-        for status, steps in trials:
+        for i, (status, steps) in enumerate(trials):
             tags = {SWEEP_TAG: spec.name, ROLE_TAG: ROLE_TRIAL, PARENT_TAG: parent}
             run_id = client.create_run(exp_id, tags=tags).info.run_id
             client.log_metric(run_id, ENV_STEPS, steps, step=steps)
+            for at, seconds in CUT_TIMES[i] if with_times and spec.name == "cut" else ():
+                client.log_metric(run_id, progress.TIME_TOTAL, seconds, step=at)
             client.set_terminated(run_id, status)
         tracking.end_sweep_run(uri, parent, "FINISHED" if finished else "KILLED")
     return path
@@ -67,7 +75,31 @@ def test_each_part_its_trials_and_env_steps_and_the_time_left(tmp_path, monkeypa
     assert left == [0.0, pytest.approx(90.0), 300.0]
     assert (
         out[-1]
-        == "  1 of 3 parts finished; 5k of 9k env steps (57 %); left: about 6 min at the measured pace (--check's rates)"
+        == "  1 of 3 parts finished; 5k of 9k env steps (57 %); left: about 6 min (parts paced by --check's rates: 2)"
+    )
+
+
+def test_the_time_left_follows_the_pace_the_trials_ran_at(tmp_path, monkeypatch, capsys):
+    """With its trials' time_total_s in the store, a part's time left is its own pace (2 env steps/s
+    after the first result, 30 s of setup per new trial), not --check's rate; a part not begun borrows
+    that of its algorithm's part with the longest trials."""
+    rates = tmp_path / "rates.json"
+    rates.write_text(json.dumps({"env_steps_per_s": {"copilot": {"lone": 10.0, "side_by_side": 5.0}}}))
+    monkeypatch.setattr(estimate, "THROUGHPUT_FILE", rates)
+    path = _file(tmp_path, with_times=True)
+    with contextlib.chdir(tmp_path):
+        specs = load_specs(path)
+        paces = progress.paces_by_algorithm(specs)
+        assert paces["copilot"] == progress.Pace(2.0, 30.0, 1500)
+        parts = [progress.part_progress(spec, paces) for spec in specs]
+    # cut: its killed trial's 900 env steps left (no setup: begun); fresh: 2 x (30 s + 1,500 / 2)
+    assert [p.seconds_left for p in parts] == [0.0, pytest.approx(450.0), pytest.approx(1560.0)]
+    assert [p.pace_from for p in parts] == [None, progress.OWN, progress.SAME_ALGORITHM]
+    assert progress.main([path.name, "--root", str(tmp_path)]) == 0
+    assert (
+        capsys.readouterr()
+        .out.splitlines()[-1]
+        .endswith(f"left: about 34 min (parts paced by {progress.OWN}: 1, {progress.SAME_ALGORITHM}: 1)")
     )
 
 
