@@ -565,7 +565,8 @@ def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
         "its own, its privileges beside it) scores higher than a seed of the best other method (highest final "
         "success), ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
         f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
-        "seeds on each side."
+        "seeds on each side. The last column says whether CO-PILOT's CI of final success lies wholly above "
+        "the other method's (a CI on both sides needs as many seeds)."
     )
     if frame.empty:
         return [head, ("p", why), ("p", "No CO-PILOT default configuration or no other method with success.")]

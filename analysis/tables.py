@@ -265,8 +265,21 @@ def improvement_frame(
             row[f"p_{what}"] = imp.p if imp.available else math.nan
             row[f"p_{what}_low"], row[f"p_{what}_high"] = imp.low, imp.high
             row[f"p_{what}_text"] = imp.text()
+        row["final_ci_apart"] = ci_apart(mx.final, my.final)
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def ci_apart(x: stats.SeedSummary, y: stats.SeedSummary) -> str:
+    """Whether x's CI lies wholly above y's ("yes"), below it, or they overlap; without a CI on both
+    sides (fewer than MIN_SEEDS_FOR_CI seeds) there is nothing to tell."""
+    if not (x.has_ci and y.has_ci):
+        return f"no CI (n = {x.n} and {y.n}; a CI needs {stats.MIN_SEEDS_FOR_CI})"
+    if x.low > y.high:
+        return f"yes: {x.low:.3f} > {y.high:.3f}"
+    if x.high < y.low:
+        return f"below: {x.high:.3f} < {y.low:.3f}"
+    return f"no: they overlap ([{x.low:.3f}, {x.high:.3f}] and [{y.low:.3f}, {y.high:.3f}])"
 
 
 def improvement_table(frame: pd.DataFrame) -> Table:
@@ -276,6 +289,7 @@ def improvement_table(frame: pd.DataFrame) -> Table:
             "best other method (privileges)",
             "P(final success higher)",
             "P(AUC higher)",
+            "final success CIs apart (CO-PILOT's above)",
         ]
     )
     for _, r in frame.iterrows():
@@ -285,6 +299,7 @@ def improvement_table(frame: pd.DataFrame) -> Table:
                 f"{r['other']} ({r['other_privileges']})",
                 str(r["p_final_text"]),
                 str(r["p_auc_text"]),
+                str(r["final_ci_apart"]),
             ]
         )
     return table

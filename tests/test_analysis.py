@@ -882,11 +882,23 @@ def test_probability_of_improvement_in_the_report(honest):
     section = report.split("## Probability of improvement over the best other method")[1].split("## ")[0]
     assert (
         "| algorithm=copilot (collision_checks, map_queries, reset_to_state) | algorithm=sac (none) "
-        "| 1.00 [95% CI 1.00, 1.00] | 1.00 [95% CI 1.00, 1.00] |" in section
+        "| 1.00 [95% CI 1.00, 1.00] | 1.00 [95% CI 1.00, 1.00] | yes: " in section
     )
     assert report.index("## Summary") < report.index("## Probability of improvement")
     imp = pd.read_csv(honest["out"] / "improvement.csv")
     assert imp.loc[0, "p_final"] == 1.0 and imp.loc[0, "p_auc"] == 1.0
+
+
+def test_whether_two_final_success_intervals_are_apart():
+    from analysis import stats
+    from analysis.tables import ci_apart
+
+    five = stats.SeedSummary(5, 0.6, 0.5, 0.7)
+    assert ci_apart(five, stats.SeedSummary(5, 0.3, 0.2, 0.4)) == "yes: 0.500 > 0.400"
+    assert ci_apart(stats.SeedSummary(5, 0.3, 0.2, 0.4), five) == "below: 0.400 < 0.500"
+    assert ci_apart(five, stats.SeedSummary(5, 0.45, 0.4, 0.55)).startswith("no: they overlap")
+    # two seeds have a range, not a CI: nothing to tell, however far apart
+    assert ci_apart(five, stats.SeedSummary(2, 0.05, 0.0, 0.1)) == "no CI (n = 5 and 2; a CI needs 5)"
 
 
 def test_provenance_block_and_metrics_export(honest, store):
