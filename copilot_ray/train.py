@@ -66,7 +66,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--stop-env-steps", type=int, default=100_000, help="stop after this many env steps (default 100000)"
     )
     run.add_argument(
-        "--stop-iters", type=int, default=None, help="stop after this many iterations (default: none)"
+        "--stop-iters",
+        type=int,
+        default=None,
+        help="stop after this many iterations (default: none; with --eval-every-env-steps an iteration "
+        "also ends at the repetition past each evaluation point)",
     )
     run.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
     run.add_argument(
