@@ -6,7 +6,7 @@ One line per part: finished, running (or stopped, to be resumed) or not started;
 in progress and to come; the env steps its trials have taken of the ones it plans (each trial counted up
 to the budget); then the whole file's share done and the time left. The time left is read off the store
 where it can be: each part's own trials' pace (their env steps over their `time_total_s`, side by side as
-the spec runs them), else that of the part of the same algorithm that ran longest in the file, else
+the spec runs them), else that of the part of the same algorithm with the longest trials in the file, else
 `--check`'s rates (`copilot_ray/measured_throughput.json`); the trials left run on the part's
 `max_concurrent_trials` slots, begun ones first. A comparison of thirteen parts runs for a day on two
 cores; this is how a researcher sees how far it got without reading its log.
@@ -78,11 +78,10 @@ class Pace:
 def observed_pace(spec, runs) -> Pace | None:
     """The pace of `runs` (one part's trials), from each trial's first result to its last; None
     before MIN_OBSERVED_S of that in all."""
-    client = tracking._client(spec.tracking.uri) if runs else None
     steps = seconds = setup = 0.0
     begun, longest = 0, 0.0
     for r in runs:
-        history = sorted((m.step, m.value) for m in client.get_metric_history(r.info.run_id, TIME_TOTAL))
+        history = tracking.metric_history(spec.tracking.uri, r.info.run_id, TIME_TOTAL)
         if len(history) < 2:
             continue
         (s0, t0), (s1, t1) = history[0], history[-1]

@@ -287,6 +287,11 @@ def trial_runs_in_store(tracking_uri: str, experiment: str, sweep: str) -> list:
     return find_runs(client, exp.experiment_id, {SWEEP_TAG: sweep, ROLE_TAG: ROLE_TRIAL})
 
 
+def metric_history(tracking_uri: str, run_id: str, key: str) -> list[tuple[int, float]]:
+    """A run's values of metric `key` as (step, value), in step order (our runs log at env steps)."""
+    return sorted((m.step, m.value) for m in _client(tracking_uri).get_metric_history(run_id, key))
+
+
 def discard_runs(tracking_uri: str, run_ids: Sequence[str]) -> None:
     """Marks runs deleted (MLflow's soft delete: reports, best_of and the UI's default view skip them)."""
     client = _client(tracking_uri)
