@@ -272,7 +272,9 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
         {
             "name": "p_rrt",
             "algorithm": "rrt_star",
-            "config": {"time_limit_s": 0.2, "eval_num_tasks": 4, "tasks_per_iteration": 2},
+            # 1 s per task: at 0.2 s a busy machine leaves the rigid body's RRT* unsolved tasks (OMPL's
+            # limit is wall time), and the SGT-PG part may then share no solved task to divide by
+            "config": {"time_limit_s": 1.0, "eval_num_tasks": 4, "tasks_per_iteration": 2},
             "stop": {"iterations": 5},
             **common,
         },
@@ -285,7 +287,7 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
                 "eval_num_tasks": 4,
                 "task_batch_size": 4,
                 "planner.num_samples": 4,
-                "rrt_reference_time_s": 0.2,
+                "rrt_reference_time_s": 1.0,
             },
             "stop": {"iterations": 2},
             **common,
@@ -299,7 +301,7 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     # One RRT* reference per agent, stored by the RRT* part and divided by in the SGT-PG part.
     # (the test session's cache, set in conftest.py before Ray started: trial workers see it too)
     cache = Path(os.environ["COPILOT_RAY_CACHE"]) / "rrt_reference"
-    assert len(list(cache.glob("maze-*-4tasks-0.2s-seed0-*.npz"))) == 2
+    assert len(list(cache.glob("maze-*-4tasks-1s-seed0-*.npz"))) == 2
 
     client, parents, children = _runs(load_specs(path)[0])
     assert sorted(p.data.tags[SWEEP_TAG] for p in parents) == ["p_rrt", "p_sgt"]
