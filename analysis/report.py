@@ -49,6 +49,7 @@ import datetime as _dt
 import html
 import re
 import shlex
+import subprocess
 import sys
 from pathlib import Path
 
@@ -534,11 +535,33 @@ def _provenance(sweep: Sweep, argv: list[str], log_to: str | None) -> list[str]:
     lines.append(f"experiment: {sweep.experiment} (id {sweep.experiment_id}); sweep: {sweep.sweep_name}")
     lines += _spec_lines(sweep)
     lines.append(f"command: {command_line(argv)}")
+    lines.append(_report_code())
     lines.append(
         f"generated {_dt.datetime.now().isoformat(timespec='seconds')}"
         + (f"; logged to run {log_to} under report/" if log_to else "")
     )
     return lines
+
+
+def _report_code() -> str:
+    """Which code read the store: the runs' commit says how they ran, this one how they were summarised
+    (a later report may read the same store differently, e.g. final success at the budget)."""
+    root = Path(__file__).resolve().parents[1]
+
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    if not commit:
+        return "report code: not a git checkout (its commit is unknown)"
+    dirty = git("status", "--porcelain", "--", "analysis", "copilot_ray")
+    return f"report code: commit {commit[:12]}" + (
+        " with uncommitted changes to analysis/ or copilot_ray/" if dirty else ""
+    )
 
 
 def _spec_lines(sweep: Sweep) -> list[str]:

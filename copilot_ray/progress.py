@@ -29,8 +29,6 @@ from copilot_ray import keys, tracking
 from copilot_ray.sweep_spec import SpecError, load_specs
 from copilot_ray.sweep_spec.estimate import duration_text, wall_seconds
 
-TIME_TOTAL = "time_total_s"  # Tune's wall seconds of a trial, kept across restores
-
 FINISHED, RUNNING, NOT_STARTED = "finished", "running or stopped", "not started"
 # Where a part's time left comes from (`PartProgress.pace_from`).
 OWN, SAME_ALGORITHM, CHECK_RATES = "its own trials", "its algorithm's longest part here", "--check's rates"
@@ -81,7 +79,9 @@ def observed_pace(spec, runs) -> Pace | None:
     steps = seconds = setup = 0.0
     begun, longest = 0, 0.0
     for r in runs:
-        history = tracking.metric_history(spec.tracking.uri, r.info.run_id, TIME_TOTAL)
+        history = tracking.metric_history(
+            spec.tracking.uri, r.info.run_id, keys.TIME_TOTAL_S
+        )  # kept across restores
         if len(history) < 2:
             continue
         (s0, t0), (s1, t1) = history[0], history[-1]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import time
@@ -908,6 +909,8 @@ def test_provenance_block_and_metrics_export(honest, store):
     head = report.split("## Missing or incomplete")[0]
     assert head.index("## Provenance") < head.index("git commits")
     assert "git commits: 1111111aaaaaaa, 2222222bbbbbbb" in head
+    # the code that read the store, beside the commits its runs came from
+    assert re.search(r"report code: (commit [0-9a-f]{12}|not a git checkout)", head)
     assert "WARNING: the runs come from 2 different commits, not from one" in head
     assert "2 of 12 runs carry no git_commit tag" in head
     assert honest["uri"] in head and f"experiment: {HONEST}" in head

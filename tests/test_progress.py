@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from copilot_ray import progress, tracking
-from copilot_ray.keys import ENV_STEPS, PARENT_TAG, ROLE_TAG, ROLE_TRIAL, SWEEP_TAG
+from copilot_ray.keys import ENV_STEPS, PARENT_TAG, ROLE_TAG, ROLE_TRIAL, SWEEP_TAG, TIME_TOTAL_S
 from copilot_ray.sweep_spec import estimate, load_specs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,7 +48,7 @@ def _file(tmp_path: Path, with_times: bool = False) -> Path:
             run_id = client.create_run(exp_id, tags=tags).info.run_id
             client.log_metric(run_id, ENV_STEPS, steps, step=steps)
             for at, seconds in CUT_TIMES[i] if with_times and spec.name == "cut" else ():
-                client.log_metric(run_id, progress.TIME_TOTAL, seconds, step=at)
+                client.log_metric(run_id, TIME_TOTAL_S, seconds, step=at)
             client.set_terminated(run_id, status)
         tracking.end_sweep_run(uri, parent, "FINISHED" if finished else "KILLED")
     return path
