@@ -7,8 +7,8 @@ A comparison runs for longer than one machine may live. The archive holds what `
 * the MLflow store: the SQLite file (a consistent snapshot, taken with SQLite's backup API, so even a
   store being written packs whole) and every part's folder (its artifacts, ``spec.yaml``, ``optuna.db``),
   without the final checkpoints logged as run artifacts unless ``--final-checkpoints``;
-* the Tune folder (Tune's state, trial folders, their last checkpoints) of every part the store does not
-  record finished: ``--resume`` then continues those trials from their checkpoints instead of starting
+* the Tune folder (Tune's state, trial folders, the checkpoints of trials not done) of every part the
+  store does not record finished: ``--resume`` then continues those trials from their checkpoints instead of starting
   the part over (a stage-2 part of five 200k-step seeds is longer than a session); finished parts go
   without theirs (``--resume`` skips them by the store);
 * the sweep's log, ``<storage>/<file stem>.log``, when there is one;
@@ -107,6 +107,16 @@ def _snapshot(db: Path, into: Path) -> Path:
     return copy
 
 
+def _trial_finished(trial_folder: Path) -> bool:
+    """Whether a Tune trial folder's last result says done (its result.json: one JSON record a line)."""
+    results = trial_folder / "result.json"
+    try:
+        lines = results.read_text().strip().splitlines()
+        return bool(lines) and bool(json.loads(lines[-1]).get("done"))
+    except (OSError, ValueError):
+        return False
+
+
 def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool = False) -> list[PartState]:
     """Writes the archive (see the module's doc) and returns each part's state as packed."""
     specs = load_specs(spec_path)  # relative storage and store paths resolve against the current folder
@@ -123,6 +133,8 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
             return None
         if not final_checkpoints and path.parts[-2:] == FINAL_CHECKPOINT:
             return None
+        if info.isdir() and path.name.startswith("checkpoint_") and _trial_finished(path.parent):
+            return None  # Tune skips a finished trial on resume and never loads its checkpoints
         return info
 
     storage = db.parent

@@ -47,6 +47,11 @@ def _three_parts(tmp_path: Path):
         (artifacts / "checkpoint" / "algorithm_state.pkl").write_bytes(b"final")
         (artifacts / "config.yaml").write_text("trial: {}\n")
         (folder / "optuna.db").write_bytes(b"studies")
+    # a trial of the cut part that finished before the cut: its checkpoints stay behind
+    finished = tmp_path / "results" / cut.name / "tune" / sweep.experiment_names(cut)[0][0] / "trial_0"
+    (finished / "checkpoint_000003").mkdir(parents=True)
+    (finished / "checkpoint_000003" / "state.pkl").write_bytes(b"weights")
+    (finished / "result.json").write_text('{"done": false}\n{"done": true}\n')
     (tmp_path / "results" / "three.log").write_text("=== part 1 of 3\n")
     return path, uri, (done, cut, fresh)
 
@@ -77,6 +82,8 @@ def test_pack_keeps_the_store_and_unfinished_tune_folders_and_leaves_out_the_res
     names = _names(out)
     assert "results/carried.db" in names and "results/three.log" in names
     assert "results/cut/tune/cut/trial_1/checkpoint_000002/state.pkl" in names
+    assert "results/cut/tune/cut/trial_0/result.json" in names
+    assert not any(n.startswith("results/cut/tune/cut/trial_0/checkpoint_") for n in names)
     assert not any(n.startswith("results/done/tune") for n in names)
     assert "results/done/mlartifacts/run1/artifacts/config.yaml" in names
     assert "results/done/optuna.db" in names and "results/cut/optuna.db" in names
