@@ -93,12 +93,25 @@ def observed_pace(spec, runs) -> Pace | None:
     return Pace(steps / seconds, max(0.0, setup / begun), longest)
 
 
-def paces_by_algorithm(specs) -> dict[str, Pace]:
+@dataclass(frozen=True)
+class Observed:
+    """What the store holds of one part's trials, read once: their runs and their pace."""
+
+    runs: list
+    pace: Pace | None
+
+
+def observe(spec) -> Observed:
+    runs = _runs(spec)
+    return Observed(runs, observed_pace(spec, runs))
+
+
+def paces_by_algorithm(specs, observed: dict[str, Observed] | None = None) -> dict[str, Pace]:
     """Each algorithm's pace in this file, from its part with the longest trials (a part without
-    trials of its own yet borrows it)."""
+    trials of its own yet borrows it); `observed`: each part's, by name, when already read."""
     best: dict[str, Pace] = {}
     for spec in specs:
-        found = observed_pace(spec, _runs(spec))
+        found = (observed[spec.name] if observed else observe(spec)).pace
         if found is not None and found.longest_trial > getattr(best.get(spec.algorithm), "longest_trial", 0):
             best[spec.algorithm] = found
     return best
@@ -116,13 +129,16 @@ def _seconds_left(spec, taken: list[float], pace: Pace) -> float:
     return max(slots)
 
 
-def part_progress(spec, paces: dict[str, Pace] | None = None) -> PartProgress:
+def part_progress(
+    spec, paces: dict[str, Pace] | None = None, observed: Observed | None = None
+) -> PartProgress:
     """Where one part stands; its time left at its own trials' pace, else `paces[spec.algorithm]`, else
-    --check's rates."""
+    --check's rates. `observed`: what the store holds of it, when already read."""
     planned = len(spec.trial_plan())
     budget = spec.stop.env_steps
     planned_steps = planned * budget if budget else None
-    runs = _runs(spec)
+    observed = observed or observe(spec)
+    runs = observed.runs
     finished_part, _ = tracking.sweep_runs_in_store(spec.tracking.uri, spec.experiment, spec.name)
     status = [r.info.status for r in runs]
     taken = [float(r.data.metrics.get(keys.ENV_STEPS, 0.0)) for r in runs]
@@ -141,7 +157,7 @@ def part_progress(spec, paces: dict[str, Pace] | None = None) -> PartProgress:
     )
     if state == FINISHED:
         return dataclasses.replace(part, seconds_left=0.0)
-    own = observed_pace(spec, runs)
+    own = observed.pace
     if budget and (own is not None or spec.algorithm in (paces or {})):
         pace, source = (own, OWN) if own is not None else (paces[spec.algorithm], SAME_ALGORITHM)
         return dataclasses.replace(part, seconds_left=_seconds_left(spec, taken, pace), pace_from=source)
@@ -160,8 +176,9 @@ def _steps(x: float | None) -> str:
 
 
 def report(specs) -> list[str]:
-    paces = paces_by_algorithm(specs)
-    parts = [part_progress(spec, paces) for spec in specs]
+    observed = {spec.name: observe(spec) for spec in specs}  # the store read once per part
+    paces = paces_by_algorithm(specs, observed)
+    parts = [part_progress(spec, paces, observed[spec.name]) for spec in specs]
     width = max(len(p.name) for p in parts)
     lines = [
         f"  {'#':>2}  {'part':<{width}}  {'state':<18}  trials done/in progress/to come  env steps taken / planned"
