@@ -1,0 +1,201 @@
+"""Env steps/s of trials on a CPU or a GPU share, side by side, without Tune or MLflow.
+
+    PYTHONPATH=. python benchmarks/device_throughput.py [--algorithm copilot] [--trials 1]
+        [--gpus-per-trial 1] [--cpus-per-trial 2] [--cpu-baseline] [--seconds 180] [--eval-every 3200]
+
+Each trial is a Ray actor holding `--cpus-per-trial` CPUs (torch's threads follow them) and
+`--gpus-per-trial` of a GPU (0: the CPU; fractions share one card, as Tune's trials would), that builds
+the algorithm from the registry at its defaults on maze-point `--layout` with
+`resources.gpus_per_trial`'s learner placement, and trains until `--seconds` have passed and it has done
+at least 3 iterations. `--cpu-baseline` adds one trial on `--cpus-per-trial` CPUs and no GPU, run beside
+the others, so a GPU's multiple is measured on the same machine at the same moment. The first iteration
+(the algorithm starting, CO-PILOT's planner warm start) is left out of the rates.
+
+Prints, per trial kind: env steps/s per trial and in aggregate, SAC updates/s, the shares of wall time
+per phase (the algorithm's own `copilot/time/*` timers; "other" is the rest: Ray and result building),
+trials per hour at `--budget` env steps, and the learner's device as the trial saw it. What this leaves
+out against `benchmarks/throughput.py`: Tune's and MLflow's per-iteration costs (under 1 % there), and
+it needs neither installed beyond Ray's own Tune imports.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+
+PHASES = ("agent_s", "agent_updates_s", "planner_s", "cost_model_s", "eval_s")
+
+
+def _config(algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float):
+    from copilot_ray.registry import RunContext, get_algorithm
+
+    run = RunContext(
+        env_id="maze-point",
+        env_config={"layout": layout},
+        seed=seed,
+        num_cpus_for_main_process=cpus,
+        num_gpus=gpus,
+    )
+    values = {"eval_every_env_steps": eval_every, "eval_num_tasks": 100}
+    if algorithm == "copilot":
+        values["eval_tree_tasks"] = 0  # no tree snapshots written to disk per evaluation
+        if warm_start is not None:
+            values["planner_warm_start"] = warm_start
+    return get_algorithm(algorithm).build_config(values, run)
+
+
+class Trial:
+    """One algorithm in one actor: builds it, trains it for a while, returns per-iteration records."""
+
+    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus):
+        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus).build_algo()
+
+    def device(self) -> str:
+        import torch
+
+        learner = self.algo.learner_group._learner
+        module = next(iter(learner.module._rl_modules.values()))
+        return f"{next(module.parameters()).device} (torch threads {torch.get_num_threads()})"
+
+    def train_for(self, seconds: float, min_iterations: int = 3) -> list[dict]:
+        from copilot_ray import keys
+
+        records, started = [], time.perf_counter()
+        while time.perf_counter() - started < seconds or len(records) < min_iterations:
+            t0 = time.perf_counter()
+            result = self.algo.train()
+            wall = time.perf_counter() - t0
+            record = {
+                "env_steps": float(keys.result_value(result, keys.ENV_STEPS) or 0.0),
+                "wall_s": wall,
+                "updates": float(keys.result_value(result, keys.AGENT_SAC_UPDATES) or 0.0),
+            }
+            for p in PHASES:
+                record[p] = float(keys.result_value(result, keys.TIME_PREFIX + p) or 0.0)
+            records.append(record)
+        return records
+
+
+def rates(records: list[dict]) -> dict:
+    """Env steps/s, updates/s and phase shares over the iterations after the first."""
+    later = records[1:]
+    wall = sum(r["wall_s"] for r in later)
+    steps = records[-1]["env_steps"] - records[0]["env_steps"]
+    spent = {p: sum(r[p] for r in later) for p in PHASES}
+    shares = {p: (spent[p] - (spent["agent_updates_s"] if p == "agent_s" else 0.0)) / wall for p in PHASES}
+    inside = spent["agent_s"] + spent["planner_s"] + spent["cost_model_s"] + spent["eval_s"]
+    shares["other"] = max(0.0, wall - inside) / wall
+    return {
+        "env_steps_per_s": steps / wall,
+        "updates_per_s": sum(r["updates"] for r in later) / wall,
+        "shares": shares,
+        "iterations": len(later),
+        "first_iteration_s": records[0]["wall_s"],
+    }
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--algorithm", default="copilot", help="a registered RLlib algorithm (default copilot)")
+    p.add_argument("--layout", default="four-rooms")
+    p.add_argument("--trials", type=int, default=1, help="trials on --gpus-per-trial (default 1)")
+    p.add_argument("--gpus-per-trial", type=float, default=0.0, help="0: the CPU (default 0)")
+    p.add_argument("--cpus-per-trial", type=int, default=2)
+    p.add_argument("--cpu-baseline", action="store_true", help="one more trial on the CPU, beside them")
+    p.add_argument("--seconds", type=float, default=180.0, help="train each trial at least this long")
+    p.add_argument("--eval-every", type=int, default=3200, help="env steps between evaluations")
+    p.add_argument(
+        "--warm-start",
+        type=int,
+        default=None,
+        help="CO-PILOT's planner_warm_start (phases before the first env step, in the first iteration only, "
+        "which the rates leave out; default: the setting's own, 1000, ~100 s)",
+    )
+    p.add_argument("--budget", type=int, default=200_000, help="env steps per trial for trials/hour")
+    args = p.parse_args(argv)
+    bad = [
+        (f"--{k.replace('_', '-')}", v, need)
+        for k, v, ok, need in (
+            ("trials", args.trials, args.trials >= 1, "an integer >= 1"),
+            ("gpus_per_trial", args.gpus_per_trial, args.gpus_per_trial >= 0, "a number >= 0"),
+            ("cpus_per_trial", args.cpus_per_trial, args.cpus_per_trial >= 1, "an integer >= 1"),
+            ("seconds", args.seconds, args.seconds > 0, "a number > 0"),
+            ("eval_every", args.eval_every, args.eval_every >= 1, "an integer >= 1"),
+            ("budget", args.budget, args.budget >= 1, "an integer >= 1"),
+        )
+        if not ok
+    ]
+    cpus = args.cpus_per_trial * (args.trials + int(args.cpu_baseline))
+    if args.cpus_per_trial >= 1 and cpus > (os.cpu_count() or 1):
+        bad.append(
+            ("--cpus-per-trial", args.cpus_per_trial, f"trials x CPUs ({cpus}) over {os.cpu_count()} cores")
+        )
+    if args.gpus_per_trial * args.trials > 1 + 1e-9:
+        bad.append(("--gpus-per-trial", args.gpus_per_trial, "over one GPU in all (this runs on one card)"))
+    for flag, value, need in bad:
+        print(f"error: {flag} {value!r} is invalid: must be {need}", file=sys.stderr)
+    if bad:
+        raise SystemExit(2)
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+    import ray
+
+    gpus_needed = 1 if args.gpus_per_trial > 0 else 0
+    ray.init(
+        num_cpus=os.cpu_count(), num_gpus=gpus_needed or None, include_dashboard=False, log_to_driver=False
+    )
+    try:
+        kinds = [("gpu" if args.gpus_per_trial > 0 else "cpu", args.gpus_per_trial, args.trials)]
+        if args.cpu_baseline:
+            kinds.append(("cpu baseline", 0.0, 1))
+        actors = []
+        for kind, gpus, n in kinds:
+            remote = ray.remote(num_cpus=args.cpus_per_trial, num_gpus=gpus)(Trial)
+            for i in range(n):
+                actor = remote.remote(
+                    args.algorithm,
+                    args.layout,
+                    args.eval_every,
+                    args.warm_start,
+                    i,
+                    args.cpus_per_trial,
+                    gpus,
+                )
+                actors.append((kind, actor))
+        devices = ray.get([a.device.remote() for _, a in actors])
+        t0 = time.perf_counter()
+        records = ray.get([a.train_for.remote(args.seconds) for _, a in actors])
+        wall = time.perf_counter() - t0
+    finally:
+        ray.shutdown()
+    print(
+        f"{args.algorithm} on maze-point {args.layout}, evaluation every {args.eval_every} env steps "
+        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial; {wall:.0f} s"
+    )
+    for kind, _, _ in kinds:
+        rows = [rates(r) for (k, _), r in zip(actors, records, strict=True) if k == kind]
+        seen = sorted({d for (k, _), d in zip(actors, devices, strict=True) if k == kind})
+        per_trial = statistics.mean(r["env_steps_per_s"] for r in rows)
+        aggregate = sum(r["env_steps_per_s"] for r in rows)
+        shares = {p: statistics.mean(r["shares"][p] for r in rows) for p in rows[0]["shares"]}
+        print(
+            f"{kind}: {len(rows)} trial(s), learner on {', '.join(seen)}: {per_trial:.0f} env steps/s per trial "
+            f"(min {min(r['env_steps_per_s'] for r in rows):.0f}), {aggregate:.0f} in aggregate, "
+            f"{statistics.mean(r['updates_per_s'] for r in rows):.0f} SAC updates/s per trial, "
+            f"{aggregate * 3600 / args.budget:.2f} trials/hour at {args.budget} env steps; "
+            f"iterations measured {min(r['iterations'] for r in rows)}-{max(r['iterations'] for r in rows)}, "
+            f"first iteration {statistics.mean(r['first_iteration_s'] for r in rows):.0f} s"
+        )
+        print("   shares: " + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
