@@ -69,11 +69,12 @@ from copilot_ray.keys import (
 from copilot_ray.privileges import DESCRIPTIONS
 
 from . import figures, paths, stats, tables
-from .aggregate import ConfigSummary, Missing, privileges_label, summarise
+from .aggregate import ConfigSummary, Missing, headline_metric, privileges_label, summarise
 from .export import METRICS_CSV, write_metrics_csv
 from .load import (
     AUTO,
     TASK_SETS,
+    TEST,
     VALIDATION,
     AnalysisError,
     Sweep,
@@ -88,6 +89,10 @@ from .load import (
 )
 
 MAX_TREE_FIGURES = 8
+# A method whose final success on the VALIDATION tasks is above this gets `stats.MIN_SEEDS_FOR_CI` seeds in
+# a comparison (below it, 2 do: its row shows a range and no CI). Read off the validation tasks so that how
+# many seeds a method gets is never decided by the test figures being reported.
+MORE_SEEDS_ABOVE = 0.1
 _VALIDATION_WHY = (
     "every sweep here is a search, which chose by these tasks; its test figures are not shown, so that "
     "nothing is chosen by them: the comparison's second stage reports the test tasks"
@@ -173,11 +178,14 @@ def main(argv: list[str] | None = None) -> int:
 
     configs, missing = summarise(sweep, reps=args.bootstrap_reps, seed=args.seed)
     _print_status(sweep, configs, missing)
+    seed_notes = seeds_wanted(sweep, configs, args)
+    for line in seed_notes:
+        print(f"note: {line}")
     axes_shown = ", ".join(axis_name(a) for a in sweep.axes()) or "configuration"
 
     # (title, png, caption): the comparison figures' captions name each configuration's privileges
     figs: list[tuple[str, Path, str]] = []
-    notes: list[str] = []
+    notes: list[str] = list(seed_notes)
     left_out: list[str] = []  # what a figure leaves out, and why
     several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
     tasks = sweep.tasks
@@ -325,6 +333,36 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         print(f"logged to MLflow run {log_to} under report/")
     return 0
+
+
+def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
+    """One line per configuration reported on the test tasks with fewer than `MIN_SEEDS_FOR_CI` seeds
+    whose final success on the validation tasks (the same runs' evaluations, mean over seeds) is above
+    `MORE_SEEDS_ABOVE`: the comparison's rule asks for more seeds there. [] for validation reports and
+    runs that logged no validation success."""
+    short = [c for c in configs if 0 < c.n_seeds < stats.MIN_SEEDS_FOR_CI]
+    if sweep.tasks != TEST or not short:
+        return []
+    try:
+        validation = load_sweep(sweep.tracking_uri, sweep.experiment, args.parent_run, tasks=VALIDATION)
+        for extra in args.also_from:
+            add_trials_from(validation, resolve_tracking_uri(extra, experiment=args.experiment))
+    except AnalysisError:
+        return []
+    on_validation = {c.key: c for c in summarise(validation, reps=10, seed=args.seed)[0]}
+    metric = headline_metric(configs)
+    out = []
+    for c in short:
+        v = on_validation.get(c.key)
+        finals = v.metrics[metric].finals if v is not None and metric in v.metrics else np.array([])
+        if finals.size and np.nanmean(finals) > MORE_SEEDS_ABOVE:
+            out.append(
+                f"{c.label}: {c.n_seeds} seed(s), and its final validation success ({metric}) is "
+                f"{np.nanmean(finals):.2f}, above {MORE_SEEDS_ABOVE}: a method above it gets "
+                f"{stats.MIN_SEEDS_FOR_CI} seeds in a comparison (decided on the validation tasks, not on "
+                "these test figures). Add seeds to its part (`seeds:`) and resume the sweep."
+            )
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- planners

@@ -1215,3 +1215,45 @@ def test_a_crowded_figure_keeps_every_methods_best_configuration():
     assert MAX_CURVES == 12 and dropped == 2 and len(shown) == 12
     assert copilot[0] in shown and copilot[1] in shown
     assert her[0] not in shown and her[1] not in shown  # the two lowest HER configurations make room
+
+
+def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_seeds(tmp_path, capsys):
+    """The comparison's rule (5 seeds for a method above 0.1, 2 may do below) is read off the validation
+    tasks: a 2-seed configuration at 0.30 validation success gets a note, one at 0.05 none, whatever their
+    test figures say; a validation report gives no such note."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import EVAL_FRESH, EVAL_SUCCESS, validation_key
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    now = int(time.time() * 1000)
+    exp_id = client.create_experiment("comparison", artifact_location=(tmp_path / "a").as_uri())
+    pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "comparison"}).info.run_id
+    client.log_param(pid, "searcher", "grid")
+    # (algorithm, test success, validation success): sac is low on test but above the bar on validation
+    for algorithm, test, validation in (("sac", 0.02, 0.30), ("ppo", 0.40, 0.05)):
+        for seed in ("0", "1"):
+            tags = {PARENT_TAG: pid, ROLE_TAG: ROLE_TRIAL, SWEEP_TAG: "comparison", SEED_TAG: seed}
+            tags |= {CONFIG_KEY_TAG: algorithm, ALGORITHM_TAG: algorithm, ENV_TAG: "maze-point"}
+            rid = client.create_run(exp_id, tags=tags).info.run_id
+            ms = [Metric(EVAL_FRESH, 1.0, now, s) for s in STEPS[:3]]
+            ms += [Metric(EVAL_SUCCESS, test, now, s) for s in STEPS[:3]]
+            ms += [Metric(validation_key(EVAL_SUCCESS), validation, now, s) for s in STEPS[:3]]
+            ms += [Metric(ENV_STEPS, s, now, s) for s in STEPS[:3]]
+            client.log_batch(rid, metrics=ms)
+            client.set_terminated(rid, "FINISHED")
+
+    out = tmp_path / "test_report"
+    assert main(["comparison", "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
+    printed = capsys.readouterr().out
+    notes = [line for line in printed.splitlines() if "final validation success" in line]
+    assert len(notes) == 1 and notes[0].startswith("note: algorithm=sac:") and "0.30, above 0.1" in notes[0]
+    assert "algorithm=sac: 2 seed(s)" in (out / "report.md").read_text()
+    out = tmp_path / "validation_report"
+    assert (
+        main(["comparison", "--tracking-uri", uri, "--out", str(out), "--no-log", "--tasks", "validation"])
+        == 0
+    )
+    assert "final validation success (" not in capsys.readouterr().out
