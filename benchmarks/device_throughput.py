@@ -2,6 +2,8 @@
 
     PYTHONPATH=. python benchmarks/device_throughput.py [--algorithm copilot] [--trials 1]
         [--gpus-per-trial 1] [--cpus-per-trial 2] [--cpu-baseline] [--seconds 180] [--eval-every 3200]
+        [--log FILE.jsonl]
+    PYTHONPATH=. python benchmarks/device_throughput.py --summarise FILE.jsonl
 
 Each trial is a Ray actor holding `--cpus-per-trial` CPUs (torch's threads follow them) and
 `--gpus-per-trial` of a GPU (0: the CPU; fractions share one card, as Tune's trials would), that builds
@@ -16,11 +18,16 @@ per phase (the algorithm's own `copilot/time/*` timers; "other" is the rest: Ray
 trials per hour at `--budget` env steps, and the learner's device as the trial saw it. What this leaves
 out against `benchmarks/throughput.py`: Tune's and MLflow's per-iteration costs (under 1 % there), and
 it needs neither installed beyond Ray's own Tune imports.
+
+`--log` appends every iteration of every trial to a JSON-lines file as it ends, so a run cut off (a
+machine lent for minutes) keeps what it measured: `--summarise FILE` prints the same summary from it,
+from each trial's iterations so far (a trial needs 2 to have a rate).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import sys
@@ -50,8 +57,10 @@ def _config(algorithm: str, layout: str, eval_every: int, warm_start, seed: int,
 class Trial:
     """One algorithm in one actor: builds it, trains it for a while, returns per-iteration records."""
 
-    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus):
+    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log):
         self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus).build_algo()
+        self.label = {"kind": kind, "trial": seed}
+        self.log = log
 
     def device(self) -> str:
         import torch
@@ -76,11 +85,16 @@ class Trial:
             for p in PHASES:
                 record[p] = float(keys.result_value(result, keys.TIME_PREFIX + p) or 0.0)
             records.append(record)
+            if self.log:
+                with open(self.log, "a") as f:  # one short line per write: appends do not interleave
+                    f.write(json.dumps({**self.label, "device": self.device(), **record}) + "\n")
         return records
 
 
-def rates(records: list[dict]) -> dict:
-    """Env steps/s, updates/s and phase shares over the iterations after the first."""
+def rates(records: list[dict]) -> dict | None:
+    """Env steps/s, updates/s and phase shares over the iterations after the first (None: fewer than 2)."""
+    if len(records) < 2:
+        return None
     later = records[1:]
     wall = sum(r["wall_s"] for r in later)
     steps = records[-1]["env_steps"] - records[0]["env_steps"]
@@ -115,7 +129,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         "which the rates leave out; default: the setting's own, 1000, ~100 s)",
     )
     p.add_argument("--budget", type=int, default=200_000, help="env steps per trial for trials/hour")
+    p.add_argument("--log", default=None, help="append every trial's iterations to this JSON-lines file")
+    p.add_argument(
+        "--summarise", default=None, metavar="FILE", help="print the summary of a --log file; run nothing"
+    )
     args = p.parse_args(argv)
+    if args.summarise is not None and not os.path.isfile(args.summarise):
+        print(f"error: --summarise {args.summarise!r} is invalid: no such file", file=sys.stderr)
+        raise SystemExit(2)
     bad = [
         (f"--{k.replace('_', '-')}", v, need)
         for k, v, ok, need in (
@@ -142,8 +163,55 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
+def summary_lines(by_trial: dict[tuple[str, int], list[dict]], devices: dict, budget: int) -> list[str]:
+    """Per trial kind (in the order met): the rates of its trials that have one, and those that do not."""
+    lines = []
+    for kind in dict.fromkeys(k for k, _ in by_trial):
+        trials = {t: r for (k, t), r in by_trial.items() if k == kind}
+        rows = [x for x in (rates(r) for r in trials.values()) if x is not None]
+        short = sorted(t for t, r in trials.items() if len(r) < 2)
+        seen = sorted({devices[(kind, t)] for t in trials if (kind, t) in devices})
+        head = f"{kind}: {len(trials)} trial(s), learner on {', '.join(seen) or '?'}"
+        if not rows:
+            lines.append(f"{head}: no rate (no trial finished 2 iterations)")
+            continue
+        per_trial = statistics.mean(r["env_steps_per_s"] for r in rows)
+        aggregate = per_trial * len(trials)  # the trials without a rate ran too: count them at the mean
+        shares = {p: statistics.mean(r["shares"][p] for r in rows) for p in rows[0]["shares"]}
+        lines.append(
+            f"{head}: {per_trial:.0f} env steps/s per trial (min {min(r['env_steps_per_s'] for r in rows):.0f}), "
+            f"{aggregate:.0f} in aggregate, "
+            f"{statistics.mean(r['updates_per_s'] for r in rows):.0f} SAC updates/s per trial, "
+            f"{aggregate * 3600 / budget:.2f} trials/hour at {budget} env steps; "
+            f"iterations measured {min(r['iterations'] for r in rows)}-{max(r['iterations'] for r in rows)}, "
+            f"first iteration {statistics.mean(r['first_iteration_s'] for r in rows):.0f} s"
+            + (f"; {len(short)} trial(s) without 2 iterations, counted at the mean" if short else "")
+        )
+        lines.append("   shares: " + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items()))
+    return lines
+
+
+def read_log(path: str) -> tuple[dict[tuple[str, int], list[dict]], dict]:
+    """A --log file back as {(kind, trial): records in order} and {(kind, trial): device}."""
+    by_trial: dict[tuple[str, int], list[dict]] = {}
+    devices = {}
+    with open(path) as f:
+        for line in f:
+            if not line.strip():
+                continue
+            row = json.loads(line)
+            key = (row.pop("kind"), int(row.pop("trial")))
+            devices[key] = row.pop("device")
+            by_trial.setdefault(key, []).append(row)
+    return by_trial, devices
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.summarise is not None:
+        by_trial, devices = read_log(args.summarise)
+        print("\n".join(summary_lines(by_trial, devices, args.budget)))
+        return 0
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     import ray
 
@@ -167,8 +235,10 @@ def main(argv=None) -> int:
                     i,
                     args.cpus_per_trial,
                     gpus,
+                    kind,
+                    args.log and os.path.abspath(args.log),
                 )
-                actors.append((kind, actor))
+                actors.append(((kind, i), actor))
         devices = ray.get([a.device.remote() for _, a in actors])
         t0 = time.perf_counter()
         records = ray.get([a.train_for.remote(args.seconds) for _, a in actors])
@@ -179,21 +249,9 @@ def main(argv=None) -> int:
         f"{args.algorithm} on maze-point {args.layout}, evaluation every {args.eval_every} env steps "
         f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial; {wall:.0f} s"
     )
-    for kind, _, _ in kinds:
-        rows = [rates(r) for (k, _), r in zip(actors, records, strict=True) if k == kind]
-        seen = sorted({d for (k, _), d in zip(actors, devices, strict=True) if k == kind})
-        per_trial = statistics.mean(r["env_steps_per_s"] for r in rows)
-        aggregate = sum(r["env_steps_per_s"] for r in rows)
-        shares = {p: statistics.mean(r["shares"][p] for r in rows) for p in rows[0]["shares"]}
-        print(
-            f"{kind}: {len(rows)} trial(s), learner on {', '.join(seen)}: {per_trial:.0f} env steps/s per trial "
-            f"(min {min(r['env_steps_per_s'] for r in rows):.0f}), {aggregate:.0f} in aggregate, "
-            f"{statistics.mean(r['updates_per_s'] for r in rows):.0f} SAC updates/s per trial, "
-            f"{aggregate * 3600 / args.budget:.2f} trials/hour at {args.budget} env steps; "
-            f"iterations measured {min(r['iterations'] for r in rows)}-{max(r['iterations'] for r in rows)}, "
-            f"first iteration {statistics.mean(r['first_iteration_s'] for r in rows):.0f} s"
-        )
-        print("   shares: " + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items()))
+    by_trial = {key: r for (key, _), r in zip(actors, records, strict=True)}
+    seen = {key: d for (key, _), d in zip(actors, devices, strict=True)}
+    print("\n".join(summary_lines(by_trial, seen, args.budget)))
     return 0
 
 

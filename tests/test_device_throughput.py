@@ -55,3 +55,34 @@ def test_bad_flags_exit_2_naming_the_flag_and_value(argv, named, capsys):
         device_throughput.parse_args(argv)
     assert done.value.code == 2
     assert f"error: {named} is invalid" in capsys.readouterr().err
+
+
+def test_a_cut_off_run_is_summarised_from_its_log(tmp_path, capsys):
+    """--log's lines back: per kind, the trials with 2 iterations give the rate, one with a single
+    iteration is counted at their mean in the aggregate and said to be so; a kind with no rate says so."""
+    import json
+
+    rows = [
+        ("gpu", 0, _record(1_000, 60.0, 900, 50.0, 40.0, 5.0)),
+        ("gpu", 0, _record(3_000, 20.0, 2_000, 16.0, 12.0, 2.0)),  # 100 env steps/s
+        ("gpu", 1, _record(1_000, 60.0, 900, 50.0, 40.0, 5.0)),  # cut off after its first iteration
+        ("cpu baseline", 0, _record(1_000, 90.0, 900, 80.0, 60.0, 5.0)),
+    ]
+    log = tmp_path / "run.jsonl"
+    log.write_text(
+        "".join(json.dumps({"kind": k, "trial": t, "device": "cuda:0", **r}) + "\n" for k, t, r in rows)
+    )
+    assert device_throughput.main(["--summarise", str(log), "--budget", "360000"]) == 0
+    gpu, shares, cpu = capsys.readouterr().out.strip().splitlines()
+    assert gpu.startswith("gpu: 2 trial(s), learner on cuda:0: 100 env steps/s per trial")
+    assert (
+        "200 in aggregate" in gpu and "2.00 trials/hour" in gpu and "1 trial(s) without 2 iterations" in gpu
+    )
+    assert "agent_updates 60%" in shares
+    assert cpu == "cpu baseline: 1 trial(s), learner on cuda:0: no rate (no trial finished 2 iterations)"
+
+
+def test_summarise_of_a_missing_file_exits_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as done:
+        device_throughput.parse_args(["--summarise", str(tmp_path / "none.jsonl")])
+    assert done.value.code == 2 and "--summarise" in capsys.readouterr().err
