@@ -33,7 +33,8 @@ import statistics
 import sys
 import time
 
-PHASES = ("agent_s", "agent_updates_s", "planner_s", "cost_model_s", "eval_s")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from throughput import PHASES, phase_shares  # noqa: E402  (the same phases and shares as the Tune benchmark)
 
 
 def _config(algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float):
@@ -99,13 +100,10 @@ def rates(records: list[dict]) -> dict | None:
     wall = sum(r["wall_s"] for r in later)
     steps = records[-1]["env_steps"] - records[0]["env_steps"]
     spent = {p: sum(r[p] for r in later) for p in PHASES}
-    shares = {p: (spent[p] - (spent["agent_updates_s"] if p == "agent_s" else 0.0)) / wall for p in PHASES}
-    inside = spent["agent_s"] + spent["planner_s"] + spent["cost_model_s"] + spent["eval_s"]
-    shares["other"] = max(0.0, wall - inside) / wall
     return {
         "env_steps_per_s": steps / wall,
         "updates_per_s": sum(r["updates"] for r in later) / wall,
-        "shares": shares,
+        "shares": phase_shares(spent, wall),
         "iterations": len(later),
         "first_iteration_s": records[0]["wall_s"],
     }

@@ -118,6 +118,16 @@ def _trial_runs(
     ]
 
 
+def phase_shares(spent: dict[str, float], wall: float) -> dict[str, float]:
+    """Each phase's share of `wall` seconds from the seconds `spent` in it (PHASES), and "other": the rest
+    (Ray, the Tune callback, logging). agent_updates_s is inside agent_s: its own share, taken out of
+    agent_s's."""
+    shares = {p: (spent[p] - (spent["agent_updates_s"] if p == "agent_s" else 0.0)) / wall for p in PHASES}
+    inside = spent["agent_s"] + spent["planner_s"] + spent["cost_model_s"] + spent["eval_s"]
+    shares["other"] = max(0.0, wall - inside) / wall
+    return shares
+
+
 def rates(client, runs) -> dict[str, dict]:
     """Per algorithm (the runs' tag): env steps/s per trial (mean over runs), SAC updates/s and the phase
     shares, from each run's iterations after its first (Ray and the trial starting, CO-PILOT's planner
@@ -140,13 +150,11 @@ def rates(client, runs) -> dict[str, dict]:
         d_wall = wall[-1] - wall[0]
         updates = h[keys.AGENT_SAC_UPDATES][1:]
         spent = {p: sum(h[keys.TIME_PREFIX + p][1:]) for p in PHASES}
-        shares = {}
-        for p in PHASES:
-            # agent_updates_s is inside agent_s: shown as its own share, taken out of agent_s's.
-            shares[p] = (spent[p] - (spent["agent_updates_s"] if p == "agent_s" else 0.0)) / d_wall
-        outside = spent["agent_s"] + spent["planner_s"] + spent["cost_model_s"] + spent["eval_s"]
-        shares["other"] = max(0.0, d_wall - outside) / d_wall
-        rate = (d_steps / d_wall, sum(updates) / d_wall if updates else float("nan"), shares)
+        rate = (
+            d_steps / d_wall,
+            sum(updates) / d_wall if updates else float("nan"),
+            phase_shares(spent, d_wall),
+        )
         by_algorithm.setdefault(run.data.tags.get(keys.ALGORITHM_TAG, "?"), []).append(rate)
     out = {}
     for algorithm, measured in by_algorithm.items():
