@@ -552,7 +552,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--check", action="store_true", help="validate and print the plan; start nothing")
     p.add_argument("--resume", action="store_true", help="continue an interrupted or failed sweep")
-    p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    p.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster address, e.g. auto (default: a local Ray of its own, whatever RAY_ADDRESS says)",
+    )
     p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI (default: the spec's)")
     return p.parse_args(argv)
 

@@ -244,6 +244,7 @@ def main(argv: list[str] | None = None) -> int:
     tracking_uri = None if args.no_tracking else args.tracking_uri or default_tracking_uri(RESULTS)
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     ray.init(
+        address="local",  # our own Ray, never one that RAY_ADDRESS or `ray start` points at
         num_cpus=max(os.cpu_count() or 1, args.num_env_runners + 1),
         include_dashboard=False,
         log_to_driver=False,

@@ -167,7 +167,9 @@ def start_ray(address: str | None) -> bool:
     if address:
         ray.init(address=address, log_to_driver=False)
     else:
-        ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False)
+        # "local": a Ray of our own even where RAY_ADDRESS is set or `ray start` left a cluster running on
+        # this machine; Ray would attach to those and then refuse num_cpus (--address picks a cluster).
+        ray.init(address="local", num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False)
     return True
 
 
