@@ -10,7 +10,10 @@ A comparison runs for longer than one machine may live. The archive holds what `
 * the Tune folder (Tune's state, trial folders, the checkpoints of trials not done) of every part the
   store does not record finished: ``--resume`` then continues those trials from their checkpoints instead of starting
   the part over (a stage-2 part of five 200k-step seeds is longer than a session); finished parts go
-  without theirs (``--resume`` skips them by the store);
+  without theirs (``--resume`` skips them by the store). Of an unfinished trial's checkpoints only the one
+  Tune restores from (the latest its newest experiment state registered) goes with its files; the
+  others go as empty folders, so that every folder Tune's state names still exists when Tune deletes
+  it by path as the trial goes on;
 * the sweep's log, ``<storage>/<file stem>.log``, when there is one;
 * ``<storage>/carry.json``: the folder and the commit it was packed from, which
   ``scripts/run_at_commit.sh --carry`` checks: a store continues only at the commit that began it, and
@@ -21,7 +24,7 @@ folder the sweep was started from, e.g. the worktree of ``scripts/run_at_commit.
 (the copy that ran) and paths in the archive are relative to it, so a checkout at a later commit packs an
 older worktree's results: ``python -m copilot_ray.carry sweeps/fair_maze.yaml out.tar.gz --root
 ../main-at-<sha>``. Bad input exits 2 and packs
-nothing. No Ray; MLflow is imported to read the store.
+nothing. No Ray is started; MLflow is imported to read the store, Ray's pickle to read Tune's state.
 """
 
 from __future__ import annotations
@@ -117,6 +120,48 @@ def _trial_finished(trial_folder: Path) -> bool:
         return False
 
 
+def checkpoints_tune_restores(tune_folder: Path) -> dict[Path, Path]:
+    """Trial folder -> the checkpoint a resume restores it from, for every trial of every experiment
+    under ``tune_folder`` whose newest experiment state (the file Tune itself picks) registered one.
+    Trials missing here (no state yet, or one this Ray cannot read) keep all their checkpoints."""
+    restores: dict[Path, Path] = {}
+    for experiment in sorted(p for p in tune_folder.iterdir() if p.is_dir()) if tune_folder.is_dir() else []:
+        states = sorted(experiment.glob("experiment_state-*.json"))
+        if not states:
+            continue
+        try:
+            trials = json.loads(states[-1].read_text())["trial_data"]
+        except (OSError, ValueError, KeyError) as err:
+            print(f"note: {states[-1]} unreadable ({err}): its trials keep every checkpoint", file=sys.stderr)
+            continue
+        for _, run_metadata in trials:
+            latest = _latest_checkpoint(run_metadata)
+            if latest is not None:
+                restores[latest.parent] = latest
+    return restores
+
+
+def _latest_checkpoint(run_metadata: str) -> Path | None:
+    """The latest checkpoint a trial's run metadata registered (Tune pickles its checkpoint manager into
+    it; the archive is the user's own results, which Tune unpickles on every resume as well)."""
+    from ray import cloudpickle
+
+    try:
+        manager = json.loads(run_metadata)["checkpoint_manager"]
+        result = cloudpickle.loads(bytes.fromhex(manager["value"])).latest_checkpoint_result
+    except Exception:  # noqa: BLE001 - any other Ray's format: keep the trial's checkpoints whole
+        return None
+    return None if result is None else Path(result.checkpoint.path).resolve()
+
+
+def _checkpoint_folder(path: Path) -> Path | None:
+    """The ``checkpoint_*`` folder of a trial that ``path`` lies in, if any."""
+    for folder in path.parents:
+        if folder.name.startswith("checkpoint_"):
+            return folder
+    return None
+
+
 def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool = False) -> list[PartState]:
     """Writes the archive (see the module's doc) and returns each part's state as packed."""
     specs = load_specs(spec_path)  # relative storage and store paths resolve against the current folder
@@ -124,6 +169,10 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
     states = part_states(specs)
     # The Tune folders of finished parts stay behind (--resume skips those parts by the store).
     finished_tune = {sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if st.finished}
+    restores: dict[Path, Path] = {}
+    for spec, state in zip(specs, states, strict=True):
+        if not state.finished:
+            restores |= checkpoints_tune_restores((root / sweep_root(spec) / "tune").resolve())
 
     def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
         path = root / info.name
@@ -135,6 +184,11 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
             return None
         if info.isdir() and path.name.startswith("checkpoint_") and _trial_finished(path.parent):
             return None  # Tune skips a finished trial on resume and never loads its checkpoints
+        checkpoint = _checkpoint_folder(path)
+        if checkpoint is not None and not info.isdir():
+            trial = checkpoint.parent.resolve()
+            if trial in restores and restores[trial] != checkpoint.resolve():
+                return None  # a checkpoint Tune will not load: its folder goes, empty (see the module doc)
         return info
 
     storage = db.parent
