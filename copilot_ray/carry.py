@@ -120,13 +120,14 @@ def _trial_finished(trial_folder: Path) -> bool:
         return False
 
 
-def checkpoints_tune_restores(tune_folder: Path) -> dict[Path, Path]:
+def _checkpoints_tune_restores(tune_folder: Path) -> dict[Path, Path]:
     """Trial folder -> the checkpoint a resume restores it from, for every trial of every experiment
     under ``tune_folder`` whose newest experiment state (the file Tune itself picks) registered one.
     Trials missing here (no state yet, or one this Ray cannot read) keep all their checkpoints."""
     restores: dict[Path, Path] = {}
-    for experiment in sorted(p for p in tune_folder.iterdir() if p.is_dir()) if tune_folder.is_dir() else []:
-        states = sorted(experiment.glob("experiment_state-*.json"))
+    experiments = sorted(p for p in tune_folder.iterdir() if p.is_dir()) if tune_folder.is_dir() else []
+    for experiment in experiments:
+        states = sorted(experiment.glob("experiment_state-*.json"))  # Tune resumes from the newest name
         if not states:
             continue
         try:
@@ -172,7 +173,7 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
     restores: dict[Path, Path] = {}
     for spec, state in zip(specs, states, strict=True):
         if not state.finished:
-            restores |= checkpoints_tune_restores((root / sweep_root(spec) / "tune").resolve())
+            restores |= _checkpoints_tune_restores((root / sweep_root(spec) / "tune").resolve())
 
     def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
         path = root / info.name
