@@ -111,16 +111,9 @@ def test_existing_results_need_resume(tmp_path):
 
 
 # ------------------------------------------------------------------------------------- on Ray
-def test_smoke_sweep_is_tracked_in_mlflow(ray_session, tmp_path):
-    from copilot_ray.sweep import run_sweep
-    from copilot_ray.sweep_spec import load_spec
-
-    spec = load_spec(_smoke_copy(tmp_path))
-    outcome = run_sweep(spec)
-    assert outcome.status == "finished" and outcome.exit_code == 0
-    assert ray_session.is_initialized()  # a Ray it did not start is left running
-    assert [r.config_key for r in outcome.rows] == ["tree_depth=1", "tree_depth=2"]
-
+def _assert_tracked_once(spec) -> None:
+    """The smoke sweep's two trials in MLflow: one FINISHED parent with the outcome per configuration,
+    one FINISHED child per trial with its tags, privileges, metrics against env steps and artifacts."""
     client, parents, children = _runs(spec)
     assert len(parents) == 1 and len(children) == 2
     parent = parents[0]
@@ -184,6 +177,7 @@ def _interrupt_callback():
 
 
 def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path):
+    """The smoke sweep, Ctrl-C'd in its second trial and resumed: both trials tracked once, completely."""
     from copilot_ray.sweep import run_sweep
     from copilot_ray.sweep_spec import load_spec
 
@@ -198,11 +192,12 @@ def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path)
     assert [r.status for r in first.rows] == ["finished", "unfinished"]
 
     second = run_sweep(spec, resume=True)
-    assert second.status == "finished", second.summary
+    assert second.status == "finished" and second.exit_code == 0, second.summary
     assert second.parent_run_id == first.parent_run_id
+    assert ray_session.is_initialized()  # a Ray it did not start is left running
+    assert [r.config_key for r in second.rows] == ["tree_depth=1", "tree_depth=2"]
+    _assert_tracked_once(spec)
     client, parents, children = _runs(spec)
-    assert len(parents) == 1 and parents[0].info.status == "FINISHED"
-    assert len(children) == 2
     assert len({c.data.tags[TRIAL_ID_TAG] for c in children}) == 2
     for run in children:
         assert run.info.status == "FINISHED"
