@@ -362,6 +362,10 @@ def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session,
         if r.data.tags.get(keys.ROLE_TAG) == keys.ROLE_TRIAL
     ]
     assert run.data.tags[keys.SEED_TAG] == "5" and run.info.status == "FINISHED"
+    # HER learns from its own episodes alone: no privilege, every count 0
+    assert run.data.tags[keys.PRIVILEGES_TAG] == "none"
+    for key in keys.PRIVILEGE_COUNTS:
+        assert {m.value for m in client.get_metric_history(run.info.run_id, key)} == {0.0}, key
     searched = ("actor_lr", "critic_lr", "gamma", "her.n_sampled_goal")
     (winner,) = [r for r in best if all(run.data.params[k] == r.data.params[k] for k in searched)]
     saved = yaml.safe_load((tmp_path / "results" / "final_her" / "spec.yaml").read_text())
