@@ -155,29 +155,6 @@ def test_the_spec_is_read_where_the_sweep_ran(tmp_path, monkeypatch, capsys):
     assert "results/cut/tune/cut/trial_1/checkpoint_000002/state.pkl" in _names(out)
 
 
-_INTERRUPT_AT = {}  # one shot: a resumed Tuner brings its callbacks back, and must not be cut again
-
-
-def _interrupt_after_results(n: int):
-    """A Tune callback that sends this process SIGINT (as Ctrl-C does) at a trial's n-th result, once."""
-    import os
-    import signal
-
-    from ray import tune
-
-    _INTERRUPT_AT["iteration"] = n
-
-    class InterruptAfterResults(tune.Callback):
-        def on_trial_result(self, iteration, trials, trial, result, **info):
-            if result["training_iteration"] == _INTERRUPT_AT.get("iteration"):
-                _INTERRUPT_AT.clear()
-                os.kill(os.getpid(), signal.SIGINT)
-
-    InterruptAfterResults.__qualname__ = "InterruptAfterResults"  # pickled by reference, not by value
-    globals()["InterruptAfterResults"] = InterruptAfterResults
-    return InterruptAfterResults()
-
-
 def _checkpoint_of(name: str) -> str | None:
     return next((part for part in Path(name).parts if part.startswith("checkpoint_")), None)
 
@@ -201,6 +178,7 @@ def test_a_cut_trial_carries_only_the_checkpoint_tune_restores_and_resumes_from_
     --resume continues the trial and finishes it, Tune deleting the emptied folders as it goes on."""
     from copilot_ray.sweep import run_sweep, sweep_root
     from copilot_ray.sweep_spec import load_spec
+    from tests import interrupts
 
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
     data["search"] = {"tree_depth": {"grid": [1]}}
@@ -209,7 +187,7 @@ def test_a_cut_trial_carries_only_the_checkpoint_tune_restores_and_resumes_from_
     path = tmp_path / "cut.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     spec = load_spec(path)
-    first = run_sweep(spec, extra_callbacks=[_interrupt_after_results(4)])
+    first = run_sweep(spec, extra_callbacks=[interrupts.at_result(4)])
     assert first.status == "interrupted"
 
     out = tmp_path / "carried.tar.gz"

@@ -309,10 +309,14 @@ def test_a_stage_two_part_writes_the_winner_into_the_spec_it_runs_with(tmp_path)
 @pytest.mark.ray
 def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session, tmp_path):
     """Stage 1 (HER, Optuna, its declared space, the defaults first) then stage 2 (best_of) from one
-    file through Tune and MLflow: stage 2's trial runs the configuration that scored best in stage 1."""
+    file through Tune and MLflow: stage 2's trial runs the configuration that scored best in stage 1.
+    Stage 1 is Ctrl-C'd in its second trial and the file resumed, as a long comparison is: its Optuna
+    study continues (no trial lost, none run twice), then stage 2 runs."""
     import mlflow
+    import optuna
 
-    from copilot_ray.sweep import main
+    from copilot_ray.sweep import main, run_sweep, sweep_root
+    from tests import interrupts
 
     open_maze = {"layout": "empty", "speed": 0.05, "success_radius": 0.1}
     common = {
@@ -326,7 +330,7 @@ def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session,
             "num_steps_sampled_before_learning_starts": 100,
         },
         "stop": {"env_steps": 160, "min_evaluations": 1},
-        "resources": {"max_concurrent_trials": 2, "num_env_runners": 0},
+        "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},  # (one at a time: cut the 2nd)
         "tracking": {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/fair.db"},
     }
     metric = "copilot/validation/success_auc"
@@ -346,12 +350,24 @@ def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session,
         "best_of": {"sweep": "tune_her", "metric": metric},
     }
     path = write(tmp_path, tune, final)
-    assert main([str(path)]) == 0
+    stage1 = load_specs(path)[0]
+    cut = run_sweep(stage1, extra_callbacks=[interrupts.when_a_trial_starts_after_one_finished()])
+    assert cut.status == "interrupted"
+    assert main([str(path), "--resume"]) == 0
 
     client = mlflow.MlflowClient(common["tracking"]["uri"])
     tuning = client.get_experiment_by_name("tuning").experiment_id
     trials = [r for r in client.search_runs([tuning]) if r.data.tags.get(keys.ROLE_TAG) == keys.ROLE_TRIAL]
     assert len(trials) == 2 and all(r.info.status == "FINISHED" for r in trials)
+    assert len({r.data.tags[keys.TRIAL_ID_TAG] for r in trials}) == 2
+    for r in trials:  # each iteration logged once, in order
+        steps = [m.step for m in client.get_metric_history(r.info.run_id, keys.TRAINING_ITERATION)]
+        assert steps and steps == sorted(set(steps))
+    studies = f"sqlite:///{sweep_root(stage1) / 'optuna.db'}"
+    (summary,) = optuna.get_all_study_summaries(studies)  # one study: one seed, continued
+    study = optuna.load_study(study_name=summary.study_name, storage=studies)
+    complete = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    assert len(complete) == 2, [t.state for t in study.trials]
     # the first trial of the study was the defaults
     assert any(r.data.params["actor_lr"] == "0.0003" and r.data.params["gamma"] == "0.99" for r in trials)
     top = max(r.data.metrics[metric] for r in trials)

@@ -7,7 +7,6 @@ storage in tmp_path: the wiring is what is tested here, not learning.
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -38,7 +37,6 @@ from copilot_ray.keys import (
     TRAINING_ITERATION,
     TREES_DIR,
     TRIAL_ID_TAG,
-    validation_key,
 )
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -155,35 +153,14 @@ def _assert_tracked_once(spec) -> None:
     assert set(by_depth) == {"1", "2"}
 
 
-class _InterruptAfterFirstTrial:
-    """Sends this process SIGINT (as Ctrl-C does) when the second trial starts (the first is done)."""
-
-    armed = True
-
-
-def _interrupt_callback():
-    from ray import tune
-
-    class InterruptAfterFirstTrial(tune.Callback):
-        def on_trial_start(self, iteration, trials, trial, **info):
-            # The first trial is done and the second one has started: interrupt it mid-way.
-            if _InterruptAfterFirstTrial.armed and any(t.status == "TERMINATED" for t in trials):
-                _InterruptAfterFirstTrial.armed = False
-                os.kill(os.getpid(), signal.SIGINT)
-
-    InterruptAfterFirstTrial.__qualname__ = "InterruptAfterFirstTrial"
-    globals()["InterruptAfterFirstTrial"] = InterruptAfterFirstTrial
-    return InterruptAfterFirstTrial
-
-
 def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path):
     """The smoke sweep, Ctrl-C'd in its second trial and resumed: both trials tracked once, completely."""
     from copilot_ray.sweep import run_sweep
     from copilot_ray.sweep_spec import load_spec
+    from tests import interrupts
 
     spec = load_spec(_smoke_copy(tmp_path))
-    _InterruptAfterFirstTrial.armed = True
-    first = run_sweep(spec, extra_callbacks=[_interrupt_callback()()])
+    first = run_sweep(spec, extra_callbacks=[interrupts.when_a_trial_starts_after_one_finished()])
     assert first.status == "interrupted" and first.exit_code == 130
     assert [r.status for r in first.rows].count("finished") == 1
     _, parents, children = _runs(spec)
@@ -203,48 +180,6 @@ def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path)
         assert run.info.status == "FINISHED"
         steps = [m.step for m in client.get_metric_history(run.info.run_id, TRAINING_ITERATION)]
         assert steps and len(steps) == len(set(steps)) and steps == sorted(steps)
-
-
-def test_interrupted_optuna_sweep_resumes_its_study(ray_session, tmp_path):
-    """An Optuna sweep killed mid-way continues the same study: no trial lost, none run twice."""
-    import optuna
-
-    from copilot_ray.sweep import run_sweep, sweep_root
-    from copilot_ray.sweep_spec import load_spec
-
-    path = _smoke_copy(tmp_path)
-    data = yaml.safe_load(path.read_text())
-    data["search"] = {"tree_depth": {"categorical": [1, 2]}}
-    data["searcher"] = {
-        "type": "optuna",
-        "sampler": "tpe",
-        "metric": validation_key(SUCCESS_PLANNED),
-        "mode": "max",
-        "num_samples": 2,
-        "seed": 0,
-    }
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    spec = load_spec(path)
-
-    _InterruptAfterFirstTrial.armed = True
-    first = run_sweep(spec, extra_callbacks=[_interrupt_callback()()])
-    assert first.status == "interrupted"
-    second = run_sweep(spec, resume=True)
-    assert second.status == "finished", second.summary
-    assert second.parent_run_id == first.parent_run_id
-
-    client, parents, children = _runs(spec)
-    assert len(parents) == 1 and len(children) == 2
-    assert len({c.data.tags[TRIAL_ID_TAG] for c in children}) == 2
-    for run in children:
-        assert run.info.status == "FINISHED"
-        steps = [m.step for m in client.get_metric_history(run.info.run_id, TRAINING_ITERATION)]
-        assert steps and len(steps) == len(set(steps))
-    storage = f"sqlite:///{sweep_root(spec) / 'optuna.db'}"
-    (summary,) = optuna.get_all_study_summaries(storage)  # one study: one seed
-    study = optuna.load_study(study_name=summary.study_name, storage=storage)
-    finished = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
-    assert len(finished) == 2, [t.state for t in study.trials]
 
 
 def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
