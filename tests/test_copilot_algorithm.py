@@ -90,12 +90,16 @@ def lookup(result, key):
 def test_two_iterations_log_metrics_and_checkpoint_round_trips(
     ray_session, tmp_path, monkeypatch, fast_learner
 ):
-    # The stock run also covers the graded (length-in-collision) planner cost end to end, the fast one
-    # the paths' figures against an RRT* reference (computed into a fresh cache).
+    # The stock run also covers the graded (length-in-collision) planner cost end to end and sampling in
+    # the algorithm's own process (no env runner actor, as the sweeps run), the fast one the paths'
+    # figures against an RRT* reference (computed into a fresh cache) and a remote env runner.
     collision_cost = "indicator" if fast_learner else "length"
     rrt_s = 0.05 if fast_learner else 0.0
+    runners = 1 if fast_learner else 0
     monkeypatch.setenv("COPILOT_RAY_CACHE", str(tmp_path / "cache"))
-    algo = tiny_config(fast_learner, collision_cost=collision_cost, rrt_reference_s=rrt_s).build_algo()
+    algo = tiny_config(
+        fast_learner, runners, collision_cost=collision_cost, rrt_reference_s=rrt_s
+    ).build_algo()
     try:
         results = [algo.train() for _ in range(2)]
         assert algo.planner.max_grad_norm == 0.5  # CO-PILOT's default planner gradient clip
@@ -138,7 +142,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
             assert (art["subtask_steps"][:, 0, 0] > 0).all() and (art["subtask_steps"][:, 0, 1:] == -1).all()
 
         path = algo.save_to_path(str(tmp_path / "ckpt"))
-        restored = tiny_config(fast_learner, collision_cost=collision_cost).build_algo()
+        restored = tiny_config(fast_learner, runners, collision_cost=collision_cost).build_algo()
         try:
             restored.restore_from_path(path)
             want, got = algo.planner.state_dict()["nets"], restored.planner.state_dict()["nets"]
