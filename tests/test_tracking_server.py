@@ -60,7 +60,7 @@ def mlflow_server(tmp_path):
         os.killpg(proc.pid, signal.SIGTERM)  # the server and its workers
         try:
             proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:  # it can take over 30 s to stop; its store is a temporary file
+        except subprocess.TimeoutExpired:  # no server outlives its test (its store is a temporary file)
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=30)
 
