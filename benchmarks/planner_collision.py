@@ -1,32 +1,40 @@
-"""Planner only: collision costs (the paper's indicator, the graded length-in-collision cost) and the
-planner's exploration std (constant, as the reference code, or annealed).
+"""Planner only: collision costs (the paper's indicator, the graded length-in-collision cost), the
+planner's exploration std (constant, as the reference code, or annealed) and its KL guard (`--max-kl`).
 
 No agent: the planner pi_p is trained with alpha = 1 (Euclidean segment cost plus the collision term)
 on the maze's training tasks, as CO-PILOT's planner warm start does before any time cost is learned,
-and its deterministic (mean) trees on the held-out test tasks are scored:
+and its deterministic (mean) trees on the maze's VALIDATION tasks are scored (a probe chooses defaults,
+so it never reads the test tasks):
 
-    collision_free  share of test tasks whose finest path (layer K) touches no obstacle
+    collision_free  share of validation tasks whose finest path (layer K) touches no obstacle
     length_ratio    finest path length / exact shortest collision-free path length, over the
                     collision-free plans (1.0 = optimal)
-    oracle_follow   share of test tasks an oracle agent (heads straight for each sub-goal at full
+    oracle_follow   share of validation tasks an oracle agent (heads straight for each sub-goal at full
                     speed) completes following the finest path with --tau-max steps per sub-goal and
                     no collision: what a perfect agent could get out of these plans
+    kl_max          the largest approximate KL of one layer's update since the last evaluation (the
+                    collapse shows as 1e2 and more; see README, Known limits)
 
 Usage (from the repository root):
 
     PYTHONPATH=. .venv/bin/python benchmarks/planner_collision.py --iterations 400 --seeds 0 1
+    # CO-PILOT's default warm start (1000 phases, std 0.05 -> 0.015 over them), one JSON line per evaluation:
     PYTHONPATH=. .venv/bin/python benchmarks/planner_collision.py --collision-costs indicator \
-        --iterations 1600 --std-final 0.015 --anneal-phases 1200
+        --iterations 1000 --std-final 0.015 --anneal-phases 1000 --layout u-maze --seeds 0 --log probe.jsonl
+    PYTHONPATH=. .venv/bin/python benchmarks/planner_collision.py --summarise probe.jsonl [more.jsonl ...]
 
 Prints one line per evaluation and a table at the end; the last line is
-`collision_free <cost>=<x> ...` (means over seeds at the last evaluation).
+`collision_free <cost>=<x> ...` (means over seeds at the last evaluation). `--summarise` prints the
+table of logged runs (several processes' logs together), one row per layout and variant.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
+from collections import defaultdict
 
 import numpy as np
 import torch
@@ -63,11 +71,18 @@ def evaluate(planner, env, starts, goals, depth, shortest, envs, tau_max):
     return float(free.mean()), ratio, float(follow.success.mean())
 
 
-def run(collision_cost: str, seed: int, args, env, test, shortest, envs) -> list[tuple]:
+def variant(collision_cost: str, args) -> str:
+    """The row a run belongs to: its collision cost, std schedule and KL guard."""
+    std = "constant" if args.std_final is None else f"{PLANNER['std']}->{args.std_final}/{args.anneal_phases}"
+    return f"{collision_cost} std {std} max_kl {args.max_kl}"
+
+
+def run(collision_cost: str, seed: int, args, env, held_out, shortest, envs) -> list[tuple]:
     torch.manual_seed(seed)
     low, high = env.goal_space.low, env.goal_space.high
     # CO-PILOT's planner defaults (the gradient clip keeps PPO from diverging at K = 5).
-    planner = SubgoalPlanner.from_settings(PLANNER, env.goal_dim, args.depth, low, high, seed)
+    settings = {**PLANNER, "max_kl": args.max_kl}
+    planner = SubgoalPlanner.from_settings(settings, env.goal_dim, args.depth, low, high, seed)
     std0 = float(PLANNER["std"])
     cost = SegmentCost(
         alpha=1.0,
@@ -79,13 +94,13 @@ def run(collision_cost: str, seed: int, args, env, test, shortest, envs) -> list
     )
     train_starts, train_goals = env.tasks("train")
     rng = np.random.default_rng(seed)
-    rows, t0 = [], time.perf_counter()
+    rows, t0, kl_max, rolled_back = [], time.perf_counter(), 0.0, 0
     for it in range(1, args.iterations + 1):
         if args.std_final is not None:  # CO-PILOT's annealing: linear over the first anneal_phases phases
             frac = min(1.0, (it - 1) / args.anneal_phases)
             planner.set_std(std0 + frac * (args.std_final - std0))
         idx = rng.choice(len(train_starts), size=args.task_batch_size, replace=False)
-        construct_trees(
+        stats = construct_trees(
             planner,
             train_starts[idx],
             train_goals[idx],
@@ -93,16 +108,64 @@ def run(collision_cost: str, seed: int, args, env, test, shortest, envs) -> list
             cost,
             num_samples=args.num_samples,
             rng=rng,
-        )
+        ).stats
+        kl_max = max(kl_max, *(stats[f"approx_kl_layer_{k}"] for k in range(1, args.depth + 1)))
+        rolled_back += int(stats.get("rolled_back", 0))
         if it % args.eval_every == 0 or it == args.iterations:
-            free, ratio, follow = evaluate(planner, env, *test, args.depth, shortest, envs, args.tau_max)
+            free, ratio, follow = evaluate(planner, env, *held_out, args.depth, shortest, envs, args.tau_max)
             rows.append((it, free, ratio, follow, time.perf_counter() - t0))
             print(
                 f"{collision_cost:9s} seed {seed} iter {it:4d}: collision_free {free:.2f} "
-                f"length_ratio {ratio:.2f} oracle_follow {follow:.2f}  ({rows[-1][4]:.0f} s)",
+                f"length_ratio {ratio:.2f} oracle_follow {follow:.2f} kl_max {kl_max:.3g} "
+                f"rolled_back {rolled_back}  ({rows[-1][4]:.0f} s)",
                 flush=True,
             )
+            if args.log:
+                record = {
+                    "layout": args.layout,
+                    "variant": variant(collision_cost, args),
+                    "seed": seed,
+                    "phase": it,
+                    "collision_free": free,
+                    "length_ratio": None if np.isnan(ratio) else ratio,
+                    "oracle_follow": follow,
+                    "kl_max": kl_max,
+                    "rolled_back": rolled_back,
+                    "seconds": rows[-1][4],
+                }
+                with open(args.log, "a") as log:
+                    log.write(json.dumps(record) + "\n")
+            kl_max, rolled_back = 0.0, 0
     return rows
+
+
+def summarise(paths: list[str]) -> None:
+    """One row per layout and variant: the last evaluation of each seed, and how many seeds collapsed
+    (an update's approximate KL above 100 at any evaluation window)."""
+    runs: dict[tuple, list[dict]] = defaultdict(list)
+    for path in paths:
+        with open(path) as f:
+            for line in f:
+                r = json.loads(line)
+                runs[(r["layout"], r["variant"], r["seed"])].append(r)
+    rows: dict[tuple, list[tuple[int, dict, bool]]] = defaultdict(list)
+    for (layout, name, seed), records in sorted(runs.items()):
+        records.sort(key=lambda r: r["phase"])
+        collapsed = any(r["kl_max"] > 100 for r in records)
+        rows[(layout, name)].append((seed, records[-1], collapsed))
+    print("| layout | variant | seeds | phases | collision-free validation plans (mean) | per seed | "
+          "oracle follows (mean) | seeds with KL > 100 |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
+    for (layout, name), seeds in rows.items():
+        frees = [last["collision_free"] for _, last, _ in seeds]
+        per_seed = ", ".join(f"s{seed} {last['collision_free']:.2f}" for seed, last, _ in seeds)
+        phases = "/".join(sorted({str(last["phase"]) for _, last, _ in seeds}))
+        follow = statistics.fmean(last["oracle_follow"] for _, last, _ in seeds)
+        collapsed = sum(c for _, _, c in seeds)
+        print(
+            f"| {layout} | {name} | {len(seeds)} | {phases} | {statistics.fmean(frees):.2f} | {per_seed} | "
+            f"{follow:.2f} | {collapsed} |"
+        )
 
 
 def main() -> None:
@@ -121,12 +184,23 @@ def main() -> None:
     )
     p.add_argument("--anneal-phases", type=int, default=1000, help="phases over which the std is annealed")
     p.add_argument("--tau-max", type=int, default=25, help="oracle's steps per sub-goal")
+    p.add_argument(
+        "--max-kl",
+        type=float,
+        default=PLANNER["max_kl"],
+        help="undo updates whose KL exceeds this (default off)",
+    )
+    p.add_argument("--log", help="append one JSON line per evaluation to this file")
+    p.add_argument("--summarise", nargs="+", metavar="LOG", help="print the table of these logs and exit")
     args = p.parse_args()
+    if args.summarise:
+        summarise(args.summarise)
+        return
     torch.set_num_threads(args.threads)
 
     env = make("maze-point", layout=args.layout).unwrapped
-    test = env.tasks("test")
-    shortest = shortest_path_lengths(env, *test)
+    held_out = env.tasks("validation")
+    shortest = shortest_path_lengths(env, *held_out)
     anneal = (
         "constant"
         if args.std_final is None
@@ -134,17 +208,19 @@ def main() -> None:
     )
     print(
         f"layout={args.layout} K={args.depth} iterations={args.iterations} B={args.task_batch_size} "
-        f"samples={args.num_samples} seeds={args.seeds} test tasks={len(test[0])} std {anneal}"
+        f"samples={args.num_samples} seeds={args.seeds} validation tasks={len(held_out[0])} std {anneal} "
+        f"max_kl={args.max_kl}"
     )
-    envs = [make("maze-point", layout=args.layout) for _ in range(len(test[0]))]
+    envs = [make("maze-point", layout=args.layout) for _ in range(len(held_out[0]))]
     final: dict[str, list[tuple[float, float, float]]] = {}
     for collision_cost in args.collision_costs:
         for seed in args.seeds:
-            rows = run(collision_cost, seed, args, env, test, shortest, envs)
+            rows = run(collision_cost, seed, args, env, held_out, shortest, envs)
             final.setdefault(collision_cost, []).append(rows[-1][1:4])
 
     print(
-        "\n| collision_cost | seeds | collision-free plans (mean) | per seed | length / shortest | oracle follows |"
+        "\n| collision_cost | seeds | collision-free validation plans (mean) | per seed | length / shortest | "
+        "oracle follows |"
     )
     print("|---|---|---|---|---|---|")
     means = {}
