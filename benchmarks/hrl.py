@@ -10,6 +10,10 @@ settings of tests/test_hrl.py); default budget 4k env steps (the demo's budget f
 four-rooms: the default maze (speed 0.0025, 800 steps per task as the SAC baseline), HIRO's c = 10 and
 sub-goals within +-0.05 of the width (twice what the agent covers in 10 steps), the SAC baseline's nets;
 default budget 30k env steps. 50 test tasks each.
+
+Measured on the open maze with tests/test_hrl.py's settings (4 tasks per batch, 40 test tasks), when the
+suite still checked it: seed 0 at 0.00 / 0.15 / 0.73 / 1.00 test success after 0.6k / 1.2k / 1.8k / 2.4k
+env steps, seeds 1-3 at 0.68-1.00 after 2.3-2.4k; uniformly random actions at both levels 0.08-0.13.
 """
 
 from __future__ import annotations

@@ -213,11 +213,16 @@ def progress_line(result: dict[str, Any], started: float) -> str:
     )
 
 
-def run_name(args: argparse.Namespace, config) -> str:
-    """What the run is called in MLflow and its checkpoint folder: env, K, b, seed and when it started."""
-    return (
+def run_name(args: argparse.Namespace, config, results: Path = RESULTS) -> str:
+    """What the run is called in MLflow and its checkpoint folder: env, K, b, seed and when it started,
+    with a "+" for each run that already has that folder under `results` (two runs started in one second
+    must not share a checkpoint)."""
+    name = (
         f"{args.env}-K{config.tree_depth}-b{config.repetitions}-s{args.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     )
+    while (results / name).exists():
+        name += "+"
+    return name
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -238,8 +243,6 @@ def main(argv: list[str] | None = None) -> int:
     from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
 
     name = run_name(args, config)
-    while args.checkpoint_dir is None and (RESULTS / name).exists():  # two runs started in one second
-        name += "+"
     checkpoint_dir = Path(args.checkpoint_dir or RESULTS / name).resolve()
     tracking_uri = None if args.no_tracking else args.tracking_uri or default_tracking_uri(RESULTS)
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")

