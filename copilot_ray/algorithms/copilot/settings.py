@@ -206,10 +206,10 @@ _PLANNER = [
         1000,
         "planner phases (Euclidean cost, no env steps) before the agent's first traversal",
         0,
-        why="~100 s, no env steps; annealed over the same 1000 phases, seeds 1-3 reached 0.95 / 0.74 / 0.97 "
-        "collision-free test plans before the agent's first step, instead of plans through walls for the "
-        "first ~80 iterations (`benchmarks/planner_collision.py --collision-costs indicator --iterations 1000 "
-        "--std-final 0.015 --anneal-phases 1000 --seeds 1 2 3`; seed 0 collapsed, see Known limits)",
+        why="~100-170 s of one core, no env steps, so that the agent's first sub-goals are not the untrained "
+        "planner's. On VALIDATION tasks (planner only, seeds 0-3, `bash benchmarks/planner_validation_probe.sh`, "
+        "docs/planner_probe): collision-free plans before the agent's first step 0.75-0.92 on four-rooms and "
+        "0.97-1.00 on u-maze; four-rooms seed 3 collapsed between phases 800 and 900 (0.00, see Known limits)",
     ),
     _choice(
         "collision_cost",
@@ -255,9 +255,11 @@ _PLANNER = [
         0.0,
         lo_open=True,
         optional=True,
-        why="planner only, one seed each, 1600 phases: an agent driving straight at each sub-goal completed "
-        "0.92 of the annealed test plans (finest paths 1.7x the shortest) and 0.40 of the constant-std ones "
-        "(3.3x): the noise keeps PPO's mean paths away from walls by wiggling them",
+        why="on VALIDATION tasks (planner only, 1000 phases, seeds 0-3, docs/planner_probe): an agent driving "
+        "straight at each sub-goal completed 0.66-0.71 (four-rooms) and 0.88-0.98 (u-maze) of the annealed "
+        "plans, 0.27-0.48 and 0.22-0.37 of the constant-std ones (finest paths 2.9-3.9x / 1.2-1.6x the "
+        "shortest against 3.2-5.3x): the noise keeps PPO's mean paths away from walls by wiggling them. The "
+        "cost: a smaller std makes each update a larger KL (1 collapse in 8 annealed runs, 0 in 8 constant)",
     ),
     _int(
         "planner.std_anneal_phases",
@@ -524,7 +526,8 @@ def readings_table() -> str:
     """The README's "Readings of the paper" table: the settings with a measured reason for their default."""
     rows = [
         "| setting | `paper_literal` | default | why the default (K = 5; single-seed probes on four-rooms, see "
-        "below, which read the test tasks before validation sets existed; after_failure's on validation tasks) |",
+        "below, which read the test tasks before validation sets existed; after_failure's, planner_warm_start's "
+        "and planner.std_final's on validation tasks) |",
         "|---|---|---|---|",
     ]
     rows += [
