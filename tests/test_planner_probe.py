@@ -51,32 +51,45 @@ def test_the_probe_scores_validation_tasks_and_logs_each_evaluation(tmp_path, mo
     assert cells[-1] == "1"  # one seed's update KL went above 100
 
 
-def test_the_runner_starts_each_layout_variant_and_seed_once(tmp_path):
-    """Run with a stand-in interpreter that records its arguments: 28 probe runs (four-rooms and u-maze:
-    3 variants x 4 seeds; spiral: 2 x 2), then one summary of the runs' logs."""
+def _runner_calls(tmp_path, **env_vars):
+    """Run the runner with a stand-in interpreter that records its arguments; the probe runs it started."""
+    tmp_path.mkdir()
     calls = tmp_path / "calls.txt"
     fake = tmp_path / "python"
     fake.write_text(f'#!/usr/bin/env bash\necho "$*" >> {calls}\n')
     fake.chmod(0o755)
     out = tmp_path / "out"
-    env = {**os.environ, "PYTHON": str(fake)}
     done = subprocess.run(
         ["bash", "benchmarks/planner_validation_probe.sh", "10", str(out), "60"],
         cwd=ROOT,
-        env=env,
+        env={**os.environ, "PYTHON": str(fake), **env_vars},
         capture_output=True,
         text=True,
     )
     assert done.returncode == 0, done.stderr
-    lines = calls.read_text().splitlines()
-    runs = [line.split() for line in lines if "--layout" in line]
-    assert len(runs) == 28 and lines[-1].endswith(f"--summarise {out}/probe.jsonl")
-    seen = set()
-    for argv in runs:
+    lines = [line for line in calls.read_text().splitlines() if line != "--version"]  # the banner's
+    assert lines[-1].endswith(f"--summarise {out}/probe.jsonl")
+    runs = set()
+    for line in lines[:-1]:
+        argv = line.split()
         flags = dict(zip(argv[1::2], argv[2::2], strict=False))  # argv[0] is the script
         assert argv[0] == "benchmarks/planner_collision.py" and flags["--iterations"] == "10"
         kind = ("k" if "--max-kl" in flags else "d") if "--std-final" in flags else "c"
-        seen.add((flags["--layout"], kind, int(flags["--seeds"])))
+        if flags["--collision-costs"] == "length":
+            kind = "l" if kind == "d" else "?"
+        runs.add((flags["--layout"], kind, int(flags["--seeds"])))
+    assert len(runs) == len(lines) - 1  # each once
+    return runs
+
+
+def test_the_runner_starts_each_layout_variant_and_seed_once(tmp_path):
+    """28 probe runs by default (four-rooms and u-maze: 3 variants x 4 seeds; spiral: 2 x 2), then one
+    summary of the runs' logs; VARIANTS / SPIRAL_VARIANTS choose others (l: the graded collision cost)."""
     expected = {(lay, v, s) for lay in ("four-rooms", "u-maze") for v in "dck" for s in range(4)}
     expected |= {("spiral", v, s) for v in "dk" for s in range(2)}
-    assert seen == expected
+    assert _runner_calls(tmp_path / "a") == expected
+    chosen = {(lay, "l", s) for lay in ("four-rooms", "u-maze") for s in range(4)} | {
+        ("spiral", "l", 0),
+        ("spiral", "l", 1),
+    }
+    assert _runner_calls(tmp_path / "b", VARIANTS="l", SPIRAL_VARIANTS="l") == chosen
