@@ -221,7 +221,8 @@ class SubgoalPlanner:
         self.last_init_scale = float(last_init_scale)
         self.nets = self._build_nets(seed)
         self.optimizer = torch.optim.Adam(self.nets.parameters(), lr=self.lr)
-        # Sub-goals are squashed into the goal box: center + half * tanh(.) (the unit box without bounds).
+        # The nets see endpoints mapped to [-1, 1] ((x - center) / half) and their output is scaled by half;
+        # the mean is not squashed (samples are clipped into the box in `extend`). Without bounds: the unit box.
         center = (self.low + self.high) / 2.0 if self.low is not None else np.zeros(self.goal_dim, np.float32)
         half = (self.high - self.low) / 2.0 if self.low is not None else np.ones(self.goal_dim, np.float32)
         self._center = torch.as_tensor(center, dtype=torch.float32)
