@@ -1,5 +1,6 @@
 """Planner only: collision costs (the paper's indicator, the graded length-in-collision cost), the
-planner's exploration std (constant, as the reference code, or annealed) and its KL guard (`--max-kl`).
+planner's exploration std (constant, as the reference code, or annealed), its KL guard (`--max-kl`) and
+a mean kept inside the goal box (`--mean squashed`).
 
 No agent: the planner pi_p is trained with alpha = 1 (Euclidean segment cost plus the collision term)
 on the maze's training tasks, as CO-PILOT's planner warm start does before any time cost is learned,
@@ -44,6 +45,7 @@ from copilot_ray.envs import make
 from copilot_ray.envs.maze.env import shortest_path_lengths
 from copilot_ray.evaluation import follow_waypoints
 from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees
+from copilot_ray.planning.planner import MEAN_MODES
 from copilot_ray.planning.subgoal_tree import layer_indices
 
 PLANNER = defaults("planner")  # CO-PILOT's planner settings
@@ -74,14 +76,15 @@ def evaluate(planner, env, starts, goals, depth, shortest, envs, tau_max):
 def variant(collision_cost: str, args) -> str:
     """The row a run belongs to: its collision cost, std schedule and KL guard."""
     std = "constant" if args.std_final is None else f"{PLANNER['std']}->{args.std_final}/{args.anneal_phases}"
-    return f"{collision_cost} std {std} max_kl {args.max_kl}"
+    mean = "" if args.mean == "free" else f" mean {args.mean}"
+    return f"{collision_cost} std {std} max_kl {args.max_kl}{mean}"
 
 
 def run(collision_cost: str, seed: int, args, env, held_out, shortest, envs) -> list[tuple]:
     torch.manual_seed(seed)
     low, high = env.goal_space.low, env.goal_space.high
     # CO-PILOT's planner defaults (the gradient clip keeps PPO from diverging at K = 5).
-    settings = {**PLANNER, "max_kl": args.max_kl}
+    settings = {**PLANNER, "max_kl": args.max_kl, "mean": args.mean}
     planner = SubgoalPlanner.from_settings(settings, env.goal_dim, args.depth, low, high, seed)
     std0 = float(PLANNER["std"])
     cost = SegmentCost(
@@ -190,6 +193,7 @@ def main() -> None:
         default=PLANNER["max_kl"],
         help="undo updates whose KL exceeds this (default off)",
     )
+    p.add_argument("--mean", choices=MEAN_MODES, default=PLANNER["mean"], help="pi_p's mean (planner.mean)")
     p.add_argument("--log", help="append one JSON line per evaluation to this file")
     p.add_argument("--summarise", nargs="+", metavar="LOG", help="print the table of these logs and exit")
     args = p.parse_args()

@@ -50,6 +50,10 @@ NOISE_MODES = ("absolute", "relative")
 # coordinates (the reference code, which only had positions); wrapped: short-way midpoints, wrapped samples;
 # scaled: wrapped, and each dim's std divided by its distance weight (the same exploration in distance units).
 ANGLE_MODES = ("raw", "wrapped", "scaled")
+# free: the parents' midpoint plus the MLP's output, samples clipped into the box (the reference code);
+# squashed: that mean mapped into the box by a tanh, so an update cannot throw it outside, where every
+# clipped sample would land on one border point and leave the update no advantage to learn from.
+MEAN_MODES = ("free", "squashed")
 MIN_STD = 1e-3  # floor of a relative std (goal units): a zero-length parent segment keeps a density
 
 
@@ -121,6 +125,8 @@ class SubgoalPlanner:
         std_scale: per-dim factor on ``std`` ([d]; default ones): with a distance that weights dims
             differently (an angle as far as the body's tip moves), ``1 / weight`` makes the exploration
             the same size in distance units in every dim.
+        mean: "free" (the reference code) or "squashed" into the goal box (see MEAN_MODES; angle dims,
+            which wrap, and an unbounded planner are never squashed).
         seed: seed of the torch initialisation.
     """
 
@@ -139,7 +145,7 @@ class SubgoalPlanner:
         std_scale: Sequence[float] | None = None,
     ) -> SubgoalPlanner:
         """pi_p from a `planner` settings dict (the `planner.*` settings of CO-PILOT: hidden, std, noise,
-        lr, clip, epochs, max_grad_norm, target_kl, max_kl, angles; the others steer the algorithm, not
+        lr, clip, epochs, max_grad_norm, target_kl, max_kl, mean, angles; the others steer the algorithm, not
         pi_p). `geometry` (an env's agent geometry: `angle_dims`, `distance_weights`) applies
         `settings["angles"]`; without it `angle_dims` and `std_scale` are used as given."""
         mode = settings.get("angles", "raw")
@@ -163,6 +169,7 @@ class SubgoalPlanner:
             max_grad_norm=settings["max_grad_norm"],
             target_kl=settings["target_kl"],
             max_kl=settings["max_kl"],
+            mean=settings.get("mean", "free"),
             angle_dims=angle_dims,
             std_scale=std_scale,
             seed=seed,
@@ -190,9 +197,12 @@ class SubgoalPlanner:
         last_init_scale: float = 0.01,
         angle_dims: Sequence[int] = (),
         std_scale: Sequence[float] | None = None,
+        mean: str = "free",
         seed: int | None = 0,
     ) -> None:
         _check_planner_args(goal_dim, low, high, noise, clip_eps, epochs, target_kl, max_kl)
+        if mean not in MEAN_MODES:
+            raise ValueError(f"mean must be one of {MEAN_MODES}, got mean={mean!r}")
         self.goal_dim = int(goal_dim)
         self.depth = check_depth(depth)
         self.low, self.high = _bounds(low, high, self.goal_dim)
@@ -227,6 +237,12 @@ class SubgoalPlanner:
         half = (self.high - self.low) / 2.0 if self.low is not None else np.ones(self.goal_dim, np.float32)
         self._center = torch.as_tensor(center, dtype=torch.float32)
         self._half = torch.as_tensor(half, dtype=torch.float32)
+        self.mean_mode = mean
+        # the dims a squashed mean is kept inside the box on (None: free, or nothing to squash)
+        squash = (
+            ~self._angle if mean == "squashed" and self.low is not None else np.zeros(self.goal_dim, bool)
+        )
+        self._squash = torch.as_tensor(squash) if squash.any() else None
 
     def _build_nets(self, seed: int | None) -> nn.ModuleList:
         """One MLP per layer (or one shared), initialised from `seed` without touching torch's global RNG."""
@@ -271,6 +287,7 @@ class SubgoalPlanner:
             "last_init_scale": self.last_init_scale,
             "angle_dims": list(self.angle_dims),
             "std_scale": self.std_scale.tolist(),
+            "mean": self.mean_mode,
         }
 
     def state_dict(self) -> dict:
@@ -313,7 +330,11 @@ class SubgoalPlanner:
         base = (left + right) / 2.0
         if self.angle_dims:  # the short way round: left + wrap(right - left) / 2
             base = torch.where(self._angle_t, left + _wrap_t(right - left) / 2.0, base)
-        return base + self._net(k)(x) * self._half
+        mean = base + self._net(k)(x) * self._half
+        if self._squash is not None:
+            squashed = self._center + self._half * torch.tanh((mean - self._center) / self._half)
+            mean = torch.where(self._squash, squashed, mean)
+        return mean
 
     def _layer_mean(self, trees_t: torch.Tensor, K: int, k: int) -> torch.Tensor:
         li, ri = parent_indices(K, k)

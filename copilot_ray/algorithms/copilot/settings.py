@@ -31,7 +31,7 @@ from copilot_ray.planning.alpha_schedule import CLOCKS as ALPHA_CLOCKS
 from copilot_ray.planning.alpha_schedule import KINDS as ALPHA_KINDS
 from copilot_ray.planning.alpha_schedule import PRESETS as ALPHA_PRESETS
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
-from copilot_ray.planning.planner import ANGLE_MODES, NOISE_MODES
+from copilot_ray.planning.planner import ANGLE_MODES, MEAN_MODES, NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import (
@@ -312,6 +312,14 @@ _PLANNER = [
         0.0,
         lo_open=True,
         optional=True,
+    ),
+    _choice(
+        "planner.mean",
+        "planner",
+        "free",
+        "pi_p's mean: free (midpoint + MLP output, samples clipped into the box; reference code) or "
+        "squashed into the goal box by a tanh, so that an update cannot throw it past the border",
+        MEAN_MODES,
     ),
 ]
 _COST_MODEL = [
