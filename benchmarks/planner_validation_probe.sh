@@ -12,7 +12,7 @@
 set -u
 PHASES=${1:-1000}; OUTDIR=${2:-results/planner_probe}; LIMIT=${3:-3600}
 PYTHON=${PYTHON:-.venv/bin/python}
-VARIANTS=${VARIANTS:-d c k}; SPIRAL_VARIANTS=${SPIRAL_VARIANTS:-d k}
+VARIANTS=${VARIANTS-d c k}; SPIRAL_VARIANTS=${SPIRAL_VARIANTS-d k}  # set and empty: none
 mkdir -p "$OUTDIR"
 LOGS=$(mktemp -d)
 jobs() {

@@ -415,3 +415,52 @@ def test_from_settings_applies_the_angles_setting_to_an_env_geometry():
     assert by_mode["scaled"].std_scale.tolist() == pytest.approx([1.0, 1.0, 1 / 0.025])
     with pytest.raises(ValueError, match="angles must be one of"):
         SubgoalPlanner.from_settings({**settings, "angles": "polar"}, 3, 2, low, high, geometry=geometry)
+
+
+def _thrown(planner: SubgoalPlanner, offset: float) -> SubgoalPlanner:
+    """The planner after an update that threw every layer's output `offset` half-widths off the midpoint."""
+    with torch.no_grad():
+        for net in planner.nets:
+            net[-1].bias.fill_(offset)
+    return planner
+
+
+def test_a_squashed_mean_stays_in_the_box_where_a_free_one_leaves_it():
+    starts, goals = _tasks(4, d=3, seed=2)
+    low, high = np.array([0.0, 0.0, -np.pi]), np.array([1.0, 1.0, np.pi])
+    free = _thrown(SubgoalPlanner(3, 2, low, high, angle_dims=[2], seed=0), 5.0)
+    squashed = _thrown(SubgoalPlanner(3, 2, low, high, angle_dims=[2], mean="squashed", seed=0), 5.0)
+    trees = free.sample(starts, goals, deterministic=True)
+    mu_free, mu_squashed = (_layer_mean(p, trees, 2) for p in (free, squashed))
+    assert (mu_free[..., :2] > 1.0).all()  # thrown past the border: every sample is clipped onto it
+    assert (mu_squashed[..., :2] < 1.0).all() and (mu_squashed[..., :2] > 0.99).all()
+    # the tanh maps the box's inside monotonically: an in-box free mean keeps its order and stays inside
+    inside = _layer_mean(SubgoalPlanner(3, 2, low, high, mean="squashed", last_init_scale=0.0), trees, 1)
+    assert ((inside[..., :2] > 0) & (inside[..., :2] < 1)).all()
+    np.testing.assert_allclose(mu_squashed[..., 2], mu_free[..., 2], rtol=1e-6)  # angles wrap instead
+    # the density is the Gaussian around the squashed mean (positions only: angles' differences wrap)
+    squashed = _thrown(SubgoalPlanner(2, 2, 0.0, 1.0, mean="squashed", seed=0), 5.0)
+    starts, goals = _tasks(4, seed=2)
+    sampled = squashed.sample(starts, goals, rng=np.random.default_rng(1)).astype(np.float64)
+    x, mu = sampled[:, new_layer_indices(2, 2)], _layer_mean(squashed, sampled, 2)
+    std = squashed.std.astype(np.float64)
+    hand = (-0.5 * ((x - mu) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi)).sum(axis=(1, 2))
+    np.testing.assert_allclose(squashed.log_prob(sampled, [2]).detach().numpy(), hand, rtol=1e-4)
+
+
+def test_the_mean_setting_reaches_the_planner_and_its_checkpoint():
+    from copilot_ray.algorithms.copilot.settings import defaults
+
+    settings = defaults("planner")
+    assert settings["mean"] == "free"
+    planner = SubgoalPlanner.from_settings({**settings, "mean": "squashed"}, 2, 2, 0.0, 1.0)
+    restored = SubgoalPlanner.from_state_dict(_thrown(planner, 5.0).state_dict())
+    assert restored.mean_mode == "squashed"
+    starts, goals = _tasks(2)
+    trees = planner.sample(starts, goals, deterministic=True)
+    np.testing.assert_array_equal(_layer_mean(restored, trees, 1), _layer_mean(planner, trees, 1))
+    old_checkpoint = planner.state_dict()
+    del old_checkpoint["config"]["mean"]  # written before the setting existed
+    assert SubgoalPlanner.from_state_dict(old_checkpoint).mean_mode == "free"
+    with pytest.raises(ValueError, match=r"mean must be one of \('free', 'squashed'\), got mean='tanh'"):
+        SubgoalPlanner(2, 2, 0.0, 1.0, mean="tanh")
