@@ -232,7 +232,7 @@ class SubgoalPlanner:
         self.nets = self._build_nets(seed)
         self.optimizer = torch.optim.Adam(self.nets.parameters(), lr=self.lr)
         # The nets see endpoints mapped to [-1, 1] ((x - center) / half) and their output is scaled by half;
-        # the mean is not squashed (samples are clipped into the box in `extend`). Without bounds: the unit box.
+        # the mean is free unless mean="squashed" (samples are clipped into the box in `extend`). Unbounded: unit box.
         center = (self.low + self.high) / 2.0 if self.low is not None else np.zeros(self.goal_dim, np.float32)
         half = (self.high - self.low) / 2.0 if self.low is not None else np.ones(self.goal_dim, np.float32)
         self._center = torch.as_tensor(center, dtype=torch.float32)
