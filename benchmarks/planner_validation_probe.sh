@@ -4,7 +4,7 @@
 #   layouts four-rooms and u-maze (where defaults are chosen), seeds 0-3, variants $VARIANTS (default d c k)
 #     d: the default warm start (std 0.05 -> 0.015 over 1000 phases)   c: constant std 0.05
 #     k: the default with planner.max_kl 0.5   l: the default with collision_cost length (SGT-PG's graded cost)
-#     s: the default with planner.mean squashed
+#     s: the default with planner.mean squashed   b: the default with planner.mean leaky
 #   spiral (transfer check only; nothing is chosen on it): seeds 0-1, variants $SPIRAL_VARIANTS (default d k)
 # usage: [VARIANTS="d c k"] [SPIRAL_VARIANTS="d k"] \
 #        bash benchmarks/planner_validation_probe.sh [PHASES=1000] [OUTDIR=results/planner_probe] [SECONDS=3600]
@@ -25,6 +25,7 @@ one() {
   [ "$v" = k ] && a="$a --max-kl 0.5"
   [ "$v" = l ] && cost=length
   [ "$v" = s ] && a="$a --mean squashed"
+  [ "$v" = b ] && a="$a --mean leaky"
   # shellcheck disable=SC2086  # $a is a list of flags
   PYTHONPATH=. OMP_NUM_THREADS=1 "$PYTHON" benchmarks/planner_collision.py --collision-costs "$cost" \
     --iterations "$PHASES" --eval-every $((PHASES / 10 > 0 ? PHASES / 10 : 1)) --layout "$lay" --seeds "$s" $a \

@@ -77,8 +77,8 @@ def _runner_calls(tmp_path, **env_vars):
         kind = ("k" if "--max-kl" in flags else "d") if "--std-final" in flags else "c"
         if flags["--collision-costs"] == "length":
             kind = "l" if kind == "d" else "?"
-        if flags.get("--mean") == "squashed":
-            kind = "s" if kind == "d" else "?"
+        if "--mean" in flags:
+            kind = {"squashed": "s", "leaky": "b"}[flags["--mean"]] if kind == "d" else "?"
         runs.add((flags["--layout"], kind, int(flags["--seeds"])))
     assert len(runs) == len(lines) - 1  # each once
     return runs
@@ -87,7 +87,7 @@ def _runner_calls(tmp_path, **env_vars):
 def test_the_runner_starts_each_layout_variant_and_seed_once(tmp_path):
     """28 probe runs by default (four-rooms and u-maze: 3 variants x 4 seeds; spiral: 2 x 2), then one
     summary of the runs' logs; VARIANTS / SPIRAL_VARIANTS choose others (l: the graded collision cost, s: a
-    squashed mean)."""
+    squashed mean, b: a leaky one)."""
     expected = {(lay, v, s) for lay in ("four-rooms", "u-maze") for v in "dck" for s in range(4)}
     expected |= {("spiral", v, s) for v in "dk" for s in range(2)}
     assert _runner_calls(tmp_path / "a") == expected
@@ -98,3 +98,5 @@ def test_the_runner_starts_each_layout_variant_and_seed_once(tmp_path):
     assert _runner_calls(tmp_path / "b", VARIANTS="l", SPIRAL_VARIANTS="l") == chosen
     squashed = {(lay, "s", s) for lay in ("four-rooms", "u-maze") for s in range(4)}
     assert _runner_calls(tmp_path / "c", VARIANTS="s", SPIRAL_VARIANTS="") == squashed
+    leaky = {("spiral", "b", 0), ("spiral", "b", 1)}
+    assert _runner_calls(tmp_path / "d", VARIANTS="", SPIRAL_VARIANTS="b") == leaky

@@ -448,6 +448,28 @@ def test_a_squashed_mean_stays_in_the_box_where_a_free_one_leaves_it():
     np.testing.assert_allclose(squashed.log_prob(sampled, [2]).detach().numpy(), hand, rtol=1e-4)
 
 
+def test_a_leaky_mean_is_free_inside_the_box_and_leaks_back_from_outside():
+    starts, goals = _tasks(4, seed=3)
+    free, leaky = (SubgoalPlanner(2, 2, 0.0, 1.0, mean=m, seed=0) for m in ("free", "leaky"))
+    trees = free.sample(starts, goals, deterministic=True)
+    # inside the box it is the reference code's mean, exactly
+    np.testing.assert_array_equal(_layer_mean(leaky, trees, 2), _layer_mean(free, trees, 2))
+    thrown_free, thrown = (
+        _layer_mean(_thrown(free, 5.0), trees, 2),
+        _layer_mean(_thrown(leaky, 5.0), trees, 2),
+    )
+    np.testing.assert_allclose(thrown, 1.0 + 0.01 * (thrown_free - 1.0), rtol=1e-6)  # the border + 1 %
+    # what a thrown free mean loses: its samples all clip onto one border point (equal costs, no
+    # advantage to learn from); the leaky one's still differ, so PPO still has a signal to pull it back
+    rng = np.random.default_rng(0)
+    layer = new_layer_indices(2, 2)
+    many = np.repeat(starts, 50, 0), np.repeat(goals, 50, 0)
+    free_samples = free.sample(*many, rng=rng)[:, layer]
+    leaky_samples = leaky.sample(*many, rng=rng)[:, layer]
+    assert (free_samples == 1.0).all()
+    assert 0.15 < (leaky_samples < 1.0).mean() < 0.5  # the mean just past the border
+
+
 def test_the_mean_setting_reaches_the_planner_and_its_checkpoint():
     from copilot_ray.algorithms.copilot.settings import defaults
 
@@ -462,5 +484,7 @@ def test_the_mean_setting_reaches_the_planner_and_its_checkpoint():
     old_checkpoint = planner.state_dict()
     del old_checkpoint["config"]["mean"]  # written before the setting existed
     assert SubgoalPlanner.from_state_dict(old_checkpoint).mean_mode == "free"
-    with pytest.raises(ValueError, match=r"mean must be one of \('free', 'squashed'\), got mean='tanh'"):
+    with pytest.raises(
+        ValueError, match=r"mean must be one of \('free', 'squashed', 'leaky'\), got mean='tanh'"
+    ):
         SubgoalPlanner(2, 2, 0.0, 1.0, mean="tanh")

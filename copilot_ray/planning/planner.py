@@ -52,8 +52,10 @@ NOISE_MODES = ("absolute", "relative")
 ANGLE_MODES = ("raw", "wrapped", "scaled")
 # free: the parents' midpoint plus the MLP's output, samples clipped into the box (the reference code);
 # squashed: that mean mapped into the box by a tanh, so an update cannot throw it outside, where every
-# clipped sample would land on one border point and leave the update no advantage to learn from.
-MEAN_MODES = ("free", "squashed")
+# clipped sample would land on one border point and leave the update no advantage to learn from;
+# leaky: the free mean inside the box, and outside it the border plus LEAK x the overshoot (a gradient back).
+MEAN_MODES = ("free", "squashed", "leaky")
+LEAK = 0.01
 MIN_STD = 1e-3  # floor of a relative std (goal units): a zero-length parent segment keeps a density
 
 
@@ -125,8 +127,8 @@ class SubgoalPlanner:
         std_scale: per-dim factor on ``std`` ([d]; default ones): with a distance that weights dims
             differently (an angle as far as the body's tip moves), ``1 / weight`` makes the exploration
             the same size in distance units in every dim.
-        mean: "free" (the reference code) or "squashed" into the goal box (see MEAN_MODES; angle dims,
-            which wrap, and an unbounded planner are never squashed).
+        mean: "free" (the reference code), "squashed" into the goal box or "leaky" outside it (see
+            MEAN_MODES; angle dims, which wrap, and an unbounded planner are never bounded).
         seed: seed of the torch initialisation.
     """
 
@@ -238,10 +240,8 @@ class SubgoalPlanner:
         self._center = torch.as_tensor(center, dtype=torch.float32)
         self._half = torch.as_tensor(half, dtype=torch.float32)
         self.mean_mode = mean
-        # the dims a squashed mean is kept inside the box on (None: free, or nothing to squash)
-        squash = (
-            ~self._angle if mean == "squashed" and self.low is not None else np.zeros(self.goal_dim, bool)
-        )
+        # the dims a bounded mean is kept at the box on (None: free, or nothing to bound)
+        squash = ~self._angle if mean != "free" and self.low is not None else np.zeros(self.goal_dim, bool)
         self._squash = torch.as_tensor(squash) if squash.any() else None
 
     def _build_nets(self, seed: int | None) -> nn.ModuleList:
@@ -332,8 +332,14 @@ class SubgoalPlanner:
             base = torch.where(self._angle_t, left + _wrap_t(right - left) / 2.0, base)
         mean = base + self._net(k)(x) * self._half
         if self._squash is not None:
-            squashed = self._center + self._half * torch.tanh((mean - self._center) / self._half)
-            mean = torch.where(self._squash, squashed, mean)
+            if self.mean_mode == "squashed":
+                bounded = self._center + self._half * torch.tanh((mean - self._center) / self._half)
+            else:  # leaky
+                inside = torch.maximum(
+                    torch.minimum(mean, self._center + self._half), self._center - self._half
+                )
+                bounded = inside + LEAK * (mean - inside)
+            mean = torch.where(self._squash, bounded, mean)
         return mean
 
     def _layer_mean(self, trees_t: torch.Tensor, K: int, k: int) -> torch.Tensor:

@@ -317,8 +317,8 @@ _PLANNER = [
         "planner.mean",
         "planner",
         "free",
-        "pi_p's mean: free (midpoint + MLP output, samples clipped into the box; reference code) or "
-        "squashed into the goal box by a tanh, so that an update cannot throw it past the border",
+        "pi_p's mean: free (midpoint + MLP output, samples clipped into the box; reference code), squashed "
+        "into the goal box by a tanh, or leaky: free inside the box, 1 % of the overshoot outside it",
         MEAN_MODES,
     ),
 ]
