@@ -10,11 +10,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from copilot_ray.envs.maze.env import GoalMazeEnv
 
-from benchmarks import planner_collision  # noqa: E402
-from copilot_ray.envs.maze.env import GoalMazeEnv  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))  # as tests/test_device_throughput.py imports its benchmark
+
+import planner_collision  # noqa: E402
 
 
 def test_the_probe_scores_validation_tasks_and_logs_each_evaluation(tmp_path, monkeypatch, capsys):

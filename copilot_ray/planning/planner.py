@@ -335,9 +335,7 @@ class SubgoalPlanner:
             if self.mean_mode == "squashed":
                 bounded = self._center + self._half * torch.tanh((mean - self._center) / self._half)
             else:  # leaky
-                inside = torch.maximum(
-                    torch.minimum(mean, self._center + self._half), self._center - self._half
-                )
+                inside = torch.clamp(mean, self._center - self._half, self._center + self._half)
                 bounded = inside + LEAK * (mean - inside)
             mean = torch.where(self._squash, bounded, mean)
         return mean
