@@ -471,10 +471,15 @@ def test_a_leaky_mean_is_free_inside_the_box_and_leaks_back_from_outside():
 
 
 def test_the_mean_setting_reaches_the_planner_and_its_checkpoint():
-    from copilot_ray.algorithms.copilot.settings import defaults
+    from copilot_ray.algorithms.copilot.settings import PRESETS, defaults
+    from copilot_ray.algorithms.sgt_pg.settings import SETTINGS as SGT_PG_SETTINGS
 
     settings = defaults("planner")
-    assert settings["mean"] == "free"
+    assert (
+        settings["mean"] == "leaky"
+    )  # CO-PILOT's default; the paper's reading and SGT-PG keep the free mean
+    assert PRESETS["paper_literal"]["planner"]["mean"] == "free"
+    assert SGT_PG_SETTINGS["planner.mean"].default == "free"
     planner = SubgoalPlanner.from_settings({**settings, "mean": "squashed"}, 2, 2, 0.0, 1.0)
     restored = SubgoalPlanner.from_state_dict(_thrown(planner, 5.0).state_dict())
     assert restored.mean_mode == "squashed"

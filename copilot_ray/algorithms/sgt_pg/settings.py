@@ -1,9 +1,9 @@
 """Every setting of the SGT-PG baseline (``algorithm: sgt_pg``), declared once (see copilot_ray.settings).
 
 pi_p's settings are CO-PILOT's ``planner.*`` settings with the reference code's exploration (a constant
-absolute std 0.05: ``planner.std_final`` defaults to null here). Every Tune iteration runs
-``phases_per_iteration`` planner phases (Algorithm 1 on ``task_batch_size`` training tasks, one PPO update
-per layer) and then scores the mean tree's finest path on the first ``eval_num_tasks`` test tasks
+absolute std 0.05: ``planner.std_final`` defaults to null here) and unbounded mean (``planner.mean`` free).
+Every Tune iteration runs ``phases_per_iteration`` planner phases (Algorithm 1 on ``task_batch_size``
+training tasks, one PPO update per layer) and then scores the mean tree's finest path on the first ``eval_num_tasks`` test tasks
 (copilot_ray.planning.path_metrics), against RRT* when ``rrt_reference_time_s`` > 0.
 """
 
@@ -16,13 +16,20 @@ from copilot_ray.algorithms.copilot.settings import SETTINGS as COPILOT_SETTINGS
 from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import float_setting, int_setting
 
+# SGT-PG as its reference code: where CO-PILOT's planner default is a measured addition, the reference's.
+_REFERENCE = {
+    "planner.std_final": (
+        None,
+        "SGT-PG's reference code keeps its std constant; CO-PILOT's annealing is a measured addition",
+    ),
+    "planner.mean": (
+        "free",
+        "SGT-PG's reference code's unbounded mean; CO-PILOT's leaky mean is a measured addition",
+    ),
+}
 _PLANNER = [
-    dataclasses.replace(
-        s,
-        default=None,
-        why="SGT-PG's reference code keeps its std constant; CO-PILOT's annealing is a measured addition",
-    )
-    if s.key == "planner.std_final"
+    dataclasses.replace(s, default=_REFERENCE[s.key][0], why=_REFERENCE[s.key][1])
+    if s.key in _REFERENCE
     else s
     for s in COPILOT_SETTINGS.values()
     if s.target == "planner"
