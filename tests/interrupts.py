@@ -32,6 +32,13 @@ class InterruptAtResult(tune.Callback):
             _press_ctrl_c()
 
 
+class InterruptAtResultAfterATrialFinished(tune.Callback):
+    def on_trial_result(self, iteration, trials, trial, result, **info):
+        finished = any(t.status == "TERMINATED" for t in trials)
+        if finished and result["training_iteration"] == _ARMED.get("at_result_after_a_finished_trial"):
+            _press_ctrl_c()
+
+
 def when_a_trial_starts_after_one_finished() -> tune.Callback:
     """Cuts a sweep of trials run one at a time in its second trial, the first one done."""
     _ARMED.clear()
@@ -44,3 +51,11 @@ def at_result(training_iteration: int) -> tune.Callback:
     _ARMED.clear()
     _ARMED["at_result"] = training_iteration
     return InterruptAtResult()
+
+
+def at_result_after_a_finished_trial(training_iteration: int) -> tune.Callback:
+    """Cuts a sweep of trials run one at a time in its second trial, at that trial's
+    ``training_iteration``-th result (its checkpoints so far on disk)."""
+    _ARMED.clear()
+    _ARMED["at_result_after_a_finished_trial"] = training_iteration
+    return InterruptAtResultAfterATrialFinished()

@@ -1,6 +1,7 @@
 """`python -m copilot_ray.carry` packs what --resume needs on another machine: the store (a snapshot), the
 parts' folders, the Tune folders of unfinished parts only, no final checkpoints unless asked; unpacked in
-place, --resume skips the finished part and continues the unfinished one through Tune."""
+place, --resume skips the finished part and continues the unfinished one through Tune. (A real sweep cut
+mid-trial, carried and resumed through Tune: tests/test_sweep.py, where the smoke sweep's resume is.)"""
 
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ from types import SimpleNamespace
 import yaml
 
 from copilot_ray import carry, sweep, tracking
-from copilot_ray.keys import PARENT_TAG, ROLE_TAG, ROLE_TRIAL, SWEEP_TAG, TRAINING_ITERATION
+from copilot_ray.keys import PARENT_TAG, ROLE_TAG, ROLE_TRIAL, SWEEP_TAG
 from copilot_ray.sweep_spec import load_specs
+from tests import stores
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,15 +56,6 @@ def _three_parts(tmp_path: Path):
     (finished / "result.json").write_text('{"done": false}\n{"done": true}\n')
     (tmp_path / "results" / "three.log").write_text("=== part 1 of 3\n")
     return path, uri, (done, cut, fresh)
-
-
-def _forget_open_stores(under: str) -> None:
-    """This process keeps an engine per store URI (MLflow's cache); a new machine opens the unpacked file
-    afresh, so the test drops the engines of the stores it replaced."""
-    from mlflow.store.tracking.sqlalchemy_store import SqlAlchemyStore
-
-    for uri in [u for u in SqlAlchemyStore._engine_map if under in u]:
-        SqlAlchemyStore._engine_map.pop(uri).dispose()
 
 
 def _names(archive: Path) -> set[str]:
@@ -107,7 +100,7 @@ def test_unpacked_in_place_resume_skips_the_finished_part_and_continues_the_cut_
     out = tmp_path / "carried.tar.gz"
     carry.pack(path, out, tmp_path)
     shutil.rmtree(tmp_path / "results")  # a new machine: only the archive is left
-    _forget_open_stores(str(tmp_path))
+    stores.forget_open_stores(str(tmp_path))
     with tarfile.open(out) as tar:
         tar.extractall(tmp_path, filter="data")
 
@@ -135,7 +128,7 @@ def test_bad_input_exits_2_naming_it_and_writes_nothing(tmp_path, capsys):
     assert carry.main([str(path), str(out), "--root", str(inner)]) == 2
     assert "is outside --root" in capsys.readouterr().err
     (tmp_path / "results" / "carried.db").unlink()
-    _forget_open_stores(str(tmp_path))
+    stores.forget_open_stores(str(tmp_path))
     assert carry.main([str(path), str(out), "--root", str(tmp_path)]) == 2
     assert f"tracking.uri {uri!r}" in capsys.readouterr().err
     assert not out.exists()
@@ -153,63 +146,3 @@ def test_the_spec_is_read_where_the_sweep_ran(tmp_path, monkeypatch, capsys):
     printed = capsys.readouterr().out
     assert "cut: unfinished, with its Tune folder" in printed and f"packed {out}" in printed
     assert "results/cut/tune/cut/trial_1/checkpoint_000002/state.pkl" in _names(out)
-
-
-def _checkpoint_of(name: str) -> str | None:
-    return next((part for part in Path(name).parts if part.startswith("checkpoint_")), None)
-
-
-def _checkpoint_tune_restores(tune_folder: Path) -> str:
-    """The checkpoint Tune resumes the only trial under ``tune_folder`` from, read with Ray's own decoder
-    (the latest registered in its newest experiment state; it can lag the newest checkpoint folder)."""
-    from ray.tune.execution.experiment_state import _find_newest_experiment_checkpoint
-    from ray.tune.utils.serialization import TuneFunctionDecoder
-
-    (experiment,) = tune_folder.iterdir()
-    state = json.loads(Path(_find_newest_experiment_checkpoint(str(experiment))).read_text())
-    ((_, run_metadata),) = state["trial_data"]
-    manager = json.loads(run_metadata, cls=TuneFunctionDecoder, allow_cloudpickle=True)["checkpoint_manager"]
-    return Path(manager.latest_checkpoint_result.checkpoint.path).name
-
-
-def test_a_cut_trial_carries_only_the_checkpoint_tune_restores_and_resumes_from_it(ray_session, tmp_path):
-    """Real Tune: a trial cut after 4 iterations is packed with the files of the checkpoint Tune
-    restores it from and its other checkpoints as empty folders; unpacked alone,
-    --resume continues the trial and finishes it, Tune deleting the emptied folders as it goes on."""
-    from copilot_ray.sweep import run_sweep, sweep_root
-    from copilot_ray.sweep_spec import load_spec
-    from tests import interrupts
-
-    data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
-    data["search"] = {"tree_depth": {"grid": [1]}}
-    data["stop"] = {"env_steps": 720, "min_evaluations": 1}  # 6 iterations of 120
-    data["tracking"] = {"storage": str(tmp_path / "results"), "uri": f"sqlite:///{tmp_path}/results/cut.db"}
-    path = tmp_path / "cut.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    spec = load_spec(path)
-    first = run_sweep(spec, extra_callbacks=[interrupts.at_result(4)])
-    assert first.status == "interrupted"
-
-    out = tmp_path / "carried.tar.gz"
-    (state,) = carry.pack(path, out, tmp_path)
-    assert not state.finished and state.has_tune
-    with tarfile.open(out) as archive:
-        members = archive.getmembers()
-    with_files = {_checkpoint_of(m.name) for m in members if m.isfile()} - {None}
-    empty = {_checkpoint_of(m.name) for m in members if m.isdir()} - {None} - with_files
-    assert len(with_files) == 1 and empty  # one checkpoint keeps its files, the others none
-    assert with_files == {_checkpoint_tune_restores(sweep_root(spec) / "tune")}
-
-    shutil.rmtree(tmp_path / "results")  # a new machine: only the archive is left
-    _forget_open_stores(str(tmp_path))
-    with tarfile.open(out) as archive:
-        archive.extractall(tmp_path, filter="data")
-    second = run_sweep(load_spec(path), resume=True)
-    assert second.status == "finished", second.summary
-    client = tracking._client(spec.tracking.uri)
-    exp = client.get_experiment_by_name(spec.experiment)
-    (run,) = [r for r in client.search_runs([exp.experiment_id]) if r.data.tags.get(ROLE_TAG) == ROLE_TRIAL]
-    assert run.info.status == "FINISHED"
-    history = sorted(client.get_metric_history(run.info.run_id, TRAINING_ITERATION), key=lambda m: m.step)
-    assert [int(m.value) for m in history] == [1, 2, 3, 4, 5, 6]  # went on to the end, nothing twice
-    assert len({m.step for m in history}) == 6

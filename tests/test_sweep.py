@@ -6,9 +6,12 @@ storage in tmp_path: the wiring is what is tested here, not learning.
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import subprocess
 import sys
+import tarfile
 from pathlib import Path
 
 import pytest
@@ -153,33 +156,87 @@ def _assert_tracked_once(spec) -> None:
     assert set(by_depth) == {"1", "2"}
 
 
-def test_interrupted_sweep_resumes_without_duplicate_runs(ray_session, tmp_path):
-    """The smoke sweep, Ctrl-C'd in its second trial and resumed: both trials tracked once, completely."""
-    from copilot_ray.sweep import run_sweep
-    from copilot_ray.sweep_spec import load_spec
-    from tests import interrupts
+def _checkpoint_of(name: str) -> tuple[str, str] | None:
+    """(trial folder, checkpoint folder) of a path inside a trial's checkpoint, else None."""
+    parts = Path(name).parts
+    at = next((i for i, part in enumerate(parts) if part.startswith("checkpoint_")), None)
+    return None if at is None else (parts[at - 1], parts[at])
 
-    spec = load_spec(_smoke_copy(tmp_path))
-    first = run_sweep(spec, extra_callbacks=[interrupts.when_a_trial_starts_after_one_finished()])
+
+def _checkpoints_tune_restores(tune_folder: Path) -> set[tuple[str, str]]:
+    """The checkpoint Tune resumes each trial under ``tune_folder`` from, read with Ray's own decoder
+    (the latest registered in its newest experiment state; it can lag the newest checkpoint folder)."""
+    from ray.tune.execution.experiment_state import _find_newest_experiment_checkpoint
+    from ray.tune.utils.serialization import TuneFunctionDecoder
+
+    (experiment,) = tune_folder.iterdir()
+    state = json.loads(Path(_find_newest_experiment_checkpoint(str(experiment))).read_text())
+    restored = set()
+    for _, run_metadata in state["trial_data"]:
+        manager = json.loads(run_metadata, cls=TuneFunctionDecoder, allow_cloudpickle=True)[
+            "checkpoint_manager"
+        ]
+        if manager.latest_checkpoint_result:
+            path = Path(manager.latest_checkpoint_result.checkpoint.path)
+            restored.add((path.parent.name, path.name))
+    return restored
+
+
+def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ray_session, tmp_path):
+    """The smoke sweep, Ctrl-C'd at its second trial's 2nd result, packed by `copilot_ray.carry`, its
+    results deleted and the archive unpacked in their place (a new machine), then resumed: the archive
+    holds the files of the one checkpoint Tune restores the cut trial from (its other checkpoints as
+    empty folders, none of the finished trial's); both trials are then tracked once, completely, each
+    iteration logged once, and the Ray the test started is left running."""
+    from copilot_ray import carry
+    from copilot_ray.sweep import run_sweep, sweep_root
+    from copilot_ray.sweep_spec import load_spec
+    from tests import interrupts, stores
+
+    path = _smoke_copy(tmp_path, env_steps=360)
+    data = yaml.safe_load(path.read_text())
+    data["search"]["tree_depth"]["grid"] = [2, 1]  # K = 1 second: 3 iterations of 120 env steps (K = 2: 2)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    spec = load_spec(path)
+    first = run_sweep(spec, extra_callbacks=[interrupts.at_result_after_a_finished_trial(2)])
     assert first.status == "interrupted" and first.exit_code == 130
-    assert [r.status for r in first.rows].count("finished") == 1
+    assert [r.status for r in first.rows] == ["finished", "unfinished"]
     _, parents, children = _runs(spec)
     assert len(parents) == 1 and parents[0].info.status == "KILLED"
     assert sorted(c.info.status for c in children) == ["FINISHED", "KILLED"]
-    assert [r.status for r in first.rows] == ["finished", "unfinished"]
 
-    second = run_sweep(spec, resume=True)
+    out = tmp_path / "carried.tar.gz"
+    (state,) = carry.pack(
+        path, out, tmp_path, final_checkpoints=True
+    )  # the finished run's, for its artifacts
+    assert not state.finished and state.has_tune
+    with tarfile.open(out) as archive:
+        members = archive.getmembers()
+    with_files = {_checkpoint_of(m.name) for m in members if m.isfile()} - {None}
+    empty = {_checkpoint_of(m.name) for m in members if m.isdir()} - {None} - with_files
+    assert len(with_files) == 1 and empty  # one checkpoint keeps its files, the cut trial's others none
+    assert with_files < _checkpoints_tune_restores(
+        sweep_root(spec) / "tune"
+    )  # the finished trial's: not packed
+
+    shutil.rmtree(tmp_path / "results")  # a new machine: only the archive is left
+    stores.forget_open_stores(str(tmp_path))
+    with tarfile.open(out) as archive:
+        archive.extractall(tmp_path, filter="data")
+    second = run_sweep(load_spec(path), resume=True)
     assert second.status == "finished" and second.exit_code == 0, second.summary
     assert second.parent_run_id == first.parent_run_id
     assert ray_session.is_initialized()  # a Ray it did not start is left running
-    assert [r.config_key for r in second.rows] == ["tree_depth=1", "tree_depth=2"]
+    assert sorted(r.config_key for r in second.rows) == ["tree_depth=1", "tree_depth=2"]
     _assert_tracked_once(spec)
     client, parents, children = _runs(spec)
     assert len({c.data.tags[TRIAL_ID_TAG] for c in children}) == 2
     for run in children:
         assert run.info.status == "FINISHED"
-        steps = [m.step for m in client.get_metric_history(run.info.run_id, TRAINING_ITERATION)]
-        assert steps and len(steps) == len(set(steps)) and steps == sorted(steps)
+        history = sorted(client.get_metric_history(run.info.run_id, TRAINING_ITERATION), key=lambda m: m.step)
+        iterations = [int(m.value) for m in history]
+        assert iterations == list(range(1, len(iterations) + 1)) and len(iterations) >= 2  # to the end, once
+        assert len({m.step for m in history}) == len(history)
 
 
 def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
