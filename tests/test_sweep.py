@@ -1,7 +1,8 @@
 """`python -m copilot_ray.sweep`: spec checks from the CLI, the smoke sweep tracked in MLflow, resume.
 
-The Ray runs use a cheaper copy of sweeps/smoke.yaml (130 env steps per trial instead of 1500: before SAC starts learning at 256) with its
-storage in tmp_path: the wiring is what is tested here, not learning.
+The Ray runs use a cheaper copy of sweeps/smoke.yaml (130 env steps per trial instead of 1500, SAC's
+learning starting after them) with its storage in tmp_path: the wiring is what is tested here, not
+learning.
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ def _smoke_copy(tmp_path: Path, env_steps: int = 130) -> Path:
     data = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
     data["tracking"] = {"storage": str(tmp_path / "results")}
     data["stop"] = {"env_steps": env_steps, "min_evaluations": 1}  # a smoke run: it only has to run
+    # and not learn: SAC's updates, not its env steps, are what a longer smoke trial would spend its time on
+    data["config"]["num_steps_sampled_before_learning_starts"] = max(256, env_steps + 1)
     path = tmp_path / "smoke.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
