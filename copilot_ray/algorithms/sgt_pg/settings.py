@@ -3,8 +3,9 @@
 pi_p's settings are CO-PILOT's ``planner.*`` settings with the reference code's exploration (a constant
 absolute std 0.05: ``planner.std_final`` defaults to null here) and unbounded mean (``planner.mean`` free).
 Every Tune iteration runs ``phases_per_iteration`` planner phases (Algorithm 1 on ``task_batch_size``
-training tasks, one PPO update per layer) and then scores the mean tree's finest path on the first ``eval_num_tasks`` test tasks
-(copilot_ray.planning.path_metrics), against RRT* when ``rrt_reference_time_s`` > 0.
+training tasks, one PPO update per layer) and then scores the mean tree's finest path on the first
+``eval_num_tasks`` test tasks (copilot_ray.planning.path_metrics), against RRT* when
+``rrt_reference_time_s`` > 0.
 """
 
 from __future__ import annotations
