@@ -238,20 +238,26 @@ def _metric_name(text: str) -> str:
     return "".join(c if c.isalnum() or c in "_-. :/" else "_" for c in text)[:200]
 
 
-def _mean_std(values: Sequence[float]) -> str:
+MIN_SEEDS_FOR_SPREAD = 5  # below it a spread says little: the range, as the report shows it
+
+
+def _over_seeds(values: Sequence[float]) -> str:
+    """The mean over seeds and, with fewer than 5 seeds, their range; with 5 or more, ± the sample std."""
     vals = [v for v in values if not math.isnan(v)]
     if not vals:
         return "-"
     mean = sum(vals) / len(vals)
     if len(vals) == 1:
         return f"{mean:.2f}"
+    if len(vals) < MIN_SEEDS_FOR_SPREAD:
+        return f"{mean:.2f} [{min(vals):.2f}, {max(vals):.2f}]"
     std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (len(vals) - 1))
     return f"{mean:.2f} ± {std:.2f}"
 
 
 def summary_table(rows: Sequence[TrialRow], searched: bool = False) -> str:
-    """A markdown table per configuration: seeds, mean ± sample std over seeds of the final success
-    (`searched`: a search's, without test-task figures)."""
+    """A markdown table per configuration: seeds, the mean over seeds of the final success with their range
+    (fewer than 5 seeds) or ± their sample std (`searched`: a search's, without test-task figures)."""
     groups: dict[str, list[TrialRow]] = {}
     for row in rows:
         groups.setdefault(row.config_key, []).append(row)
@@ -269,7 +275,7 @@ def summary_table(rows: Sequence[TrialRow], searched: bool = False) -> str:
             [
                 key,
                 ",".join(str(r.seed) for r in group),
-                *(_mean_std([r.figures.get(key, math.nan) for r in group]) for key in shown),
+                *(_over_seeds([r.figures.get(key, math.nan) for r in group]) for key in shown),
                 f"{sum(r.env_steps for r in group) / len(group):,.0f}",
                 f"{sum(r.wall_s for r in group) / len(group):.0f}",
                 "/".join(statuses),
@@ -510,7 +516,7 @@ def report_sweep(
     header = (
         f"# sweep {spec.name}: {status}\n\n{len(rows)} trial(s), wall {wall:.0f}s (this session). "
         "Success = last evaluation of each trial on the validation tasks (the report shows the test tasks'); "
-        "mean ± sample std over seeds.\n\n"
+        "mean over seeds, [range] with fewer than 5 seeds, ± sample std with 5 or more.\n\n"
     )
     mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
     tracking.end_sweep_run(

@@ -327,7 +327,9 @@ def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
                            row("env.id=maze-rigid", 0, 0.0, nan)])  # fmt: skip
     header, _, point, rigid = table.splitlines()
     assert "path success" in header and "length / RRT*" in header and "planned" not in header
-    assert "0.80 ± 0.14" in point and "2.50 ± 0.71" in point
+    assert "0.80 [0.70, 0.90]" in point and "2.50 [2.00, 3.00]" in point  # 2 seeds: the range
+    five = summary_table([row("env.id=maze-point", s, 0.5 + 0.1 * s, 2.0) for s in range(5)])
+    assert "0.70 ± 0.16" in five.splitlines()[2]  # 5 seeds: ± the sample std
     assert rigid.split("|")[4].strip() == "-"  # no successful path at the end: no length ratio
     # A search (Optuna) chooses by validation figures: its summary shows no test-task (paths) figure.
     searched = summary_table([row("env.id=maze-point", 0, 0.7, 3.0)], searched=True)
