@@ -209,18 +209,16 @@ def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ra
     assert sorted(c.info.status for c in children) == ["FINISHED", "KILLED"]
 
     out = tmp_path / "carried.tar.gz"
-    (state,) = carry.pack(
-        path, out, tmp_path, final_checkpoints=True
-    )  # the finished run's, for its artifacts
+    # with the final checkpoints: the finished run's is one of the artifacts checked after the resume
+    (state,) = carry.pack(path, out, tmp_path, final_checkpoints=True)
     assert not state.finished and state.has_tune
     with tarfile.open(out) as archive:
         members = archive.getmembers()
     with_files = {_checkpoint_of(m.name) for m in members if m.isfile()} - {None}
     empty = {_checkpoint_of(m.name) for m in members if m.isdir()} - {None} - with_files
     assert len(with_files) == 1 and empty  # one checkpoint keeps its files, the cut trial's others none
-    assert with_files < _checkpoints_tune_restores(
-        sweep_root(spec) / "tune"
-    )  # the finished trial's: not packed
+    restored = _checkpoints_tune_restores(sweep_root(spec) / "tune")
+    assert with_files < restored  # the cut trial's; the finished trial's is not packed
 
     shutil.rmtree(tmp_path / "results")  # a new machine: only the archive is left
     stores.forget_open_stores(str(tmp_path))
