@@ -240,9 +240,10 @@ class SubgoalPlanner:
         self._center = torch.as_tensor(center, dtype=torch.float32)
         self._half = torch.as_tensor(half, dtype=torch.float32)
         self.mean_mode = mean
-        # the dims a bounded mean is kept at the box on (None: free, or nothing to bound)
-        squash = ~self._angle if mean != "free" and self.low is not None else np.zeros(self.goal_dim, bool)
-        self._squash = torch.as_tensor(squash) if squash.any() else None
+        # the dims a bounded mean is kept at the box on (None: free, or nothing to bound), and the box
+        bounded = ~self._angle if mean != "free" and self.low is not None else np.zeros(self.goal_dim, bool)
+        self._bounded_dims = torch.as_tensor(bounded) if bounded.any() else None
+        self._box_low, self._box_high = self._center - self._half, self._center + self._half
 
     def _build_nets(self, seed: int | None) -> nn.ModuleList:
         """One MLP per layer (or one shared), initialised from `seed` without touching torch's global RNG."""
@@ -331,13 +332,13 @@ class SubgoalPlanner:
         if self.angle_dims:  # the short way round: left + wrap(right - left) / 2
             base = torch.where(self._angle_t, left + _wrap_t(right - left) / 2.0, base)
         mean = base + self._net(k)(x) * self._half
-        if self._squash is not None:
+        if self._bounded_dims is not None:
             if self.mean_mode == "squashed":
                 bounded = self._center + self._half * torch.tanh((mean - self._center) / self._half)
             else:  # leaky
-                inside = torch.clamp(mean, self._center - self._half, self._center + self._half)
+                inside = torch.clamp(mean, self._box_low, self._box_high)
                 bounded = inside + LEAK * (mean - inside)
-            mean = torch.where(self._squash, bounded, mean)
+            mean = torch.where(self._bounded_dims, bounded, mean)
         return mean
 
     def _layer_mean(self, trees_t: torch.Tensor, K: int, k: int) -> torch.Tensor:
