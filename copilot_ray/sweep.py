@@ -346,8 +346,8 @@ def resolve_sweep(spec, *, resume: bool, tracking_uri: str | None) -> SweepRun:
     saved_spec = root / "spec.yaml"
     if resume and saved_spec.is_file():
         running = load_spec(saved_spec)
-        if running.model_dump(exclude={"tracking"}) != spec.model_dump(exclude={"tracking"}):
-            _say(f"note: {spec.source} differs from the spec this sweep ran with; resuming with {saved_spec}")
+        for line in resume_notes(running, spec, saved_spec):
+            _say(line)
     else:
         if spec.best_of is not None and spec.best_of.chosen is None:
             spec = choose_best_of(spec, tracking_uri)
@@ -355,6 +355,40 @@ def resolve_sweep(spec, *, resume: bool, tracking_uri: str | None) -> SweepRun:
         running = load_spec(saved_spec)
     uri = tracking_uri or running.tracking.uri
     return SweepRun(running, uri, resume, Path(spec.source), root, saved_spec, experiments)
+
+
+def _as_compared(spec) -> dict[str, Any]:
+    """What a resumed sweep's saved spec and the file given to --resume must agree on: everything but
+    what resolving writes into the saved copy (tracking, stage 1's winner, absolute layout paths)."""
+    data = spec.model_dump(exclude={"tracking"})
+    if data.get("best_of"):
+        data["best_of"] = {k: v for k, v in data["best_of"].items() if k not in ("chosen", "chosen_from")}
+    layout = (data.get("env") or {}).get("config", {}).get("layout")
+    if isinstance(layout, str) and Path(layout).expanduser().is_file():
+        data["env"]["config"]["layout"] = str(Path(layout).expanduser().resolve())
+    return data
+
+
+def resume_notes(running, given, saved_spec: Path) -> list[str]:
+    """Lines for --resume when the file given differs from the spec the sweep began with (which is the
+    one that runs). Added seeds get their own line: a started Tune experiment takes no new trials."""
+    before, now = _as_compared(running), _as_compared(given)
+    changed = [key for key in now if before.get(key) != now.get(key)]
+    if not changed:
+        return []
+    notes = [
+        f"note: {given.source} differs from the spec this sweep began with in {', '.join(changed)}; "
+        f"resuming with {saved_spec}"
+    ]
+    added = [seed for seed in given.seeds if seed not in running.seeds]
+    if "seeds" in changed and added:
+        notes.append(
+            f"note: seeds {added} added to {given.source} do not run on --resume, which runs the seeds "
+            f"the sweep began with ({list(running.seeds)}): run them as a part of their own, with the "
+            f"same config and `seeds: {added}` under another name (e.g. sweeps/fair_maze_more_seeds.yaml), "
+            "and report both with --parent-run all (one store) or --also-from (its own store)"
+        )
+    return notes
 
 
 def choose_best_of(spec, tracking_uri: str | None):

@@ -306,6 +306,35 @@ def test_a_stage_two_part_writes_the_winner_into_the_spec_it_runs_with(tmp_path)
     assert again.spec.best_of.chosen == {"actor_lr": 5e-4}
 
 
+def test_resuming_a_stage_two_part_notes_only_real_changes_and_says_added_seeds_do_not_run(tmp_path, capsys):
+    """The saved copy differs from the file by what resolving wrote (stage 1's winner, the store): no
+    note for that. Seeds added to the file are named, with what to do: a started part keeps its seeds."""
+    from copilot_ray.sweep import resolve_sweep
+
+    uri = _store_with_a_tuning_sweep(tmp_path)
+    best_of = {
+        "sweep": "tune",
+        "metric": "copilot/validation/success_auc",
+        "uri": uri,
+        "experiment": "tuning",
+    }
+    data = part("final", best_of=best_of, seeds=[0, 1], tracking={"storage": str(tmp_path / "results")})
+    spec = load_specs(write(tmp_path, data))[0]
+    run = resolve_sweep(spec, resume=False, tracking_uri=None)
+    (run.root / "tune" / "final").mkdir(parents=True)  # as if it had started
+    capsys.readouterr()
+    resolve_sweep(spec, resume=True, tracking_uri=None)
+    assert "note:" not in capsys.readouterr().out
+
+    grown = load_specs(write(tmp_path, {**data, "seeds": [0, 1, 2, 3, 4]}))[0]
+    again = resolve_sweep(grown, resume=True, tracking_uri=None)
+    out = capsys.readouterr().out
+    assert again.spec.seeds == [0, 1]
+    assert "differs from the spec this sweep began with in seeds;" in out
+    assert "seeds [2, 3, 4] added to" in out and "do not run on --resume" in out
+    assert "`seeds: [2, 3, 4]`" in out
+
+
 @pytest.mark.ray
 def test_a_two_stage_file_tunes_then_runs_the_winner_in_one_command(ray_session, tmp_path):
     """Stage 1 (HER, Optuna, its declared space, the defaults first) then stage 2 (best_of) from one
