@@ -356,13 +356,22 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
         v = on_validation.get(c.key)
         finals = v.metrics[metric].finals if v is not None and metric in v.metrics else np.array([])
         if finals.size and np.nanmean(finals) > MORE_SEEDS_ABOVE:
+            more = _unused_seeds(c, stats.MIN_SEEDS_FOR_CI - c.n_seeds)
             out.append(
                 f"{c.label}: {c.n_seeds} seed(s), and its final validation success ({metric}) is "
                 f"{np.nanmean(finals):.2f}, above {MORE_SEEDS_ABOVE}: a method above it gets "
                 f"{stats.MIN_SEEDS_FOR_CI} seeds in a comparison (decided on the validation tasks, not on "
-                "these test figures). Add seeds to its part (`seeds:`) and resume the sweep."
+                f"these test figures). Run seeds {more} as a part of their own, with the same config (or "
+                f"best_of) and `seeds: {more}` (a started part takes no new seeds on --resume), and report "
+                "it with this one (--parent-run all in one store, --also-from its own)."
             )
     return out
+
+
+def _unused_seeds(config: ConfigSummary, count: int) -> list[int]:
+    """The `count` smallest seeds no run of `config` used (a repeated seed would not be a new draw)."""
+    used = {str(t.seed) for t in config.all_trials}
+    return [s for s in range(count + len(used)) if str(s) not in used][:count]
 
 
 # ---------------------------------------------------------------------------------------------- planners
