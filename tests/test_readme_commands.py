@@ -30,6 +30,14 @@ def _commands() -> list[str]:
     return [c for c in out if "python" in c]
 
 
+def _script_commands(script: str) -> list[str]:
+    """Commands that run `script`, from code blocks and inline code (which may wrap over lines)."""
+    blocks = [line.strip().split("  #")[0] for line in README.splitlines() if line.startswith("    ")]
+    found = re.findall(r"`([^`#]*?" + re.escape(script) + r"[^`#]*)`", README)
+    inline = [" ".join(c.split()) for c in found if c.count("\n") <= 2]  # not a code block's stretch
+    return [c[c.index("bash ") :] for c in blocks + inline if script in c and "bash " in c]
+
+
 def _args(command: str, marker: str) -> list[str]:
     return shlex.split(command.split(marker, 1)[1].replace("$PWD", str(ROOT)))
 
@@ -41,10 +49,11 @@ TRAINS = [c for c in COMMANDS if "-m copilot_ray.train" in c]
 BENCHMARKS = [c for c in COMMANDS if "benchmarks/" in c and "<" not in c]
 CARRIES = [c for c in COMMANDS if "-m copilot_ray.carry " in c]
 PROGRESSES = [c for c in COMMANDS if "-m copilot_ray.progress " in c]
+PINNED_RUNS = _script_commands("scripts/run_at_commit.sh")
 
 
 def test_the_readme_shows_each_kind_of_command():
-    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS and CARRIES and PROGRESSES
+    assert SWEEPS and REPORTS and TRAINS and BENCHMARKS and CARRIES and PROGRESSES and PINNED_RUNS
 
 
 @pytest.mark.parametrize("command", CARRIES)
@@ -54,6 +63,26 @@ def test_carry_commands_name_a_valid_spec_and_an_archive(command):
 
     args = parse_args(_args(command, "-m copilot_ray.carry "))
     assert load_specs(ROOT / args.spec) and args.out.endswith(".tar.gz")
+
+
+@pytest.mark.parametrize("command", PINNED_RUNS)
+def test_pinned_run_commands_use_the_scripts_options_a_shipped_spec_and_sweep_flags(command):
+    """`bash scripts/run_at_commit.sh [--commit REV] [--spec-from REV2] [--carry F] SPEC [sweep flags]`:
+    its options are the script's (read off its usage line), SPEC a shipped spec, the rest sweep flags."""
+    from copilot_ray.sweep import parse_args
+    from copilot_ray.sweep_spec import load_specs
+
+    script = (ROOT / "scripts" / "run_at_commit.sh").read_text()
+    usage = next(line for line in script.splitlines() if "usage: bash scripts/run_at_commit.sh" in line)
+    options = set(re.findall(r"\[(--[a-z-]+) ", usage))
+    assert {"--commit", "--spec-from", "--carry"} <= options
+    words = shlex.split(command.replace("<sha>", "abc1234"))[2:]
+    while words and words[0].startswith("--"):
+        assert words[0] in options, (words[0], command)
+        words = words[2:]
+    spec, flags = words[0], words[1:]
+    assert load_specs(ROOT / spec)
+    parse_args([spec, *flags])
 
 
 @pytest.mark.parametrize("command", PROGRESSES)
