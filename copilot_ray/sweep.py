@@ -348,6 +348,7 @@ def resolve_sweep(spec, *, resume: bool, tracking_uri: str | None) -> SweepRun:
         running = load_spec(saved_spec)
         for line in resume_notes(running, spec, saved_spec):
             _say(line)
+        experiments = experiment_names(running)  # a search's seeds too: the ones it began with
     else:
         if spec.best_of is not None and spec.best_of.chosen is None:
             spec = choose_best_of(spec, tracking_uri)

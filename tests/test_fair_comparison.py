@@ -333,6 +333,23 @@ def test_resuming_a_stage_two_part_notes_only_real_changes_and_says_added_seeds_
     assert "differs from the spec this sweep began with in seeds;" in out
     assert "seeds [2, 3, 4] added to" in out and "do not run on --resume" in out
     assert "`seeds: [2, 3, 4]`" in out
+    # A search runs one Tune experiment per seed: on --resume, too, only those of the seeds it began with.
+    search = part(
+        "tuned",
+        search="declared",
+        searcher={
+            "type": "optuna",
+            "metric": "copilot/validation/success_auc",
+            "mode": "max",
+            "num_samples": 2,
+        },
+        tracking={"storage": str(tmp_path / "results")},
+    )
+    run = resolve_sweep(load_specs(write(tmp_path, search))[0], resume=False, tracking_uri=None)
+    (run.root / "tune" / "tuned-seed0").mkdir(parents=True)
+    grown = load_specs(write(tmp_path, {**search, "seeds": [0, 1]}))[0]
+    assert resolve_sweep(grown, resume=True, tracking_uri=None).experiments == [("tuned-seed0", 0)]
+    assert "seeds [1] added to" in capsys.readouterr().out
 
 
 @pytest.mark.ray
