@@ -386,7 +386,8 @@ def resume_notes(running, given, saved_spec: Path) -> list[str]:
         notes.append(
             f"note: seeds {added} added to {given.source} do not run on --resume, which runs the seeds "
             f"the sweep began with ({list(running.seeds)}): run them as a part of their own, with the "
-            f"same config and `seeds: {added}` under another name (e.g. sweeps/fair_maze_more_seeds.yaml), "
+            f"same config and `seeds: {added}` under another name (as "
+            "sweeps/fair_maze_paper_literal_seeds_2_4.yaml does for sweeps/fair_maze.yaml), "
             "and report both with --parent-run all (one store) or --also-from (its own store)"
         )
     return notes
