@@ -95,6 +95,13 @@ def experiment_names(spec) -> list[tuple[str, int | None]]:
     return [(f"{spec.name}-seed{seed}", seed) for seed in spec.seeds]
 
 
+def _absolute_layout(layout: Any) -> Any:
+    """A layout file's absolute path; a built-in layout's name (or an inline layout) as it is."""
+    if isinstance(layout, str) and Path(layout).expanduser().is_file():
+        return str(Path(layout).expanduser().resolve())
+    return layout
+
+
 def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None) -> Path:
     """The spec as it runs: absolute storage, the tracking URI and layout files resolved, re-validated."""
     data = spec.document  # this spec's own part of its file, as written
@@ -109,9 +116,8 @@ def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None
     data["tracking"] = {**(data["tracking"] or {}), "storage": spec.tracking.storage}
     data["tracking"]["uri"] = tracking_uri or spec.tracking.uri
     env_config = (data.get("env") or {}).get("config") or {}
-    layout = env_config.get("layout")
-    if isinstance(layout, str) and Path(layout).expanduser().is_file():
-        env_config["layout"] = str(Path(layout).expanduser().resolve())  # trials run in their own cwd
+    if "layout" in env_config:
+        env_config["layout"] = _absolute_layout(env_config["layout"])  # trials run in their own cwd
     destination.parent.mkdir(parents=True, exist_ok=True)
     text = (
         f"# {spec.name}: resolved copy of {Path(spec.source).resolve()} (written by copilot_ray.sweep)\n"
@@ -364,9 +370,9 @@ def _as_compared(spec) -> dict[str, Any]:
     data = spec.model_dump(exclude={"tracking"})
     if data.get("best_of"):
         data["best_of"] = {k: v for k, v in data["best_of"].items() if k not in ("chosen", "chosen_from")}
-    layout = (data.get("env") or {}).get("config", {}).get("layout")
-    if isinstance(layout, str) and Path(layout).expanduser().is_file():
-        data["env"]["config"]["layout"] = str(Path(layout).expanduser().resolve())
+    env_config = (data.get("env") or {}).get("config") or {}
+    if "layout" in env_config:
+        env_config["layout"] = _absolute_layout(env_config["layout"])
     return data
 
 
