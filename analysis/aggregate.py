@@ -360,13 +360,18 @@ def final_values(trials: list[Trial], metric: str, budget: float) -> tuple[np.nd
     budget, so a method with long iterations (CO-PILOT's are ~16k env steps) would be scored after up
     to an iteration more experience than one with short iterations.
     """
-    finals, steps = [], []
-    for t in trials:
-        s, v = t.curves[metric]
-        at = float(np.clip(budget, s[0], s[-1])) if np.isfinite(budget) else float(s[-1])
-        finals.append(float(np.interp(at, s, v)))
-        steps.append(at)
-    return np.array(finals), np.array(steps)
+    read = [value_at(t.curves[metric], budget) for t in trials]
+    return np.array([v for v, _ in read]), np.array([at for _, at in read])
+
+
+def value_at(curve: tuple[np.ndarray, np.ndarray], budget: float) -> tuple[float, float]:
+    """A curve's value at the budget and the env step it is read at (`final_values`' rule); (NaN, NaN)
+    for an empty curve."""
+    steps, values = curve
+    if not len(steps):
+        return float("nan"), float("nan")
+    at = float(np.clip(budget, steps[0], steps[-1])) if np.isfinite(budget) else float(steps[-1])
+    return float(np.interp(at, steps, values)), at
 
 
 def _cadence(trials: list[Trial], metric: str, budget: float) -> dict[str, float]:

@@ -1259,3 +1259,114 @@ def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_s
         == 0
     )
     assert "final validation success (" not in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- the stated target and the diagnostics
+def _target_sweep(copilot_finals, her_finals, budget=2000.0):
+    """CO-PILOT's default (K = 2, logging diagnostics) and HER, evaluated at 1000 and 3000 env steps
+    with a budget of 2000: every figure is read halfway between, at the budget."""
+    from analysis.load import Sweep, Trial
+    from copilot_ray.keys import (
+        AGENT_SUBTASK_SUCCESS_LAYER,
+        DIAG_SEGMENT_LENGTH_LAYER,
+        DIAG_SUCCESS_AFTER_FAILED,
+        EVAL_SUCCESS,
+        PRESET_TAG,
+        SUCCESS_DIRECT,
+    )
+
+    steps = np.array([1000.0, 3000.0])
+    trials = []
+    for algorithm, finals in (("copilot", copilot_finals), ("her", her_finals)):
+        for seed, final in enumerate(finals):
+            tags = {
+                ALGORITHM_TAG: algorithm,
+                PRESET_TAG: "default",
+                SEED_TAG: str(seed),
+                ENV_TAG: "maze-point",
+            }
+            t = Trial(f"{algorithm}{seed}", "r", "FINISHED", "default", str(seed), tags, budget=budget)
+            t.curves[EVAL_SUCCESS] = (steps, np.array([0.0, 2 * final]))  # final at 2000 env steps
+            if algorithm == "copilot":
+                t.curves[SUCCESS_DIRECT] = (steps, np.array([0.0, 0.2]))  # 0.1 at the budget
+                t.curves[DIAG_SEGMENT_LENGTH_LAYER + "2"] = (steps, np.array([1.0, 1.0]))  # depth K = 2
+                t.curves[AGENT_SUBTASK_SUCCESS_LAYER + "2"] = (steps, np.array([0.2, 0.4 + 0.2 * seed]))
+                t.curves[DIAG_SUCCESS_AFTER_FAILED] = (steps, np.array([0.1, 0.1]))
+            trials.append(t)
+    return Sweep("u", "e", "1", None, "s", trials)
+
+
+def test_target_verdict_says_how_far_each_part_is_from_the_claim():
+    from analysis.aggregate import summarise
+    from analysis.target import verdict
+
+    five = [0.40, 0.45, 0.50, 0.55, 0.60]  # IQM 0.5 (the middle three)
+    configs, _ = summarise(_target_sweep(five, [0.1, 0.12, 0.14, 0.16, 0.18]), reps=200)
+    lines = verdict(configs, 0.6, "test")
+    assert lines[0].startswith("algorithm=copilot: final test success IQM 0.500 [95% CI ")
+    assert lines[0].endswith("target 0.6: NOT met, the IQM is 0.100 short of it (83% of the target).")
+    cp = configs[0].metrics["copilot/eval/success"].final
+    her = configs[1].metrics["copilot/eval/success"].final
+    assert lines[1].startswith("against the best other method, algorithm=her (IQM 0.140 ")
+    assert lines[1].endswith(
+        f"met: the lower end of its CI, {cp.low:.3f}, is {cp.low - her.high:.3f} above their upper end, "
+        f"{her.high:.3f}."
+    )
+    assert (
+        lines[2]
+        == "algorithm=copilot's agent alone (no plan): final test success IQM 0.100 [95% CI 0.100, 0.100]."
+    )
+    assert verdict(configs, 0.45, "test")[0].endswith("target 0.45: met, the IQM is 0.050 above it.")
+    # overlapping intervals: the shortfall is the gap between the two ends
+    configs, _ = summarise(_target_sweep(five, [0.40, 0.45, 0.50, 0.55, 0.60]), reps=200)
+    cp, her = (c.metrics["copilot/eval/success"].final for c in configs)
+    assert verdict(configs, 0.6, "test")[1].endswith(
+        f"NOT met: the lower end of its CI, {cp.low:.3f}, is {her.high - cp.low:.3f} short of their upper "
+        f"end, {her.high:.3f}."
+    )
+    # two seeds: neither an IQM nor a CI to judge, and the verdict says so instead of judging a mean
+    configs, _ = summarise(_target_sweep([0.2, 0.3], [0.1, 0.2]), reps=200)
+    lines = verdict(configs, 0.6, "test")
+    assert lines[0].endswith(
+        "target 0.6 (an IQM over >= 5 seeds): cannot be judged on 2 seed(s); their mean is 0.350 short of it "
+        "(42% of the target)."
+    )
+    assert lines[1].endswith("CIs apart cannot be judged (n = 2 and 2; a CI needs 5).")
+
+
+def test_diagnostics_table_reads_each_seed_at_the_budget():
+    from analysis.aggregate import summarise
+    from analysis.target import diagnostics_table
+
+    configs, _ = summarise(_target_sweep([0.2, 0.3], [0.1, 0.2]), reps=200)
+    table = diagnostics_table(configs)
+    # only the figures some run logged; HER logged no tree diagnostics, so it has no row
+    assert table.header == [
+        "configuration",
+        "agent alone (no plan)",
+        "training sub-task success, layer K",
+        "after a missed one",
+    ]
+    # sub-task success at 2000 env steps: seed 0 (0.2 + 0.4) / 2 = 0.3, seed 1 (0.2 + 0.6) / 2 = 0.4
+    assert table.rows == [
+        ["algorithm=copilot", "0.10 (0.10-0.10, n = 2)", "0.35 (0.30-0.40, n = 2)", "0.10 (0.10-0.10, n = 2)"]
+    ]
+
+
+def test_report_target_flag_is_checked_and_shown(honest, tmp_path, capsys):
+    out = tmp_path / "report"
+    with pytest.raises(SystemExit) as e:
+        main([HONEST, "--tracking-uri", honest["uri"], "--out", str(out), "--no-log", "--target", "1.5"])
+    assert e.value.code == 2 and "--target: 1.5 is not a success rate in (0, 1]" in capsys.readouterr().err
+    assert not out.exists()
+    assert (
+        main([HONEST, "--tracking-uri", honest["uri"], "--out", str(out), "--no-log", "--target", "0.9"]) == 0
+    )
+    section = (
+        (out / "report.md").read_text().split("## Target: final test success >= 0.9")[1].split("\n## ")[0]
+    )
+    assert "- algorithm=copilot: final test success IQM 0.800 [95% CI " in section
+    assert "target 0.9: NOT met, the IQM is 0.100 short of it (89% of the target)." in section
+    # without the flag there is no verdict (the honest store logs no tree diagnostics: no table either)
+    assert "## Target" not in (honest["out"] / "report.md").read_text()
+    assert "## Diagnostics at the budget" not in (honest["out"] / "report.md").read_text()
