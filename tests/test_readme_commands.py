@@ -141,9 +141,9 @@ def test_report_commands_name_an_experiment_a_shipped_spec_writes_there(command)
     experiments = {e for e, _ in stores}
     assert experiment in experiments, f"{experiment!r} is no shipped spec's experiment: {sorted(experiments)}"
     for uri in filter(None, [parsed.tracking_uri, *parsed.also_from]):
-        # a pinned worktree beside this checkout (scripts/run_at_commit.sh) keeps a spec's store at the
-        # same path under it
-        here = re.sub(r"/\.\./main-at-[0-9a-f]+/", "/", uri)
+        # a pinned worktree beside this checkout (scripts/run_at_commit.sh: ../<checkout>-at-<sha7>) keeps
+        # a spec's store at the same path under it
+        here = re.sub(r"/\.\./[^/]+-at-[0-9a-f]{7}/", "/", uri)
         assert (experiment, here) in stores, f"no shipped spec writes {experiment!r} into {uri}"
 
 
