@@ -74,7 +74,7 @@ def _groups(configs: list[ConfigSummary]) -> dict[tuple[str, str], tuple[ConfigS
 
 
 def path_frame(configs: list[ConfigSummary]) -> pd.DataFrame:
-    """One row per (env, method): seeds and each metric's last value, mean [min, max] over seeds."""
+    """One row per (env, method): seeds and each metric's last value, its mean, min and max over seeds."""
     rows = []
     for (env, method), (c, group) in _groups(configs).items():
         row: dict[str, object] = {
@@ -105,7 +105,8 @@ def _final(trial: Trial, key: str) -> float:
 
 
 def table(frame: pd.DataFrame) -> Table:
-    """The table with mean [min, max] cells (a single seed: just its value); columns no row has a value
+    """The table with "mean (range min-max)" cells (a single seed: just its value; no brackets, which the
+    report keeps for confidence intervals); columns no row has a value
     in (the ratios without an RRT* reference) are left out."""
     names = [n for n in COLUMNS.values() if frame[n].notna().any()]
     out = Table(["env", "method", "seeds", *names, "env steps (planners: checks)", "privileges"])
@@ -127,7 +128,7 @@ def _cell(mean: float, low: float, high: float, big: bool = False) -> str:
     if not math.isfinite(mean):
         return "-"
     fmt = (lambda v: f"{v:,.0f}") if big else (lambda v: f"{v:.2f}")
-    return fmt(mean) if low == high else f"{fmt(mean)} [{fmt(low)}, {fmt(high)}]"
+    return fmt(mean) if low == high else f"{fmt(mean)} (range {fmt(low)}-{fmt(high)})"
 
 
 def _seed_curves(group: list[Trial], key: str) -> list[tuple[np.ndarray, np.ndarray]]:

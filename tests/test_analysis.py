@@ -514,6 +514,8 @@ def test_planners_from_several_sweep_runs_get_one_table_and_figure(tmp_path):
     md = (out / "report.md").read_text()
     assert "Planners: paths on the test tasks" in md and "planners_paths.png" in md
     assert "| maze-point | rrt_star | 2 | 1.00 |" in md
+    # two seeds: their range, never a bracketed pair that would read as a confidence interval
+    assert "| maze-rigid | sgt_pg | 2 |" in md and "2.50 (range 2.00-3.00)" in md and "[2.00, 3.00]" not in md
     assert (out / "planners_paths.png").stat().st_size > 10_000
 
 
