@@ -105,8 +105,8 @@ def _final(trial: Trial, key: str) -> float:
 
 
 def table(frame: pd.DataFrame) -> Table:
-    """The table with "mean (range min-max)" cells (a single seed: just its value; no brackets, which the
-    report keeps for confidence intervals); columns no row has a value
+    """The table with "mean (range min-max)" cells (a single seed: just its value; an unlabelled
+    "[min, max]" would read as the report's confidence intervals); columns no row has a value
     in (the ratios without an RRT* reference) are left out."""
     names = [n for n in COLUMNS.values() if frame[n].notna().any()]
     out = Table(["env", "method", "seeds", *names, "env steps (planners: checks)", "privileges"])
