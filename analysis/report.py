@@ -100,6 +100,8 @@ _VALIDATION_WHY = (
     "every sweep here is a search, which chose by these tasks; its test figures are not shown, so that "
     "nothing is chosen by them: the comparison's second stage reports the test tasks"
 )
+# Said instead when --tasks validation chose them: a check of a default is no search, and must not read as one.
+_VALIDATION_ASKED = "asked for with --tasks validation; no test figure is shown"
 OWNED = (
     "*.png",
     "report.md",
@@ -202,8 +204,9 @@ def main(argv: list[str] | None = None) -> int:
     left_out: list[str] = []  # what a figure leaves out, and why
     several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
     tasks = sweep.tasks
+    tasks_why = _VALIDATION_ASKED if args.tasks == VALIDATION else _VALIDATION_WHY
     if tasks == VALIDATION:
-        print(f"tasks: {tasks} ({_VALIDATION_WHY})")
+        print(f"tasks: {tasks} ({tasks_why})")
     if any(c.metrics for c in configs):
         caption = _privilege_caption(configs)
 
@@ -334,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         left_out,
         provenance,
         below,
+        tasks_why,
     )
     (out / "report.md").write_text(_to_markdown(doc))
     (out / "report.html").write_text(_to_html(doc, sweep.experiment))
@@ -689,7 +693,7 @@ DIAGNOSTICS_TEXT = (
 )
 
 
-def _summary_text(configs: list[ConfigSummary], tasks: str) -> str:
+def _summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str) -> str:
     windows = []
     for metric, short in tables.SHORT.items():
         m = next((c.metrics[metric] for c in configs if metric in c.metrics), None)
@@ -697,7 +701,7 @@ def _summary_text(configs: list[ConfigSummary], tasks: str) -> str:
             lo, hi = m.auc_window
             windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
     return (
-        (f"Validation tasks only ({_VALIDATION_WHY}). " if tasks == VALIDATION else "Test tasks only. ")
+        (f"Validation tasks only ({tasks_why}). " if tasks == VALIDATION else "Test tasks only. ")
         + "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method "
         "of a comparison), linear between its evaluations on either side; a seed whose evaluations end "
         "before it (still running) or a sweep without one: its last evaluation; one first evaluated "
@@ -734,7 +738,18 @@ DETAILS_TEXT = (
 
 
 def _document(
-    sweep, configs, missing: Missing, axes_shown, figs, tree_figs, frame, notes, left_out, provenance, below
+    sweep,
+    configs,
+    missing: Missing,
+    axes_shown,
+    figs,
+    tree_figs,
+    frame,
+    notes,
+    left_out,
+    provenance,
+    below,
+    tasks_why: str,
 ):
     statuses: dict[str, int] = {}
     for t in sweep.trials:
@@ -767,7 +782,7 @@ def _document(
         doc.append(("h2", "Left out of the figures"))
         doc.append(("ul", left_out))
     doc.append(("h2", "Summary"))
-    doc.append(("p", _summary_text(configs, sweep.tasks)))
+    doc.append(("p", _summary_text(configs, sweep.tasks, tasks_why)))
     doc.append(("table", tables.headline_table(frame)))
     details = tables.details_table(frame)
     if details.rows:

@@ -1186,6 +1186,7 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
     summary, csv, text = report("search")
     assert "| final validation success | validation success AUC |" in summary
     assert "mean 0.170" in summary and "0.97" not in summary and "Validation tasks only" in text
+    assert "every sweep here is a search" in text
     assert not csv.metric.eq(EVAL_SUCCESS).any() and csv.metric.eq(validation_key(EVAL_SUCCESS)).any()
     assert not csv.metric.eq(PATH_SUCCESS).any() and not (tmp_path / "search" / "planners.md").exists()
     summary, csv, text = report("comparison")
@@ -1194,8 +1195,10 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
     assert csv.metric.eq(PATH_SUCCESS).any() and (tmp_path / "comparison" / "planners.md").exists()
     summary, _, _ = report("search", "--tasks", "test")
     assert "mean 0.970" in summary
-    summary, _, _ = report("comparison", "--tasks", "validation")
+    summary, _, text = report("comparison", "--tasks", "validation")
     assert "mean 0.170" in summary and "0.97" not in summary
+    # a grid read on validation tasks by request is no search, and its report must not say it is one
+    assert "asked for with --tasks validation" in text and "every sweep here is a search" not in text
 
 
 def test_a_crowded_figure_keeps_every_methods_best_configuration():
