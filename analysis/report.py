@@ -510,7 +510,11 @@ def _tree_figures(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, n
             f"Sub-goal trees drawn for the {MAX_TREE_FIGURES} best of {len(candidates)} configurations."
         )
         candidates = [c for c in candidates if c.key in best]
-    if not candidates:
+    if not candidates and sweep.tasks == VALIDATION:  # the snapshots are of test tasks: withheld, not absent
+        notes.append(
+            f"No tree figure in a validation report: sub-goal tree snapshots ({TREES_DIR}/*.npz) are drawn on test tasks."
+        )
+    elif not candidates:
         notes.append(f"No run has sub-goal tree snapshots ({TREES_DIR}/*.npz): no tree figure.")
     result = []
     loaded: list[tuple[str, list]] = []

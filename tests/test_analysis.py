@@ -1189,6 +1189,10 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
     assert "every sweep here is a search" in text
     assert not csv.metric.eq(EVAL_SUCCESS).any() and csv.metric.eq(validation_key(EVAL_SUCCESS)).any()
     assert not csv.metric.eq(PATH_SUCCESS).any() and not (tmp_path / "search" / "planners.md").exists()
+    assert (
+        "No tree figure in a validation report: sub-goal tree snapshots (copilot_trees/*.npz) are drawn on test tasks."
+        in text
+    )
     summary, csv, text = report("comparison")
     assert "| final test success | test success AUC |" in summary and "mean 0.970" in summary
     assert "Test tasks only" in text and csv.metric.eq(EVAL_SUCCESS).any()
