@@ -106,7 +106,16 @@ if [ -n "$carry" ] && [ -d "$tree" ]; then
 fi
 if [ "$spec_sha" != "$sha" ] && [ -e "$tree/$spec" ]; then
   if ! git show "$spec_sha:$spec" | cmp -s - "$tree/$spec"; then
-    echo "error: --spec-from ${spec_sha:0:7}: $tree/$spec differs from $spec in ${spec_sha:0:7}; a part resumes with the spec it began with" >&2
+    # Name the commit whose spec the part began with (a later commit may only have edited a comment).
+    began="$(git hash-object "$tree/$spec")"
+    hint=""
+    for rev in $(git log --format=%H -- "$spec"); do
+      if [ "$(git rev-parse -q --verify "$rev:$spec" 2>/dev/null)" = "$began" ]; then
+        hint="; it is $spec as committed in ${rev:0:7}: resume with --spec-from ${rev:0:7}"
+        break
+      fi
+    done
+    echo "error: --spec-from ${spec_sha:0:7}: $tree/$spec differs from $spec in ${spec_sha:0:7}; a part resumes with the spec it began with$hint" >&2
     exit 2
   fi
 fi

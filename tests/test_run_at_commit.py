@@ -148,7 +148,16 @@ def test_spec_from_runs_a_later_commits_part_with_the_code_of_the_pinned_commit(
     assert (
         done.returncode == 2
         and f"{tree}/sweeps/b.yaml differs from sweeps/b.yaml in {later[:7]}" in done.stderr
+        and "resume with --spec-from" not in done.stderr
     )
+    # A later commit that edits the spec (a comment, say) is refused too, and the error names the
+    # commit whose spec the part began with.
+    (tree / "sweeps" / "b.yaml").write_text("name: b\nseeds: [2, 3, 4]\n")
+    (repo / "sweeps" / "b.yaml").write_text("# a comment\nname: b\nseeds: [2, 3, 4]\n")
+    _git(repo, "add", "-A")
+    _git(repo, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "comment")
+    done = _run_in(repo, "--commit", code, "--spec-from", "HEAD", "sweeps/b.yaml", "--resume")
+    assert done.returncode == 2 and f"resume with --spec-from {later[:7]}" in done.stderr
 
     # A spec the code's commit holds in another version would leave the worktree's tracked file edited.
     done = _run_in(repo, "--commit", code, "--spec-from", later, "sweeps/a.yaml")
