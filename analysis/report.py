@@ -354,10 +354,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
-    """One line per configuration reported on the test tasks with fewer than `MIN_SEEDS_FOR_CI` seeds
-    whose final success on the validation tasks (the same runs' evaluations, mean over seeds) is above
-    `MORE_SEEDS_ABOVE`: the comparison's rule asks for more seeds there. [] for validation reports and
-    runs that logged no validation success."""
+    """One line per configuration reported on the test tasks with fewer than `MIN_SEEDS_FOR_CI` seeds,
+    read off its final success on the validation tasks (the same runs' evaluations, mean over seeds):
+    above `MORE_SEEDS_ABOVE` the comparison's rule asks for more seeds, and the line says which to run;
+    at or below it the line says the rule allows the few (else "lacks seeds" reads as a defect). [] for
+    validation reports and runs that logged no validation success."""
     short = [c for c in configs if 0 < c.n_seeds < stats.MIN_SEEDS_FOR_CI]
     if sweep.tasks != TEST or not short:
         return []
@@ -382,6 +383,12 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
                 f"these test figures). Run seeds {more} as a part of their own, with the same config (or "
                 f"best_of) and `seeds: {more}` (a started part takes no new seeds on --resume), and report "
                 "it with this one (--parent-run all in one store, --also-from its own)."
+            )
+        elif finals.size:
+            out.append(
+                f"{c.label}: {c.n_seeds} seed(s), within the comparison's seed rule: its final validation "
+                f"success ({metric}) is {np.nanmean(finals):.2f}, not above {MORE_SEEDS_ABOVE}, so "
+                f"{c.n_seeds} may do (decided on the validation tasks, not on these test figures)."
             )
     return out
 

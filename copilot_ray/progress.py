@@ -203,7 +203,8 @@ def report(specs) -> list[str]:
     )
     sources = [p.pace_from for p in parts if p.state != FINISHED and p.pace_from]
     paced = ", ".join(f"{s}: {sources.count(s)}" for s in (OWN, SAME_ALGORITHM, CHECK_RATES) if s in sources)
-    eta = f"; left: about {duration_text(sum(left))} (parts paced by {paced})" if left else ""
+    # Every part finished: nothing is left to estimate (not "about 0 s, paced by" nothing).
+    eta = f"; left: about {duration_text(sum(left))} (parts paced by {paced})" if left and paced else ""
     if unknown:
         eta += f" ({unknown} part(s) without an estimate not counted)"
     lines.append(f"  {finished} of {len(parts)} parts finished{total}{eta}")

@@ -79,6 +79,14 @@ def test_each_part_its_trials_and_env_steps_and_the_time_left(tmp_path, monkeypa
     )
 
 
+def test_a_finished_file_says_so_without_an_estimate(tmp_path, capsys):
+    path = _file(tmp_path)
+    done_only = tmp_path / "done.yaml"
+    done_only.write_text(path.read_text().split("---\n")[0])
+    assert progress.main([done_only.name, "--root", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == "  1 of 1 parts finished; 3k of 3k env steps (100 %)"
+
+
 def test_the_time_left_follows_the_pace_the_trials_ran_at(tmp_path, monkeypatch, capsys):
     """With its trials' time_total_s in the store, a part's time left is its own pace (2 env steps/s
     after the first result, 30 s of setup per new trial), not --check's rate; a part not begun borrows
