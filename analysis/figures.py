@@ -418,6 +418,11 @@ def _draw_walls_and_path(ax, snap: TreeSnapshot, pts: np.ndarray) -> None:
 # ---------------------------------------------------------------------------------------------- diagnostics
 # One panel per question, one colour per configuration, one line per seed. (metric, line style, label);
 # {K} / {K2} in a metric: the run's tree depth K / max(K - 2, 1).
+# What a trial must have for a panel's lines to mean what the panel says: TREE, a sub-goal tree (the
+# training sub-task panels); PLAN, a plan of its own (HER's and SAC's "plan" is the straight segment
+# from start to goal, and their training "sub-task" is the whole task: drawn, they read as a planner's).
+TREE, PLAN, ANY = "tree", "plan", "any"
+
 _DIAG_PANELS = (
     (
         "sub-goals inside obstacles",
@@ -425,6 +430,7 @@ _DIAG_PANELS = (
             (DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "{K}", "-", "layer K"),
             (DIAG_SUBGOAL_IN_OBSTACLE_LAYER + "{K2}", ":", "layer K-2"),
         ),
+        TREE,
     ),
     (
         "segments longer than one sub-task can cover",
@@ -432,6 +438,7 @@ _DIAG_PANELS = (
             (DIAG_SEGMENT_UNREACHABLE_LAYER + "{K}", "-", "layer K"),
             (DIAG_SEGMENT_UNREACHABLE_LAYER + "{K2}", ":", "layer K-2"),
         ),
+        TREE,
     ),
     (
         "training sub-task success by layer",
@@ -440,6 +447,7 @@ _DIAG_PANELS = (
             (AGENT_SUBTASK_SUCCESS_LAYER + "{K2}", "--", "layer K-2"),
             (AGENT_SUBTASK_SUCCESS_LAYER + "0", ":", "layer 0"),
         ),
+        TREE,
     ),
     (
         "sub-task success after the previous one was...",
@@ -447,8 +455,9 @@ _DIAG_PANELS = (
             (DIAG_SUCCESS_AFTER_REACHED, "-", "reached"),
             (DIAG_SUCCESS_AFTER_FAILED, ":", "failed"),
         ),
+        TREE,
     ),
-    ("critic's mean Q", ((DIAG_Q_MEAN, "-", "mean Q"),)),
+    ("critic's mean Q", ((DIAG_Q_MEAN, "-", "mean Q"),), ANY),
     (
         "{tasks}: planned path collision-free / followed",
         (
@@ -456,6 +465,7 @@ _DIAG_PANELS = (
             (eval_by_action(REACHED_PLANNED, "deterministic"), "--", "reached (collisions allowed)"),
             (eval_by_action(SUCCESS_PLANNED, "deterministic"), "-", "success"),
         ),
+        PLAN,
     ),
     (
         "{tasks} success: deterministic vs sampled actions",
@@ -464,6 +474,7 @@ _DIAG_PANELS = (
             (eval_by_action(SUCCESS_PLANNED, "sampled"), "--", "sampled, planned"),
             (eval_by_action(SUCCESS_DIRECT, "sampled"), ":", "sampled, direct"),
         ),
+        ANY,
     ),
 )
 
@@ -471,6 +482,27 @@ _DIAG_PANELS = (
 def depth_of(trial) -> int:
     layers = [int(k.rsplit("_", 1)[1]) for k in trial.curves if k.startswith(DIAG_SEGMENT_LENGTH_LAYER)]
     return max(layers, default=0)
+
+
+def plans_of_its_own(trial) -> bool:
+    """A sub-goal tree, or a planned success that differs from the agent alone's somewhere (SoRB's
+    graph); HER's and SAC's planned success is their direct one."""
+    if depth_of(trial) > 0:
+        return True
+    planned, direct = trial.curves.get(SUCCESS_PLANNED), trial.curves.get(SUCCESS_DIRECT)
+    if planned is None or direct is None:
+        return False
+    return len(planned[1]) != len(direct[1]) or not np.allclose(planned[1], direct[1])
+
+
+def diagnostic_keys(trial, lines, needs: str) -> list[tuple[str, str]]:
+    """(metric, line style) of a panel's lines for one trial: none where the trial lacks what the
+    panel needs (a sub-goal tree, a plan of its own), so a flat method's numbers do not pass for a
+    planner's."""
+    if (needs == TREE and depth_of(trial) == 0) or (needs == PLAN and not plans_of_its_own(trial)):
+        return []
+    K = depth_of(trial)
+    return [(metric.format(K=K, K2=max(K - 2, 1)), style) for metric, style, _ in lines]
 
 
 def diagnostics(
@@ -485,19 +517,22 @@ def diagnostics(
     if not trials:
         return None
 
-    def keys(t, lines):
-        K = depth_of(t)
-        return [(metric.format(K=K, K2=max(K - 2, 1)), style) for metric, style, _ in lines]
-
-    named = [(title.format(tasks=tasks), lines) for title, lines in _DIAG_PANELS]
+    named = [(title.format(tasks=tasks), lines, needs) for title, lines, needs in _DIAG_PANELS]
     panels = [
-        (title, lines)
-        for title, lines in named
-        if any(k in t.curves for _, t in trials for k, _ in keys(t, lines))
+        (title, lines, needs)
+        for title, lines, needs in named
+        if any(k in t.curves for _, t in trials for k, _ in diagnostic_keys(t, lines, needs))
     ]
-    empty = [title for title, _ in named if title not in {p[0] for p in panels}]
+    empty = [title for title, _, _ in named if title not in {p[0] for p in panels}]
     if empty:
         notes.append(f"{path.name}: panels left out (no run logged their metrics): {'; '.join(empty)}.")
+    flat = sorted({c.label for c, t in trials if depth_of(t) == 0})
+    if flat:
+        notes.append(
+            f"{path.name}: {', '.join(flat)}: no sub-goal tree, so no lines in the training sub-task "
+            "panels (their 'sub-task' is the whole task); in the planned-path panel only where the "
+            "method plans (its planned success differs from the agent alone's, as SoRB's graph)."
+        )
     if not panels:
         return None
     drawn = [c for c in shown if any(c is d for d, _ in trials)]
@@ -512,9 +547,9 @@ def diagnostics(
         squeeze=False,
         layout="constrained",
     )
-    for ax, (title, lines) in zip(axes.flat, panels, strict=False):
+    for ax, (title, lines, needs) in zip(axes.flat, panels, strict=False):
         for c, t in trials:
-            for key, style in keys(t, lines):
+            for key, style in diagnostic_keys(t, lines, needs):
                 if key not in t.curves:
                     continue
                 steps, values = t.curves[key]

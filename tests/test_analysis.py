@@ -286,6 +286,34 @@ def test_diagnostics_page_draws_the_diag_curves_and_tau_hat(store):
     assert "## Diagnostics" in report and "## Learned time cost tau_hat against segment length" in report
 
 
+def test_diagnostics_draw_a_flat_methods_lines_only_where_they_mean_what_the_panel_says():
+    """HER's "plan" is the straight segment and its training "sub-task" the whole task: drawn in the
+    sub-goal panels they would read as a planner's. A tree draws everywhere; SoRB (planned success
+    differs from direct) draws its planned path; HER (planned = direct) only the critic and success."""
+    from types import SimpleNamespace
+
+    from analysis.figures import _DIAG_PANELS, PLAN, TREE, diagnostic_keys
+    from copilot_ray.keys import DIAG_SEGMENT_LENGTH_LAYER, PLANNED_COLLISION_FREE
+
+    steps = np.array([1000.0, 2000.0])
+    curves = {SUCCESS_DIRECT: (steps, np.array([0.1, 0.2])), DIAG_Q_MEAN: (steps, np.array([0.1, 0.2]))}
+    her = SimpleNamespace(curves={**curves, SUCCESS_PLANNED: (steps, np.array([0.1, 0.2]))})
+    sorb = SimpleNamespace(curves={**curves, SUCCESS_PLANNED: (steps, np.array([0.1, 0.4]))})
+    tree = SimpleNamespace(curves={**her.curves, DIAG_SEGMENT_LENGTH_LAYER + "3": (steps, steps)})
+    panels = {title: (lines, needs) for title, lines, needs in _DIAG_PANELS}
+    by_needs = {
+        TREE: panels["training sub-task success by layer"][0],
+        PLAN: panels["{tasks}: planned path collision-free / followed"][0],
+    }
+    assert panels["training sub-task success by layer"][1] == TREE
+    assert panels["{tasks}: planned path collision-free / followed"][1] == PLAN
+    for trial, tree_lines, plan_lines in ((her, 0, 0), (sorb, 0, 3), (tree, 3, 3)):
+        assert len(diagnostic_keys(trial, by_needs[TREE], TREE)) == tree_lines
+        assert len(diagnostic_keys(trial, by_needs[PLAN], PLAN)) == plan_lines
+    assert (PLANNED_COLLISION_FREE, ":") in diagnostic_keys(sorb, by_needs[PLAN], PLAN)
+    assert diagnostic_keys(her, (("x{K}", "-", "mean Q"),), "any") == [("x0", "-")]
+
+
 def test_diag_curves_and_tau_hat_are_loaded(store):
     from analysis.load import load_sweep, load_tree_snapshots
 
