@@ -529,7 +529,7 @@ def diagnostics(
     flat = sorted({c.label for c, t in trials if depth_of(t) == 0})
     if flat:
         notes.append(
-            f"{path.name}: {', '.join(flat)}: no sub-goal tree, so no lines in the training sub-task "
+            f"{path.name}: {'; '.join(flat)}: no sub-goal tree, so no lines in the training sub-task "
             "panels (their 'sub-task' is the whole task); in the planned-path panel only where the "
             "method plans (its planned success differs from the agent alone's, as SoRB's graph)."
         )
