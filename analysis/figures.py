@@ -489,10 +489,8 @@ def plans_of_its_own(trial) -> bool:
     graph); HER's and SAC's planned success is their direct one."""
     if depth_of(trial) > 0:
         return True
-    planned, direct = trial.curves.get(SUCCESS_PLANNED), trial.curves.get(SUCCESS_DIRECT)
-    if planned is None or direct is None:
-        return False
-    return len(planned[1]) != len(direct[1]) or not np.allclose(planned[1], direct[1])
+    logged = SUCCESS_PLANNED in trial.curves and SUCCESS_DIRECT in trial.curves
+    return logged and not trial.curves_agree(SUCCESS_PLANNED, SUCCESS_DIRECT)
 
 
 def diagnostic_keys(trial, lines, needs: str) -> list[tuple[str, str]]:

@@ -133,6 +133,13 @@ class Trial:
     def usable(self) -> bool:
         return self.status in USABLE_STATUSES
 
+    def curves_agree(self, a: str, b: str) -> bool:
+        """Whether metrics `a` and `b` were both logged, at the same env steps, with the same values."""
+        if a not in self.curves or b not in self.curves:
+            return False
+        (steps_a, values_a), (steps_b, values_b) = self.curves[a], self.curves[b]
+        return np.array_equal(steps_a, steps_b) and np.allclose(values_a, values_b)
+
     @property
     def has_eval(self) -> bool:
         """Evaluated at least once: the agent's success, or (planner-only baselines) its paths'."""

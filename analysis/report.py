@@ -481,13 +481,7 @@ RETURN_TWINS = (REACHED_PLANNED, REACHED_DIRECT, *SUCCESS_METRICS)
 
 def _return_equals(trial: Trial) -> str | None:
     """The rate `trial`'s return equals at every evaluation (R = 1), or None."""
-    steps, values = trial.curves[EVAL_RETURN]
-    for metric in RETURN_TWINS:
-        if metric in trial.curves:
-            s, v = trial.curves[metric]
-            if np.array_equal(s, steps) and np.allclose(v, values):
-                return metric
-    return None
+    return next((metric for metric in RETURN_TWINS if trial.curves_agree(EVAL_RETURN, metric)), None)
 
 
 def _privilege_caption(configs: list[ConfigSummary]) -> str:

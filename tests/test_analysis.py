@@ -290,16 +290,20 @@ def test_diagnostics_draw_a_flat_methods_lines_only_where_they_mean_what_the_pan
     """HER's "plan" is the straight segment and its training "sub-task" the whole task: drawn in the
     sub-goal panels they would read as a planner's. A tree draws everywhere; SoRB (planned success
     differs from direct) draws its planned path; HER (planned = direct) only the critic and success."""
-    from types import SimpleNamespace
-
     from analysis.figures import _DIAG_PANELS, PLAN, TREE, diagnostic_keys
+    from analysis.load import Trial
     from copilot_ray.keys import DIAG_SEGMENT_LENGTH_LAYER, PLANNED_COLLISION_FREE
+
+    def trial(curves):
+        return Trial(
+            run_id="r", run_name="r", status="FINISHED", config_key="c", seed="0", tags={}, curves=curves
+        )
 
     steps = np.array([1000.0, 2000.0])
     curves = {SUCCESS_DIRECT: (steps, np.array([0.1, 0.2])), DIAG_Q_MEAN: (steps, np.array([0.1, 0.2]))}
-    her = SimpleNamespace(curves={**curves, SUCCESS_PLANNED: (steps, np.array([0.1, 0.2]))})
-    sorb = SimpleNamespace(curves={**curves, SUCCESS_PLANNED: (steps, np.array([0.1, 0.4]))})
-    tree = SimpleNamespace(curves={**her.curves, DIAG_SEGMENT_LENGTH_LAYER + "3": (steps, steps)})
+    her = trial({**curves, SUCCESS_PLANNED: (steps, np.array([0.1, 0.2]))})
+    sorb = trial({**curves, SUCCESS_PLANNED: (steps, np.array([0.1, 0.4]))})
+    tree = trial({**her.curves, DIAG_SEGMENT_LENGTH_LAYER + "3": (steps, steps)})
     panels = {title: (lines, needs) for title, lines, needs in _DIAG_PANELS}
     by_needs = {
         TREE: panels["training sub-task success by layer"][0],
