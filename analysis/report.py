@@ -30,7 +30,8 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
                              data, or a figure that would repeat another) and why; CO-PILOT's
                              diagnostics at the budget in numbers; with --target SUCCESS, whether
                              CO-PILOT's default meets that claim, part by part, or by how much it
-                             falls short
+                             falls short; each configuration's settings against this checkout's
+                             defaults (`defaults.py`: is a row the default as the code stands now?)
 and logs the folder to the sweep's parent MLflow run under `report/`.
 
 Configurations are grouped by algorithm, config key, env id, env config and every other logged setting
@@ -71,7 +72,7 @@ from copilot_ray.keys import (
 )
 from copilot_ray.privileges import DESCRIPTIONS
 
-from . import figures, paths, stats, tables, target
+from . import defaults, figures, paths, stats, tables, target
 from .aggregate import ConfigSummary, Missing, headline_metric, privileges_label, summarise
 from .export import METRICS_CSV, write_metrics_csv
 from .load import (
@@ -319,6 +320,13 @@ def main(argv: list[str] | None = None) -> int:
             print(line, file=sys.stderr)
     below = _improvement_blocks(configs, improvement, several)  # right under the summary tables
     below += _target_blocks(configs, sweep.tasks, args)
+    settings_table = defaults.defaults_table(configs)
+    if settings_table is not None:
+        below += [
+            ("h2", "Settings against this checkout's defaults"),
+            ("p", defaults.TEXT),
+            ("table", settings_table),
+        ]
     if planner_table is not None:
         below += [
             ("h2", planner_title),

@@ -23,6 +23,10 @@ starts) and provide:
                                           whose value grants more says so itself (Setting.grants)
     GPU_LEARNER: bool                     optional: its learner runs on a GPU when a spec gives trials
                                           one (resources.gpus_per_trial; RLlib places it); default False
+    PRESETS: dict[str, dict]              optional: named sets of values (`preset: <name>`)
+    as_logged(values)                     optional: effective flat values -> the settings as its runs'
+                                          params hold them, where a setting is logged as other keys
+                                          (CO-PILOT's alpha schedule as its fields); default: as they are
 
 The config class (an RLlib AlgorithmConfig, imported only when a run is built) provides
 `from_settings(values, run)`: flat setting values + a RunContext -> a config ready to build. The trial
@@ -41,7 +45,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from copilot_ray.privileges import privileges_of
-from copilot_ray.settings import Setting
+from copilot_ray.settings import Setting, effective, logged_text
 
 ALGORITHMS: dict[str, tuple[str, str, str]] = {
     "copilot": (
@@ -134,10 +138,20 @@ class AlgorithmEntry:
     # (K: tree_depth, b: repetitions, alpha_schedule); the settings module's LABELS.
     labels: Mapping[str, str] = field(default_factory=dict)
     gpu_learner: bool = False  # the settings module's GPU_LEARNER
+    presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # the settings module's PRESETS
+    as_logged: Callable[[Mapping[str, Any]], dict[str, Any]] = dict  # the settings module's as_logged
 
     def privileges(self, values: Mapping[str, Any]) -> tuple[str, ...]:
         """The privileges a run uses at the effective setting `values` (copilot_ray.privileges)."""
         return privileges_of(self.settings, values, self.always_privileges)
+
+    def defaults_as_logged(self, preset: str | None = None) -> dict[str, str]:
+        """Every setting at its default (after `preset`) in the form its runs log them as MLflow params,
+        without building a config (no RLlib): a report holds old runs' params against these."""
+        values = self.as_logged(effective(self.settings, {"preset": preset} if preset else {}, self.presets))
+        if "preset" in self.settings:
+            values["preset"] = preset or "default"  # a run logs the preset it used by name
+        return {key: logged_text(value) for key, value in values.items()}
 
     def build_config(self, values: Mapping[str, Any], run: RunContext) -> Any:
         """The algorithm's config for flat setting `values` and one run (imports the config class)."""
@@ -203,4 +217,6 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         max_env_steps_past_budget=getattr(module, "max_env_steps_past_budget", None),
         labels=dict(getattr(module, "LABELS", {})),
         gpu_learner=bool(getattr(module, "GPU_LEARNER", False)),
+        presets=dict(getattr(module, "PRESETS", {})),
+        as_logged=getattr(module, "as_logged", dict),
     )

@@ -187,6 +187,12 @@ def numbers_setting(
     return Setting(key, "list", target, default, doc, check, f"a list of {what}", **kw)
 
 
+def logged_text(value: Any) -> str:
+    """A setting's value as runs log it among their MLflow params: a string as it is, anything else its
+    repr (the report reads old runs' params against this checkout's defaults in the same form)."""
+    return value if isinstance(value, str) else repr(value)
+
+
 def markdown_value(value: Any) -> str:
     """A setting's value as a README table cell."""
     if value is None:

@@ -47,6 +47,7 @@ from copilot_ray.keys import (
     result_value,
 )
 from copilot_ray.privileges import tag_value
+from copilot_ray.settings import logged_text
 from copilot_ray.store import missing_sqlite_file
 from copilot_ray.trials.description import describe_trial, env_params, trial_config_yaml
 
@@ -95,7 +96,7 @@ def params_for_mlflow(config: Mapping[str, Any]) -> dict[str, str]:
     """Flattened params, each value truncated to MLflow's limit (the full config is an artifact)."""
     out = {}
     for key, value in flatten(config, sep=".").items():
-        text = repr(value) if not isinstance(value, str) else value
+        text = logged_text(value)
         out[key[:250]] = text[:MLFLOW_PARAM_LIMIT]
     return out
 

@@ -911,6 +911,14 @@ def test_privileges_and_budgets_beside_every_result(honest):
         assert f"]({figure})\n\n{caption}" in report
 
 
+def test_every_configuration_is_held_against_this_checkouts_defaults(honest):
+    report = (honest["out"] / "report.md").read_text()
+    section = report.split("## Settings against this checkout's defaults")[1].split("## ")[0]
+    rows = [line for line in section.splitlines() if line.startswith("| algorithm=")]
+    # These hand-made runs logged no params: each row says so rather than listing every setting.
+    assert len(rows) == 3 and all("not compared: its runs logged no settings" in r for r in rows)
+
+
 def test_probability_of_improvement_in_the_report(honest):
     """CO-PILOT's default against the best other method by final success (SAC, 5 seeds; PPO is worse)."""
     report = (honest["out"] / "report.md").read_text()

@@ -106,6 +106,9 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
 
 def effective_settings(algo_config: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
     """Every setting of the trial's algorithm at the value the run uses (dotted keys read nested dicts)."""
+    if hasattr(algo_config, "setting_values"):
+        # A settings record (copilot_ray.settings.record_class) knows its own: `hrl.c` is its field `hrl_c`.
+        return {k: v for k, v in algo_config.setting_values().items() if k in settings}
     out: dict[str, Any] = {}
     for key, setting in settings.items():
         if key == "alpha_schedule":

@@ -476,6 +476,17 @@ def alpha_schedule_from(values: Mapping[str, Any]) -> Any:
     return {**base.to_dict(), **dotted}
 
 
+def as_logged(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Effective flat `values` as a run's params hold them: the alpha schedule as the fields of the
+    schedule it resolves to (`alpha_schedule.kind`, `.start`, ...), not as its preset's name."""
+    out = {k: v for k, v in values.items() if k != "alpha_schedule" and not k.startswith("alpha_schedule.")}
+    given = {k: v for k, v in values.items() if k.startswith("alpha_schedule.") and v is not None}
+    schedule = alpha_schedule_from({"alpha_schedule": values.get("alpha_schedule"), **given})
+    fields = AlphaSchedule.from_dict(schedule if schedule is not None else SETTINGS["alpha_schedule"].default)
+    out.update({f"alpha_schedule.{k}": v for k, v in fields.to_dict().items()})
+    return out
+
+
 def effective_values(values: Mapping[str, Any]) -> dict[str, Any]:
     """Every top-level setting a run of flat `values` uses: defaults, then the preset, then `values`."""
     out = {key: s.default for key, s in SETTINGS.items() if "." not in key}
