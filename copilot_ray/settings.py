@@ -187,10 +187,14 @@ def numbers_setting(
     return Setting(key, "list", target, default, doc, check, f"a list of {what}", **kw)
 
 
+PARAM_LIMIT = 500  # MLflow rejects longer param values
+
+
 def logged_text(value: Any) -> str:
     """A setting's value as runs log it among their MLflow params: a string as it is, anything else its
-    repr (the report reads old runs' params against this checkout's defaults in the same form)."""
-    return value if isinstance(value, str) else repr(value)
+    repr, cut to MLflow's limit (the report reads old runs' params against this checkout's defaults in
+    the same form)."""
+    return (value if isinstance(value, str) else repr(value))[:PARAM_LIMIT]
 
 
 def markdown_value(value: Any) -> str:

@@ -51,8 +51,6 @@ from copilot_ray.settings import logged_text
 from copilot_ray.store import missing_sqlite_file
 from copilot_ray.trials.description import describe_trial, env_params, trial_config_yaml
 
-MLFLOW_PARAM_LIMIT = 500  # MLflow rejects longer param values
-
 
 def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str, Any]:
     out: dict[str, Any] = {}
@@ -93,12 +91,8 @@ def git_commit(checkout: str | Path | None = None) -> str:
 
 
 def params_for_mlflow(config: Mapping[str, Any]) -> dict[str, str]:
-    """Flattened params, each value truncated to MLflow's limit (the full config is an artifact)."""
-    out = {}
-    for key, value in flatten(config, sep=".").items():
-        text = logged_text(value)
-        out[key[:250]] = text[:MLFLOW_PARAM_LIMIT]
-    return out
+    """Flattened params, each value cut to MLflow's limit by `logged_text` (the full config is an artifact)."""
+    return {key[:250]: logged_text(value) for key, value in flatten(config, sep=".").items()}
 
 
 class MlflowRun:

@@ -11,7 +11,7 @@ from analysis.defaults import SAME, defaults_table, differences, short
 from analysis.load import Trial
 from copilot_ray.keys import ALGORITHM_TAG, GIT_COMMIT_TAG
 from copilot_ray.registry import ALGORITHMS, RunContext, get_algorithm
-from copilot_ray.settings import logged_text
+from copilot_ray.settings import PARAM_LIMIT, logged_text
 
 CASES = [(name, preset) for name in sorted(ALGORITHMS) for preset in [None, *get_algorithm(name).presets]]
 
@@ -90,3 +90,14 @@ def test_numbers_are_shortened_and_everything_else_kept():
         "leaky",
         "0.98",
     ]
+
+
+def test_a_value_is_logged_and_read_back_in_one_form_cut_to_mlflows_limit():
+    from copilot_ray.tracking import params_for_mlflow
+
+    long = "x" * (PARAM_LIMIT + 100)
+    assert params_for_mlflow({"a": long, "b": {"c": [64, 64]}}) == {
+        "a": long[:PARAM_LIMIT],
+        "b.c": "[64, 64]",
+    }
+    assert logged_text(long) == long[:PARAM_LIMIT] and logged_text(None) == "None"
