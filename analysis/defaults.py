@@ -58,10 +58,8 @@ def differences(config: ConfigSummary) -> tuple[list[tuple[str, str, str]], list
         entry = get_algorithm(name)
     except UnknownAlgorithmError:
         return f"algorithm {name!r} is not one of this checkout's" if name else "no algorithm tag"
-    preset = trial.params.get("preset")
-    if preset in (None, "default", "None"):
-        preset = None
-    elif preset not in entry.presets:
+    preset = trial.params.get("preset")  # logged by name ("default" too) by an algorithm with presets
+    if preset is not None and preset not in entry.presets:
         return f"preset {preset!r} is not one of this checkout's {name} presets"
     defaults = entry.defaults_as_logged(preset)
     if not set(defaults) & set(trial.params):
