@@ -69,6 +69,22 @@ def test_every_default_obeys_its_own_rule_and_is_what_a_fresh_config_holds():
         assert values[s.key] == s.default, s.key
 
 
+def test_the_default_is_one_configuration_from_python_the_train_cli_and_a_spec():
+    # A user who builds the default from Python once got 30 tasks per iteration where the CLI and the
+    # specs (and so the evidence) used 2: every entry point must hold the same settings, preset included.
+    from copilot_ray import train
+    from copilot_ray.sweep_spec import build_algorithm_config
+
+    python = CoPilotConfig().setting_values()
+    cli = train.build_config(train.parse_args([])).setting_values()
+    spec = parse_spec({"name": "t", "env": {"id": "maze-point"}, "stop": {"env_steps": 200_000}})
+    (point,) = spec.trial_plan()
+    from_spec = build_algorithm_config(point, spec).setting_values()
+    assert set(python) == {s.key for s in CONFIG_SETTINGS}
+    assert cli == python
+    assert from_spec == python
+
+
 @pytest.mark.parametrize("setting", CONFIG_SETTINGS, ids=lambda s: s.key)
 def test_spec_and_config_refuse_the_same_bad_value_naming_the_key(setting):
     value = bad_value(setting)
