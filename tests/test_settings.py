@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from copilot_ray import train
 from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
 from copilot_ray.algorithms.copilot.settings import (
     PRESETS,
@@ -21,7 +22,7 @@ from copilot_ray.algorithms.copilot.settings import (
 )
 from copilot_ray.planning.alpha_schedule import CLOCKS, KINDS, AlphaSchedule
 from copilot_ray.registry import RunContext
-from copilot_ray.sweep_spec import SpecError, parse_spec
+from copilot_ray.sweep_spec import SpecError, build_algorithm_config, parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -72,9 +73,6 @@ def test_every_default_obeys_its_own_rule_and_is_what_a_fresh_config_holds():
 def test_the_default_is_one_configuration_from_python_the_train_cli_and_a_spec():
     # A user who builds the default from Python once got 30 tasks per iteration where the CLI and the
     # specs (and so the evidence) used 2: every entry point must hold the same settings, preset included.
-    from copilot_ray import train
-    from copilot_ray.sweep_spec import build_algorithm_config
-
     python = CoPilotConfig().setting_values()
     cli = train.build_config(train.parse_args([])).setting_values()
     spec = parse_spec({"name": "t", "env": {"id": "maze-point"}, "stop": {"env_steps": 200_000}})
