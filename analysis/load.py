@@ -158,6 +158,7 @@ class Sweep:
     # (tracking URI, run id, sweep name) of every sweep (parent) run whose trials are included
     parents: list[tuple[str, str, str]] = field(default_factory=list)
     tasks: str = TEST  # whose evaluations the trials' copilot/eval/ figures are (`on_validation_tasks`)
+    joined_experiments: list[str] = field(default_factory=list)  # others whose runs `add_trials_from` added
 
     def axes(self) -> list[str]:
         """What the configuration labels name (`axis_value`): the axis tags and env-config keys that take more
@@ -323,10 +324,11 @@ def _trial_order(t: Trial):
     return (t.tags.get(ALGORITHM_TAG, ""), t.config_key, natural_key(t.seed), t.run_id)
 
 
-def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
+def add_trials_from(sweep: Sweep, tracking_uri: str, experiment: str | None = None) -> int:
     """Adds every trial run of the same experiment in another store (runs that ran apart, e.g. two
-    sweeps side by side with their own SQLite files); returns how many. Run ids must not repeat."""
-    other = load_sweep(tracking_uri, sweep.experiment, ALL_SWEEPS, tasks=sweep.tasks)
+    sweeps side by side with their own SQLite files), or of `experiment` there (one method rerun in an
+    experiment of its own); returns how many. Run ids must not repeat."""
+    other = load_sweep(tracking_uri, experiment or sweep.experiment, ALL_SWEEPS, tasks=sweep.tasks)
     known = {t.run_id for t in sweep.trials}
     twice = sorted(known & {t.run_id for t in other.trials})
     if twice:
@@ -337,6 +339,8 @@ def add_trials_from(sweep: Sweep, tracking_uri: str) -> int:
     sweep.trials.sort(key=_trial_order)
     sweep.sweep_name += " + " + other.sweep_name
     sweep.parents.extend(other.parents)
+    if other.experiment != sweep.experiment and other.experiment not in sweep.joined_experiments:
+        sweep.joined_experiments.append(other.experiment)
     return len(other.trials)
 
 

@@ -138,6 +138,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "(sweeps that ran side by side, each with its own SQLite file); repeatable",
     )
     p.add_argument(
+        "--also-experiment",
+        metavar="NAME",
+        help="the experiment the --also-from stores' runs are read from (default: this report's own): "
+        "one method rerun in an experiment of its own, put beside the comparison it joins (the "
+        "provenance names every commit and warns when they differ)",
+    )
+    p.add_argument(
         "--tasks",
         choices=TASK_SETS,
         default=AUTO,
@@ -166,6 +173,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     args.experiment = args.experiment or args.experiment_pos
     if not args.experiment:
         p.error("an experiment name is required (positional or --experiment)")
+    if args.also_experiment and not args.also_from:
+        p.error(
+            f"--also-experiment {args.also_experiment}: names the experiment of --also-from stores; none given"
+        )
     return args
 
 
@@ -181,7 +192,11 @@ def main(argv: list[str] | None = None) -> int:
         uri = resolve_tracking_uri(args.tracking_uri, experiment=args.experiment)
         sweep = load_sweep(uri, args.experiment, args.parent_run, tasks=args.tasks)
         for extra in args.also_from:
-            add_trials_from(sweep, resolve_tracking_uri(extra, experiment=args.experiment))
+            add_trials_from(
+                sweep,
+                resolve_tracking_uri(extra, experiment=args.also_experiment or args.experiment),
+                args.also_experiment,
+            )
     except AnalysisError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -373,7 +388,11 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
     try:
         validation = load_sweep(sweep.tracking_uri, sweep.experiment, args.parent_run, tasks=VALIDATION)
         for extra in args.also_from:
-            add_trials_from(validation, resolve_tracking_uri(extra, experiment=args.experiment))
+            add_trials_from(
+                validation,
+                resolve_tracking_uri(extra, experiment=args.also_experiment or args.experiment),
+                args.also_experiment,
+            )
     except AnalysisError:
         return []
     on_validation = {c.key: c for c in summarise(validation, reps=10, seed=args.seed)[0]}
@@ -610,7 +629,10 @@ def _provenance(sweep: Sweep, argv: list[str], log_to: str | None) -> list[str]:
         lines.append(f"{untagged} of {len(sweep.trials)} runs carry no {GIT_COMMIT_TAG} tag")
     stores = sorted({sweep.tracking_uri, *(t.tracking_uri for t in sweep.trials if t.tracking_uri)})
     lines.append(f"tracking URI{'s' if len(stores) > 1 else ''}: {', '.join(stores)}")
-    lines.append(f"experiment: {sweep.experiment} (id {sweep.experiment_id}); sweep: {sweep.sweep_name}")
+    joined = "".join(f" + experiment {name} (--also-experiment)" for name in sweep.joined_experiments)
+    lines.append(
+        f"experiment: {sweep.experiment} (id {sweep.experiment_id}){joined}; sweep: {sweep.sweep_name}"
+    )
     lines += _spec_lines(sweep)
     lines.append(f"command: {command_line(argv)}")
     lines.append(_report_code())

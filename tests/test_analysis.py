@@ -1423,3 +1423,74 @@ def test_report_target_flag_is_checked_and_shown(honest, tmp_path, capsys):
     # without the flag there is no verdict (the honest store logs no tree diagnostics: no table either)
     assert "## Target" not in (honest["out"] / "report.md").read_text()
     assert "## Diagnostics at the budget" not in (honest["out"] / "report.md").read_text()
+
+
+def test_a_method_rerun_in_its_own_experiment_joins_the_comparison_with_also_experiment(tmp_path, capsys):
+    """CO-PILOT rerun at a newer commit in experiment 'rerun' of its own store; the comparison's PPO in
+    experiment 'comparison' of another: --also-experiment puts them in one report, with the improvement
+    of CO-PILOT over PPO, both commits and the joined experiment named; without it the other store's
+    experiment is not found, and the flag without --also-from is refused."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import EVAL_SUCCESS, PRESET_TAG
+
+    now = int(time.time() * 1000)
+    runs = {
+        "rerun": ("copilot", "newcommit", [0.6, 0.7, 0.8, 0.7, 0.9]),
+        "comparison": ("ppo", "oldcommit", [0.1, 0.2, 0.1, 0.3, 0.2]),
+    }
+    uris = {}
+    for experiment, (algorithm, commit, finals) in runs.items():
+        uri = uris[experiment] = f"sqlite:///{tmp_path / experiment}.db"
+        client = mlflow.MlflowClient(uri)
+        exp_id = client.create_experiment(experiment, artifact_location=(tmp_path / experiment).as_uri())
+        pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: algorithm}).info.run_id
+        for seed, final in enumerate(finals):
+            tags = {
+                PARENT_TAG: pid,
+                ROLE_TAG: ROLE_TRIAL,
+                SWEEP_TAG: algorithm,
+                CONFIG_KEY_TAG: "default",
+                ALGORITHM_TAG: algorithm,
+                ENV_TAG: "maze-point",
+                PRESET_TAG: "default",
+                SEED_TAG: str(seed),
+                GIT_COMMIT_TAG: commit,
+            }
+            rid = client.create_run(exp_id, tags=tags).info.run_id
+            values = [final / 2, final]
+            client.log_batch(
+                rid, metrics=[Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS[:2], values, strict=True)]
+            )
+            client.set_terminated(rid, "FINISHED")
+    out = tmp_path / "report"
+    argv = [
+        "rerun",
+        "--tracking-uri",
+        uris["rerun"],
+        "--out",
+        str(out),
+        "--no-log",
+        "--also-from",
+        uris["comparison"],
+    ]
+    assert main([*argv, "--also-experiment", "comparison"]) == 0
+    frame = pd.read_csv(out / "summary.csv").set_index("configuration")
+    assert frame.loc["algorithm=copilot", "success_final"] == pytest.approx(stats.iqm(runs["rerun"][2]))
+    assert frame.loc["algorithm=ppo", "success_final"] == pytest.approx(stats.iqm(runs["comparison"][2]))
+    imp = pd.read_csv(out / "improvement.csv")
+    assert len(imp) == 1 and imp.loc[0, "p_final"] == 1.0  # every CO-PILOT seed above every PPO seed
+    report = (out / "report.md").read_text()
+    assert (
+        "git commits: newcommit, oldcommit" in report
+        and "WARNING: the runs come from 2 different commits" in report
+    )
+    assert "experiment: rerun (id 1) + experiment comparison (--also-experiment)" in report
+    capsys.readouterr()
+    assert main(argv) == 2  # 'rerun' is not in the comparison's store
+    assert "experiment 'rerun' not found" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:
+        main(["rerun", "--tracking-uri", uris["rerun"], "--also-experiment", "comparison"])
+    assert exit_.value.code == 2
+    assert "--also-experiment comparison" in capsys.readouterr().err

@@ -140,11 +140,15 @@ def test_report_commands_name_an_experiment_a_shipped_spec_writes_there(command)
     stores = _shipped_stores()
     experiments = {e for e, _ in stores}
     assert experiment in experiments, f"{experiment!r} is no shipped spec's experiment: {sorted(experiments)}"
-    for uri in filter(None, [parsed.tracking_uri, *parsed.also_from]):
+    also = parsed.also_experiment or experiment  # the --also-from stores' experiment
+    pairs = [(experiment, parsed.tracking_uri)] + [(also, uri) for uri in parsed.also_from]
+    for name, uri in pairs:
+        if uri is None:
+            continue
         # a pinned worktree beside this checkout (scripts/run_at_commit.sh: ../<checkout>-at-<sha7>) keeps
         # a spec's store at the same path under it
         here = re.sub(r"/\.\./[^/]+-at-[0-9a-f]{7}/", "/", uri)
-        assert (experiment, here) in stores, f"no shipped spec writes {experiment!r} into {uri}"
+        assert (name, here) in stores, f"no shipped spec writes {name!r} into {uri}"
 
 
 @pytest.mark.parametrize("command", TRAINS)
