@@ -653,6 +653,13 @@ def test_shipped_ablation_spec_has_the_paper_reading_and_one_revert_per_variant(
     assert spec.variants["paper_literal"] == {"preset": "paper_literal"}
     assert spec.variants["default"] == {}
     assert all(len(v) == 1 for name, v in spec.variants.items() if name != "default")
+    from copilot_ray.algorithms.copilot.settings import SETTINGS
+
+    # each revert changes its reading: a variant at the default (a reading whose default became the
+    # paper's) would run the default twice under another name
+    reverts = {n: v for n, v in spec.variants.items() if n not in ("default", "paper_literal")}
+    for name, ((key, value),) in ((n, v.items()) for n, v in reverts.items()):
+        assert SETTINGS[key].default != value, f"variant {name}: {key} {value!r} is the default"
 
 
 def test_a_layout_that_one_of_the_envs_does_not_fit_names_the_layout_and_the_env(tmp_path):
