@@ -185,18 +185,20 @@ def command_line(argv: list[str]) -> str:
     return shlex.join(["python", "-m", "analysis.report", *argv])
 
 
+def join_other_stores(sweep: Sweep, args: argparse.Namespace) -> None:
+    """Adds the trial runs of each --also-from store, read from --also-experiment (default: the report's)."""
+    experiment = args.also_experiment or args.experiment
+    for extra in args.also_from:
+        add_trials_from(sweep, resolve_tracking_uri(extra, experiment=experiment), experiment)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     try:
         uri = resolve_tracking_uri(args.tracking_uri, experiment=args.experiment)
         sweep = load_sweep(uri, args.experiment, args.parent_run, tasks=args.tasks)
-        for extra in args.also_from:
-            add_trials_from(
-                sweep,
-                resolve_tracking_uri(extra, experiment=args.also_experiment or args.experiment),
-                args.also_experiment,
-            )
+        join_other_stores(sweep, args)
     except AnalysisError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -387,12 +389,7 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
         return []
     try:
         validation = load_sweep(sweep.tracking_uri, sweep.experiment, args.parent_run, tasks=VALIDATION)
-        for extra in args.also_from:
-            add_trials_from(
-                validation,
-                resolve_tracking_uri(extra, experiment=args.also_experiment or args.experiment),
-                args.also_experiment,
-            )
+        join_other_stores(validation, args)
     except AnalysisError:
         return []
     on_validation = {c.key: c for c in summarise(validation, reps=10, seed=args.seed)[0]}
