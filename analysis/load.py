@@ -163,9 +163,10 @@ class Sweep:
     def axes(self) -> list[str]:
         """What the configuration labels name (`axis_value`): the axis tags and env-config keys that take more
         than one value among the child runs (an env-config key right after `env`); when those do not tell
-        the configurations (`configurations`) apart, the algorithm (if it varies), the config key and the
-        env-config axes, then the sweep, its run and the params that differ, until they do (e.g. an HPO
-        sweep over planner knobs, or one config key run in two sweeps on two layouts)."""
+        the configurations (`configurations`) apart, the algorithm (if it varies), the axis tags that differ
+        within one algorithm's config key, the config key and the env-config axes, then the sweep, its run
+        and the params that differ, until they do (e.g. an HPO sweep over planner knobs, one config key run
+        in two sweeps on two layouts, or two presets' sweeps joined from two stores)."""
         trials = self.trials
         groups = list(configurations(trials).values())
 
@@ -188,7 +189,21 @@ class Sweep:
                 named += env_axes
         if len(groups) <= 1 or separates(named):
             return named
-        axes = ([ALGORITHM_TAG] if varies(ALGORITHM_TAG) else []) + [CONFIG_KEY_AXIS] + env_axes
+
+        def varies_within_a_config_key(tag: str) -> bool:
+            seen: dict[str, set[str]] = {}
+            for t in trials:
+                seen.setdefault(f"{axis_value(t, ALGORITHM_TAG)} {t.config_key}", set()).add(
+                    axis_value(t, tag)
+                )
+            return any(len(values) > 1 for values in seen.values())
+
+        # a tag that differs between one algorithm's runs of one config key (e.g. two presets, each run in
+        # a sweep of its own under the key "default") is named too: the config key alone would hide it
+        tags_in_key = [
+            t for t in AXIS_TAGS if t not in (ALGORITHM_TAG, ENV_TAG) and varies_within_a_config_key(t)
+        ]
+        axes = ([ALGORITHM_TAG] if varies(ALGORITHM_TAG) else []) + tags_in_key + [CONFIG_KEY_AXIS] + env_axes
         params = sorted({k for t in trials for k in t.params} - set(PER_RUN_PARAMS))
         extra = [SWEEP_AXIS, PARENT_AXIS] + [
             PARAM_AXIS_PREFIX + k for k in params if not k.startswith(ENV_CONFIG_PREFIX) and k != ENV_PARAM

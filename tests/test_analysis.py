@@ -32,6 +32,7 @@ from copilot_ray.keys import (
     GIT_COMMIT_TAG,
     K_TAG,
     PARENT_TAG,
+    PRESET_TAG,
     REPORT_ARTIFACT,
     ROLE_SWEEP,
     ROLE_TAG,
@@ -1115,6 +1116,30 @@ def test_one_configuration_in_two_sweeps_is_split_not_pooled():
     # seeds 0, 1 and 2, 3: no seed repeats, one configuration of four seeds
     trials[2].seed, trials[3].seed = "2", "3"
     assert len(configurations(trials)) == 1
+
+
+def test_two_presets_run_under_one_config_key_in_joined_sweeps_are_labelled_by_preset():
+    """A comparison joined with a rerun (each method's sweep of its own, every config key "default"): the
+    labels must say which CO-PILOT row is the paper-literal preset, not only which sweep it came from."""
+    from analysis.aggregate import config_label
+    from analysis.load import Sweep, Trial
+
+    def trial(algorithm, preset, sweep, k):
+        tags = {ALGORITHM_TAG: algorithm, PRESET_TAG: preset, SWEEP_TAG: sweep, K_TAG: k, SEED_TAG: "0"}
+        return Trial(sweep, "r", "FINISHED", "default", "0", tags)
+
+    trials = [
+        trial("copilot", "default", "fair_maze_copilot", "5"),
+        trial("copilot", "paper_literal", "fair_maze_paper_literal", "5"),
+        trial("copilot", "default", "fair_maze_leaky_copilot", "5"),
+        trial("her", "", "fair_maze_her", ""),
+    ]
+    sweep = Sweep("u", "e", "1", None, "s", trials)
+    # K differs between algorithms, not within one: it does not join the labels
+    assert sweep.axes() == [ALGORITHM_TAG, PRESET_TAG, "config_key", "sweep"]
+    assert config_label(trials[1], sweep.axes()) == (
+        "algorithm=copilot, preset=paper_literal, default, sweep=fair_maze_paper_literal"
+    )
 
 
 def test_headline_table_is_compact_and_success_is_shown_once(layouts):
