@@ -191,11 +191,9 @@ class Sweep:
             return named
 
         def varies_within_a_config_key(tag: str) -> bool:
-            seen: dict[str, set[str]] = {}
+            seen: dict[tuple[str, str], set[str]] = {}
             for t in trials:
-                seen.setdefault(f"{axis_value(t, ALGORITHM_TAG)} {t.config_key}", set()).add(
-                    axis_value(t, tag)
-                )
+                seen.setdefault((axis_value(t, ALGORITHM_TAG), t.config_key), set()).add(axis_value(t, tag))
             return any(len(values) > 1 for values in seen.values())
 
         # a tag that differs between one algorithm's runs of one config key (e.g. two presets, each run in
