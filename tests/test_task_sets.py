@@ -62,3 +62,34 @@ def test_ant_maze_and_walker_have_validation_sets_too():
     assert [len(seeds[n]) for n in TASK_SETS] == [3 * 20, 3 * 2, 3 * 2]
     assert not seeds["validation"] & (seeds["train"] | seeds["test"])
     walker.close()
+
+
+def test_a_fresh_test_set_is_disjoint_from_the_other_three_and_the_original_test_set():
+    """`test_set: fresh` draws the test tasks from a stream of their own: none is a train, validation or
+    original test task, the train and validation sets stay the same, and the fresh set is stable."""
+    fresh = make("maze-point", layout="four-rooms", test_set="fresh").unwrapped
+    original = make("maze-point", layout="four-rooms").unwrapped
+    for name in ("train", "validation"):
+        for a, b in zip(fresh.tasks(name), original.tasks(name), strict=True):
+            np.testing.assert_array_equal(a, b)
+    new = _pairs(*fresh.tasks("test"))
+    assert len(new) == 100
+    for name in TASK_SETS:
+        assert not new & _pairs(*original.tasks(name)), name
+    again = make("maze-point", layout="four-rooms", test_set="fresh").unwrapped
+    np.testing.assert_array_equal(again.tasks("test")[0], fresh.tasks("test")[0])
+
+
+def test_a_fresh_test_set_that_meets_the_original_one_is_refused():
+    def sample(n, stream):  # the fresh stream repeats the original test tasks
+        base = 0.0 if stream in ("test", "fresh_test") else {"train": 1.0, "validation": 2.0}[stream]
+        return np.full((n, 2), base, np.float32), np.full((n, 2), base + 0.5, np.float32)
+
+    with pytest.raises(ValueError, match=r"the fresh_test and test task sets share 1"):
+        draw_task_sets(sample, {"train": 2, "validation": 2, "test": 2}, test_set="fresh")
+
+
+@pytest.mark.parametrize("env_id", ["maze-point", "ant-maze"])
+def test_an_unknown_test_set_is_refused_naming_the_key_and_the_value(env_id):
+    with pytest.raises(ValueError, match=r"test_set'\] = 'newest': must be one of original, fresh"):
+        make(env_id, test_set="newest")

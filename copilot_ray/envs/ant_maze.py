@@ -40,7 +40,7 @@ from copilot_ray.envs.goal_env import SparseGoalReward
 from copilot_ray.envs.maze.agents import PointMass
 from copilot_ray.envs.maze.geometry import Obstacles, merge_cells
 from copilot_ray.envs.maze.tasks import SPLITS, sample_task_pairs, split_rng
-from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, draw_task_sets
+from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, check_test_set, draw_task_sets
 
 # The package prints a notice about its unrelated Adroit envs to stderr on import.
 with contextlib.redirect_stderr(io.StringIO()):
@@ -71,6 +71,8 @@ DEFAULTS: dict[str, Any] = {
     "num_validation_tasks": 10,
     "num_test_tasks": 10,
     "task_seed": 0,
+    # Which tasks the test set holds: "original", or "fresh" (its own seed stream; envs/task_sets.py).
+    "test_set": "original",
     "task_split": "train",
     "render_mode": None,
     "render_size": 256,
@@ -100,6 +102,8 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
         raise bad("task_seed", "a non-negative integer")
     if cfg["task_split"] not in SPLITS:
         raise bad("task_split", f"one of {', '.join(SPLITS)}")
+    if (need := check_test_set(cfg["test_set"])) is not None:
+        raise bad("test_set", need)
     if cfg["render_mode"] not in (None, "rgb_array"):
         raise bad("render_mode", "None or 'rgb_array'")
     if not (is_integer(cfg["render_size"]) and cfg["render_size"] >= 16):
@@ -218,7 +222,7 @@ class GoalAntMazeEnv(SparseGoalReward, gym.Env):
         check_task_set(split)
         if not self._fixed:
             sizes = {name: self.config[f"num_{name}_tasks"] for name in TASK_SETS}
-            self._fixed = draw_task_sets(self.sample_tasks, sizes)
+            self._fixed = draw_task_sets(self.sample_tasks, sizes, self.config["test_set"])
         starts, goals = self._fixed[split]
         return starts.copy(), goals.copy()
 

@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
 from copilot_ray.envs.goal_env import SparseGoalReward
-from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, draw_task_sets
+from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, check_test_set, draw_task_sets
 
 from .agents import AgentGeometry, PointMass
 from .geometry import Obstacles
@@ -41,6 +41,8 @@ DEFAULTS: dict[str, Any] = {
     "num_validation_tasks": 100,
     "num_test_tasks": 100,
     "task_seed": 0,
+    # Which tasks the test set holds: "original", or "fresh" (its own seed stream; envs/task_sets.py).
+    "test_set": "original",
     "task_split": "train",
     "render_mode": None,
     "render_size": 256,
@@ -68,6 +70,8 @@ def _check_config(config: Mapping[str, Any]) -> dict[str, Any]:
         raise bad("task_seed", "a non-negative integer")
     if cfg["task_split"] not in SPLITS:
         raise bad("task_split", f"one of {', '.join(SPLITS)}")
+    if (need := check_test_set(cfg["test_set"])) is not None:
+        raise bad("test_set", need)
     if cfg["render_mode"] not in GoalMazeEnv.metadata["render_modes"] + [None]:
         raise bad("render_mode", f"None or one of {GoalMazeEnv.metadata['render_modes']}")
     if not (is_integer(cfg["render_size"]) and cfg["render_size"] >= 16):
@@ -161,7 +165,7 @@ class GoalMazeEnv(SparseGoalReward, gym.Env):
         check_task_set(split)
         if not self._fixed:
             sizes = {name: self.config[f"num_{name}_tasks"] for name in TASK_SETS}
-            self._fixed = draw_task_sets(self.sample_tasks, sizes)
+            self._fixed = draw_task_sets(self.sample_tasks, sizes, self.config["test_set"])
         starts, goals = self._fixed[split]
         return starts.copy(), goals.copy()
 
