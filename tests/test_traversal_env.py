@@ -100,6 +100,30 @@ def test_failed_subtask_truncates_at_tau_max_and_next_continues_in_place():
     np.testing.assert_allclose(obs[2:], G, atol=1e-6)
 
 
+def test_a_training_episode_length_truncates_training_episodes_but_not_the_evaluation_budget():
+    """train_episode_steps (the agent-only baselines' knob): a training episode is truncated there,
+    while the step limit evaluation reads (step_limit_of) stays tau_max."""
+    env = TraversalEnv(
+        {
+            "goal_env": "maze-point",
+            "goal_env_config": {"layout": "empty", "speed": 0.01},
+            **PAPER,
+            "tau_max": 50,
+            "train_episode_steps": 7,
+        }
+    )
+    env.load_plan(straight_tree(0)[None], 0, np.array([0]))
+    obs, _ = env.reset()
+    steps, trunc = 0, False
+    while not trunc:
+        obs, _, term, trunc, _ = env.step(drive_to_goal(env, obs))
+        steps += 1
+        assert not term
+    assert steps == 7
+    assert env.rules.step_limit_of(0, 0) == 50 and env.rules.training_step_limit_of(0, 0) == 7
+    assert make_env(tau_max=50).rules.training_step_limit_of(0, 0) == 50  # null: tau_max
+
+
 def test_reset_without_plan_gives_idle_episode():
     env = make_env(tau_max=3)
     env.reset()

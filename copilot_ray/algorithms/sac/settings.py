@@ -28,6 +28,7 @@ from copilot_ray.settings import (
     choice_setting,
     float_setting,
     int_setting,
+    is_int,
     is_number,
 )
 
@@ -48,6 +49,15 @@ TASKS = [
         800,
         "steps per episode (one training task each); also the test tasks' step budget",
         1,
+    ),
+    Setting(
+        "train_episode_steps",
+        "int",
+        "agent",
+        None,
+        "steps per training episode; null: tau_max (the test tasks' budget stays tau_max whatever this is)",
+        lambda v: v is None or (is_int(v) and v >= 1),
+        "null or an integer >= 1",
     ),
     int_setting("task_batch_size", "agent", 4, "episodes per iteration (one training task each)", 1),
     float_setting(
@@ -248,9 +258,10 @@ METRICS: tuple[str, ...] = (
 
 
 def max_iteration_env_steps(values: Mapping[str, Any]) -> int:
-    """One iteration: an episode of at most tau_max steps on each of task_batch_size training tasks."""
+    """One iteration: an episode of at most train_episode_steps (else tau_max) steps on each of
+    task_batch_size training tasks."""
     get = lambda key: values.get(key, SETTINGS[key].default)  # noqa: E731
-    return int(get("task_batch_size")) * int(get("tau_max"))
+    return int(get("task_batch_size")) * int(get("train_episode_steps") or get("tau_max"))
 
 
 def combination_problems(values: Mapping[str, Any]) -> list[tuple[tuple[str, ...], Any, str]]:

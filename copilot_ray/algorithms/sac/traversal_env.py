@@ -52,6 +52,7 @@ TRAVERSAL_ENV_ID = "copilot-traversal"
 # The settings that say how sub-tasks are run and rewarded (the env runners get them in env_config).
 RULE_KEYS = (
     "tau_max",
+    "train_episode_steps",
     "step_limit",
     "after_failure",
     "subtask_reward",
@@ -73,6 +74,13 @@ class TraversalRules(record_class("TraversalRules", {k: _RULES[k] for k in RULE_
     def from_config(cls, config: Mapping[str, Any]) -> TraversalRules:
         """The rules from a traversal env_config (keys of this class; missing ones keep their defaults)."""
         return cls(**{k: config[k] for k in cls.__dataclass_fields__ if k in config})
+
+    def training_step_limit_of(self, layer: int, depth: int) -> int:
+        """Steps a layer-`layer` sub-task may take in training: `train_episode_steps` where set (the
+        agent alone's episodes), else as in evaluation (`step_limit_of`)."""
+        if self.train_episode_steps is not None:
+            return int(self.train_episode_steps)
+        return self.step_limit_of(layer, depth)
 
     def step_limit_of(self, layer: int, depth: int) -> int:
         """Steps a layer-`layer` sub-task of a depth-`depth` tree may take."""
@@ -181,7 +189,7 @@ class TraversalEnv(gym.Env):
             if start is None:
                 start, carry_on = self._continue_from()
             goal = self._current.goal
-            self._limit = self.rules.step_limit_of(self._current.layer, self._depth)
+            self._limit = self.rules.training_step_limit_of(self._current.layer, self._depth)
             self._idle_goal = None
         else:
             # Nothing planned (RLlib resets envs at construction, and may sample before a plan is
