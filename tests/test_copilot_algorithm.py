@@ -296,3 +296,40 @@ def test_an_env_runner_dying_mid_iteration_loses_its_subtasks_countably_and_come
         assert steps[0] < steps[1] < steps[2]
     finally:
         algo.stop()
+
+
+def _planner_weights(algo) -> list[np.ndarray]:
+    return [p.detach().clone().numpy() for p in algo.planner.parameters()]
+
+
+def _recording_plan_sizes(algo) -> list[int]:
+    """The number of tasks every planner phase plans from now on."""
+    sizes, plan = [], algo._plan
+
+    def recording(starts, *args):
+        sizes.append(len(starts))
+        return plan(starts, *args)
+
+    algo._plan = recording
+    return sizes
+
+
+def test_a_frozen_planner_learns_nothing_after_its_warm_start_and_plans_only_the_agents_tasks(ray_session):
+    """The co-training ablation (planner_frozen): after the warm start the planner's weights stay as they
+    were while the default's move; its phases plan the agent's tasks only (task_batch_size, not the
+    planner's batch of planner_task_batch_size) and count their collision checks."""
+    moved = {}
+    for frozen in (False, True):
+        algo = tiny_config(num_env_runners=0).copilot(planner_frozen=frozen).build_algo()
+        try:
+            algo._warm_start_planner()
+            before, checks = _planner_weights(algo), algo._collision_checks()
+            planned = _recording_plan_sizes(algo)
+            algo.train()
+            after = _planner_weights(algo)
+            moved[frozen] = any(not np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+            assert algo._collision_checks() > checks  # the output trees' costs still ask the map
+            assert planned == [3 if frozen else 5] * 2
+        finally:
+            algo.stop()
+    assert moved == {False: True, True: False}

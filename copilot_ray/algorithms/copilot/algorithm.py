@@ -257,7 +257,10 @@ class CoPilot(GoalSAC):
         return self._rng.choice(len(self.train_starts), size=n_plan, replace=False)
 
     def _trees(self, idx: np.ndarray, stats, timing) -> np.ndarray:
-        """The planner phase of one repetition (see `_plan`), at the alpha of this episode."""
+        """The planner phase of one repetition (see `_plan`), at the alpha of this episode. A frozen
+        planner (`planner_frozen`, after its warm start) has no PPO batch: only the agent's tasks."""
+        if self._planner_frozen():
+            idx = idx[: self.config.task_batch_size]
         alpha = self.alpha_clock.value
         stats[keys.ALPHA].append(alpha)
         t0 = time.perf_counter()
@@ -310,8 +313,13 @@ class CoPilot(GoalSAC):
             collision_lengths=getattr(env, "collision_lengths", None),
         )
 
+    def _planner_frozen(self) -> bool:
+        """Whether the planner learns no more: `planner_frozen` once its warm start is done."""
+        return bool(self.config.planner_frozen) and self._warm_started
+
     def _planner_phase(self, starts, goals, cost: SegmentCost, mean_tree: bool):
-        """One top-down construction with one PPO update per layer (Algorithm 1)."""
+        """One top-down construction with one PPO update per layer (Algorithm 1); a frozen planner only
+        samples (its output trees' costs are still computed, and their collision checks counted)."""
         p = self.config.planner
         if p["std_final"] is not None:
             # Linear annealing of the exploration std over the first std_anneal_phases phases.
@@ -325,7 +333,7 @@ class CoPilot(GoalSAC):
             self.config.tree_depth,
             cost,
             num_samples=p["num_samples"],
-            train=True,
+            train=not self._planner_frozen(),
             deterministic=mean_tree,
             rng=self._rng,
         )
@@ -370,6 +378,8 @@ class CoPilot(GoalSAC):
             stats[key].append(value)
         for k in range(cfg.tree_depth + 1):
             stats[keys.PLANNER_COST_LAYER + str(k)].append(built.stats[f"cost_layer_{k}"])
+        if self._planner_frozen():
+            return built.trees  # no update: no KL, nothing skipped or rolled back
         # How far PPO moved the planner per layer update (a diverging planner shows here first).
         stats[keys.PLANNER_APPROX_KL_MAX].append(
             max(built.stats[f"approx_kl_layer_{k}"] for k in range(1, cfg.tree_depth + 1))

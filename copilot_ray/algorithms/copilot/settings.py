@@ -157,7 +157,7 @@ _TRAVERSAL = [
     replace(_A_TREE["step_limit"], why="the paper's"),
     replace(
         _A_TREE["after_failure"],
-        why="the paper's, and chosen on VALIDATION tasks among the privilege-free readings (restart resets the "
+        why="the paper's, and chosen on VALIDATION tasks among the readings without resets or map queries (restart resets the "
         "agent to a missed sub-goal after a map query, which no baseline may): mean validation success AUC over "
         "four-rooms and u-maze, 2 seeds each, 60k env steps: continue 0.095, abort_layer 0.030; final "
         "validation success 0.16 vs 0.08. Weak: continue's lead is one u-maze seed (AUC 0.34, final 0.59; "
@@ -210,6 +210,13 @@ _PLANNER = [
         "planner's. On VALIDATION tasks (planner only, seeds 0-3, `bash benchmarks/planner_validation_probe.sh`, "
         "docs/planner_probe): collision-free plans before the agent's first step 0.75-0.92 on four-rooms and "
         "0.97-1.00 on u-maze; four-rooms seed 3 collapsed between phases 800 and 900 (0.00, see Known limits)",
+    ),
+    _bool(
+        "planner_frozen",
+        "copilot",
+        False,
+        "no planner update after the warm start: the agent traverses the warm-started planner's trees "
+        "(the co-training ablation; the planner then plans only the tasks the agent traverses)",
     ),
     _choice(
         "collision_cost",
