@@ -123,6 +123,8 @@ class GoalSACConfig(SACConfig):
         # The tree-traversal readings the traversal env implements (their defaults: no tree here).
         for s in agent_settings.TREE_TRAVERSAL:
             setattr(self, s.key, s.default)
+        # The training episodes' own length (the agent-only baselines' setting; null: tau_max).
+        self.train_episode_steps = agent_settings.SETTINGS["train_episode_steps"].default
         # n_sampled_goal 0: plain SAC on the flat buffer (no relabelling, no goal bookkeeping).
         self.her: dict[str, Any] = {"n_sampled_goal": 0, "goal_selection": "future"}
         self._apply({key: s.default for key, s in self.SETTINGS.items() if self._is_value(s)}, defaults=True)
@@ -430,12 +432,6 @@ class GoalSAC(SAC):
         for key, values in stats.items():
             self.metrics.log_value(keys.metric_path(key), float(np.mean(values)), window=1)
         self.metrics.log_value(keys.metric_path(keys.AGENT_SUBTASKS_LOST), self._subtasks_lost, window=1)
-        for key, count in (
-            (keys.PRIVILEGE_COLLISION_CHECKS, self._collision_checks()),
-            (keys.PRIVILEGE_RESETS, self._privileged["resets"]),
-            (keys.PRIVILEGE_MAP_QUERIES, self._privileged["map_queries"]),
-        ):
-            self.metrics.log_value(keys.metric_path(key), count, window=1)
         self._log_iteration(timing)
         # agent_s is the whole traversal (env stepping + SAC updates); the updates' part beside it.
         timing["agent_updates_s"] = self._update_seconds
@@ -454,6 +450,14 @@ class GoalSAC(SAC):
             self.metrics.log_value(
                 keys.metric_path(keys.TIME_PREFIX + "eval_s"), time.perf_counter() - t, window=1
             )
+        # After the evaluation: a method that plans its evaluation tasks with the map (SoRB with the map,
+        # the RRT* curriculum) counts those checks in the iteration that made them.
+        for key, count in (
+            (keys.PRIVILEGE_COLLISION_CHECKS, self._collision_checks()),
+            (keys.PRIVILEGE_RESETS, self._privileged["resets"]),
+            (keys.PRIVILEGE_MAP_QUERIES, self._privileged["map_queries"]),
+        ):
+            self.metrics.log_value(keys.metric_path(key), count, window=1)
 
     def _env_steps(self) -> int:
         return int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
