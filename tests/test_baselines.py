@@ -101,6 +101,42 @@ def test_sorb_starts_later_then_searches_its_replay_graph(ray_session):
         algo.stop()
 
 
+def test_sorb_with_the_map_counts_every_edge_check_as_a_privilege(ray_session):
+    """algorithm sorb_map: its graph's edges are checked against the map, each check counted in the
+    privileges its iteration logs (after the evaluation that built the graph); plain SoRB counts none."""
+    from copilot_ray.registry import RunContext, get_algorithm
+
+    values = {
+        "tau_max": 40,
+        "task_batch_size": 4,
+        "eval_num_tasks": 5,
+        "sorb.pretrain_env_steps": 0,
+        "sorb.graph_size": 30,
+        # An untrained critic puts every pair ~1,400 steps apart: a cutoff above that keeps every edge.
+        "sorb.max_edge_steps": 100_000,
+        "num_steps_sampled_before_learning_starts": 10_000,  # wiring only: no SAC update
+    }
+    counts = {}
+    for name in ("sorb_map", "sorb"):
+        entry = get_algorithm(name)
+        assert ("collision_checks" in entry.privileges(entry.defaults_as_logged())) == (name == "sorb_map")
+        algo = entry.build_config(
+            values, RunContext("maze-point", {"layout": "four-rooms"}, seed=0)
+        ).build_algo()
+        try:
+            result = algo.train()
+            assert keys.result_value(result, keys.SORB_GRAPH_EDGES) >= 0
+            counts[name] = (
+                keys.result_value(result, keys.PRIVILEGE_COLLISION_CHECKS),
+                algo._collision_checks(),
+            )
+        finally:
+            algo.stop()
+    checks, counted = counts["sorb_map"]
+    assert checks == counted >= 30 * 29  # every node pair at least, then the tasks' own edges
+    assert counts["sorb"] == (0, 0)
+
+
 def test_ppo_reports_the_common_metric_and_resumes(ray_session, tmp_path):
     from copilot_ray.algorithms.ppo.algorithm import GoalPPO, GoalPPOConfig
 

@@ -60,3 +60,39 @@ def test_bad_graphs_are_refused():
         ReplayGraph.build(obs, ach, euclid_steps(0.01), max_edge_steps=0)
     with pytest.raises(ValueError, match="at least one state"):
         ReplayGraph.build(obs[:0], ach[:0], euclid_steps(0.01), max_edge_steps=5)
+
+
+def wall_at(x, checked):
+    """The map of a wall across the plane at x (a segment crossing it is blocked); counts its checks."""
+
+    def segment_free(a, b):
+        checked.append(len(a))
+        return ~((a[:, 0] - x) * (b[:, 0] - x) < 0)
+
+    return segment_free
+
+
+def test_with_the_map_no_kept_edge_crosses_a_wall_and_every_check_is_counted():
+    """SoRB with the map: the critic keeps edges up to the cutoff (here neighbours 0.1 apart and their
+    second neighbours), the map drops those across the wall at x = 0.55, so nothing routes across it;
+    the start-to-node, node-to-goal and direct edges are checked too. Without the map the same graph
+    routes across the wall."""
+    obs, ach = line_nodes()
+    start, goal = np.array([[0.0, 0.0]], np.float32), np.array([[1.0, 0.0]], np.float32)
+    plain = ReplayGraph.build(obs, ach, euclid_steps(0.01), max_edge_steps=25)
+    assert len(plain.waypoints(start, start, goal)[0]) > 2
+    checked = []
+    mapped = ReplayGraph.build(
+        obs, ach, euclid_steps(0.01), max_edge_steps=25, segment_free=wall_at(0.55, checked)
+    )
+    assert checked == [plain.num_edges]  # every edge the critic kept, asked once
+    # Crossing edges: 0.5->0.6 and the second neighbours 0.4->0.6, 0.5->0.7, in both directions.
+    assert mapped.num_edges == plain.num_edges - 2 * 3
+    assert np.isinf(mapped.steps[0, 10]) and np.isfinite(plain.steps[0, 10])
+    (path,) = mapped.waypoints(start, start, goal)
+    assert len(path) == 2  # no route: straight, as SoRB goes when its graph cannot connect
+    # A goal on the start's side is routed, each of its hops free of the wall.
+    near_goal = np.array([[0.5, 0.0]], np.float32)
+    (route,) = mapped.waypoints(start, start, near_goal)
+    assert len(route) > 2 and (route[:, 0] < 0.55).all()
+    assert sum(checked) > plain.num_edges  # the route's entry, exit and direct edges were asked too

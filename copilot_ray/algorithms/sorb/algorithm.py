@@ -19,6 +19,10 @@ unchanged, its twin-Q minimum at the actor's mean action is turned into steps, a
 [R * 1e-6, R] (an entropy bonus can push it outside). Left out: the distributional critic and the
 critic ensemble (the twin minimum is the only pessimism), and SoRB's graph cleaning.
 
+With `sorb.edge_check: map` (`algorithm: sorb_map`) every edge the critic keeps is also checked against
+the map, and dropped where its straight segment crosses a wall: the graph gets the map access CO-PILOT's
+planner has, and its checks are counted like the planner's (`copilot/privileges/collision_checks`).
+
 Logged at each evaluation after pre-training: `copilot/eval/success` and `success_planned` = following
 the graph's waypoints, `success_direct` = the agent alone; `sorb/graph_edges`, `sorb/waypoints_mean`,
 `sorb/graph_s`.
@@ -41,6 +45,8 @@ from copilot_ray import keys
 from copilot_ray.algorithms.sac.algorithm import GoalSAC, HERConfig
 from copilot_ray.algorithms.sorb import settings as sorb_settings
 from copilot_ray.algorithms.sorb.graph import ReplayGraph, pad_front
+from copilot_ray.algorithms.sorb_map import settings as sorb_map_settings
+from copilot_ray.planning.path_metrics import CountedChecks
 from copilot_ray.settings import Setting
 
 # Rows per critic call when building the graph (memory: rows x hidden floats per layer).
@@ -75,6 +81,12 @@ class SoRBConfig(HERConfig):
         return True  # the graph's states come from it, relabelling or not
 
 
+class SoRBMapConfig(SoRBConfig):
+    """SoRB with the map (`algorithm: sorb_map`): `sorb.edge_check` is "map" unless set otherwise."""
+
+    SETTINGS: ClassVar[Mapping[str, Setting]] = sorb_map_settings.SETTINGS
+
+
 class SoRB(GoalSAC):
     """Goal-conditioned SAC whose evaluation searches a graph over its replay buffer (module docstring)."""
 
@@ -82,6 +94,27 @@ class SoRB(GoalSAC):
     @override(GoalSAC)
     def get_default_config(cls):
         return SoRBConfig()
+
+    @override(GoalSAC)
+    def setup(self, config) -> None:
+        super().setup(config)
+        # Every map check of the graph's edges (sorb.edge_check: map); checkpointed.
+        self._edge_checks = CountedChecks(self.goal_env.unwrapped.segments_collide)
+
+    def _segment_free(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return ~np.asarray(self._edge_checks(a, b), bool)
+
+    @override(GoalSAC)
+    def _collision_checks(self) -> int:
+        return self._edge_checks.count
+
+    @override(GoalSAC)
+    def _own_state(self) -> dict[str, Any]:
+        return {"sorb": {"edge_checks": self._edge_checks.count}}
+
+    @override(GoalSAC)
+    def _set_own_state(self, state: dict[str, Any]) -> None:
+        self._edge_checks.count = int(state.get("sorb", {}).get("edge_checks", 0))
 
     @torch.no_grad()
     def critic_distance(
@@ -116,7 +149,13 @@ class SoRB(GoalSAC):
             return super()._evaluation_plan(n)
         t0 = time.perf_counter()
         observations, achieved = self.agent_updater.buffer.sample_states(cfg.sorb["graph_size"], self._rng)
-        graph = ReplayGraph.build(observations, achieved, self.critic_distance, cfg.sorb["max_edge_steps"])
+        graph = ReplayGraph.build(
+            observations,
+            achieved,
+            self.critic_distance,
+            cfg.sorb["max_edge_steps"],
+            segment_free=self._segment_free if cfg.sorb["edge_check"] == "map" else None,
+        )
         search = _GraphWaypoints(graph, self.goal_env, cfg.sorb["waypoint_steps"], cfg.tau_max)
         self.metrics.log_value(keys.metric_path(keys.SORB_GRAPH_EDGES), graph.num_edges, window=1)
         self.metrics.log_value(keys.metric_path(keys.SORB_GRAPH_S), time.perf_counter() - t0, window=1)

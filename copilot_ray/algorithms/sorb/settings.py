@@ -21,7 +21,10 @@ from copilot_ray.algorithms.sac.settings import (  # GPU_LEARNER: HER's agent, o
     combination_problems,
     max_iteration_env_steps,
 )
-from copilot_ray.settings import int_setting
+from copilot_ray.privileges import COLLISION_CHECKS
+from copilot_ray.settings import choice_setting, int_setting
+
+EDGE_CHECKS = ("none", "map")
 
 SEARCH = [
     int_setting(
@@ -45,6 +48,16 @@ SEARCH = [
         50,
         "longest edge kept, in the critic's estimated agent steps (SoRB's cutoff)",
         1,
+    ),
+    choice_setting(
+        "sorb.edge_check",
+        "sorb",
+        "none",
+        "which edges the graph keeps: those the critic puts within max_edge_steps (SoRB), or of those the ones "
+        "whose straight segment the map finds free of walls (SoRB with CO-PILOT's map access)",
+        EDGE_CHECKS,
+        # Every kept edge asks the map (counted as copilot/privileges/collision_checks).
+        grants=lambda v: (COLLISION_CHECKS,) if v == "map" else (),
     ),
     int_setting(
         "sorb.waypoint_steps",
@@ -77,8 +90,12 @@ METRICS: tuple[str, ...] = (
     keys.SORB_WAYPOINTS,
 )
 
-# HER's space (SoRB trains HER's agent) plus the search's edge cutoff.
-SEARCH_SPACE: dict[str, dict] = {**HER_SEARCH_SPACE, "sorb.max_edge_steps": {"categorical": [25, 50, 100]}}
+# HER's space (SoRB trains HER's agent) plus the search's structure: the graph's size and edge cutoff.
+SEARCH_SPACE: dict[str, dict] = {
+    **HER_SEARCH_SPACE,
+    "sorb.graph_size": {"categorical": [500, 1000, 2000]},
+    "sorb.max_edge_steps": {"categorical": [25, 50, 100]},
+}
 
 __all__ = [
     "GPU_LEARNER",
