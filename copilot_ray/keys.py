@@ -78,6 +78,9 @@ REACHED_PLANNED = "copilot/eval/reached_planned"
 REACHED_DIRECT = "copilot/eval/reached_direct"
 SUBGOALS_REACHED_PLANNED = "copilot/eval/subgoals_reached_planned"
 PLANNED_COLLISION_FREE = "copilot/eval/planned_collision_free"
+# The classical-planner curriculum's RRT*: tasks planned so far, and those it did not solve in its time.
+CURRICULUM_RRT_TASKS = "copilot/curriculum/rrt_tasks"
+CURRICULUM_RRT_UNSOLVED = "copilot/curriculum/rrt_unsolved"
 # SoRB's search graph at each evaluation: edges kept, waypoints per test path (its start and goal too).
 SORB_GRAPH_EDGES = "sorb/graph_edges"
 SORB_WAYPOINTS = "sorb/waypoints_mean"

@@ -69,10 +69,22 @@ ALGORITHMS: dict[str, tuple[str, str, str]] = {
         "copilot_ray.algorithms.sorb.algorithm:SoRBConfig",
         "copilot_ray.algorithms.sorb.trial:SoRBTrial",
     ),
+    # SoRB with the map: its graph keeps only edges the map finds free (CO-PILOT's map access, counted).
+    "sorb_map": (
+        "copilot_ray.algorithms.sorb_map.settings",
+        "copilot_ray.algorithms.sorb.algorithm:SoRBMapConfig",
+        "copilot_ray.algorithms.sorb.trial:SoRBTrial",
+    ),
     "ppo": (
         "copilot_ray.algorithms.ppo.settings",
         "copilot_ray.algorithms.ppo.algorithm:GoalPPOConfig",
         "copilot_ray.algorithms.ppo.trial:GoalPPOTrial",
+    ),
+    # CO-PILOT's traversal and agent on trees cut from RRT* paths: a curriculum with no learned planner.
+    "rrt_curriculum": (
+        "copilot_ray.algorithms.rrt_curriculum.settings",
+        "copilot_ray.algorithms.rrt_curriculum.algorithm:RRTCurriculumConfig",
+        "copilot_ray.algorithms.rrt_curriculum.trial:RRTCurriculumTrial",
     ),
     # Planner-only baselines (the paper's Fig. 4b/4c): plain Tune trainables, no RLlib.
     "rrt_star": (

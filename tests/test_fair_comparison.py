@@ -99,7 +99,7 @@ def test_search_declared_is_the_algorithms_own_space_and_its_defaults_are_tried_
         parse_spec({**data, "algorithm": "rrt_star", "config": {}})
 
 
-@pytest.mark.parametrize("algorithm", ["copilot", "sac", "her", "sorb", "ppo"])
+@pytest.mark.parametrize("algorithm", ["copilot", "sac", "her", "sorb", "sorb_map", "rrt_curriculum", "ppo"])
 def test_every_compared_algorithm_declares_a_space_whose_ranges_hold_its_defaults(algorithm):
     from copilot_ray.registry import get_algorithm
     from copilot_ray.sweep_spec.plan import default_point

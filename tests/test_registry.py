@@ -65,6 +65,6 @@ def test_unknown_algorithm_names_the_registered_ones():
         registry.get_algorithm("copilt")
     with pytest.raises(
         SpecError,
-        match=r"algorithm: 'nope' is invalid: unknown algorithm; known: \['copilot', 'her', 'hrl', 'next', 'ppo', 'rrt_star', 'sac', 'sgt_pg', 'sorb'\]",
+        match=r"algorithm: 'nope' is invalid: unknown algorithm; known: \['copilot', 'her', 'hrl', 'next', 'ppo', 'rrt_curriculum', 'rrt_star', 'sac', 'sgt_pg', 'sorb', 'sorb_map'\]",
     ):
         parse_spec(toy_spec(algorithm="nope"))
