@@ -24,6 +24,7 @@ from copilot_ray.keys import (
     PRIVILEGE_COUNTS,
     PRIVILEGES_TAG,
     SUCCESS_PLANNED,
+    VARIANT_TAG,
 )
 from copilot_ray.privileges import from_tag
 
@@ -301,15 +302,28 @@ def headline_metric(configs: list[ConfigSummary]) -> str:
     return EVAL_SUCCESS if any(EVAL_SUCCESS in c.metrics for c in configs) else SUCCESS_PLANNED
 
 
-def improvement_pairs(configs: list[ConfigSummary], metric: str) -> list[tuple[ConfigSummary, ConfigSummary]]:
-    """(CO-PILOT default, best other method) for each CO-PILOT default configuration with `metric`:
-    the other method is the configuration of another algorithm with the highest final `metric` (IQM,
-    or mean with fewer than 5 seeds). [] without such a pair (e.g. a sweep of one algorithm)."""
+IMPROVEMENT_OVER = ("best", "each")
+
+
+def improvement_pairs(
+    configs: list[ConfigSummary], metric: str, over: str = "best"
+) -> list[tuple[ConfigSummary, ConfigSummary]]:
+    """(CO-PILOT default, other) for each CO-PILOT default configuration with `metric`. over="best": the
+    other is the configuration of another algorithm with the highest final `metric` (IQM, or mean with
+    fewer than 5 seeds); over="each": every other configuration, CO-PILOT's own variants (an ablation)
+    included. [] without such a pair (e.g. a sweep of one algorithm)."""
+    if over not in IMPROVEMENT_OVER:
+        raise ValueError(f"over={over!r} is invalid: use one of {IMPROVEMENT_OVER}")
+    defaults = [c for c in configs if c.is_copilot_default and metric in c.metrics]
+    if over == "each":
+        # CO-PILOT's default as it ships: a variant of it (an ablation, a privileged row) is an other.
+        plain = [c for c in defaults if not c.all_trials[0].tags.get(VARIANT_TAG)] or defaults
+        return [(x, y) for x in plain for y in configs if y is not x and metric in y.metrics]
     others = [c for c in configs if c.algorithm != COPILOT and metric in c.metrics]
     if not others:
         return []
     best = max(others, key=lambda c: np.nan_to_num(c.metrics[metric].final.point, nan=-np.inf))
-    return [(c, best) for c in configs if c.is_copilot_default and metric in c.metrics]
+    return [(c, best) for c in defaults]
 
 
 def _metric_summary(trials, metric: str, grid: np.ndarray, window, budget: float, reps: int, seed: int):

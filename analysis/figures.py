@@ -34,6 +34,7 @@ from copilot_ray.keys import (  # noqa: E402
     EVAL_RETURN,
     EVAL_SUCCESS,
     PLANNED_COLLISION_FREE,
+    PRIVILEGE_COLLISION_CHECKS,
     REACHED_PLANNED,
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
@@ -255,6 +256,90 @@ def _point(ax, cv: CurveSummary, color, label: str) -> None:
 
 
 BAR_FONT = 8  # the bars' tick labels
+CHECKS_LINEAR_BELOW = 1e3  # the checks axis is logarithmic above this and linear below (0: no map)
+
+
+def checks_at(c: ConfigSummary, steps: np.ndarray) -> np.ndarray | None:
+    """The collision checks a configuration had spent by each of `steps` (env steps): each seed's count
+    (`copilot/privileges/collision_checks`, cumulative) interpolated there, averaged over seeds. None when
+    none of its runs logged the count."""
+    curves = [
+        t.curves[PRIVILEGE_COLLISION_CHECKS] for t in c.trials if PRIVILEGE_COLLISION_CHECKS in t.curves
+    ]
+    if not curves:
+        return None
+    return np.mean([np.interp(steps, s, v) for s, v in curves], axis=0)
+
+
+def success_vs_checks(
+    configs: list[ConfigSummary],
+    axis_name: str,
+    path: Path,
+    metric: str = EVAL_SUCCESS,
+    title: str = "Test success against collision checks",
+    notes: list[str] | None = None,
+) -> Path | None:
+    """Success (`metric`, each method's headline) against the ground-truth collision checks spent so far
+    (the map's answers; paper Fig. 4c's axis): one line per configuration that used any, at the IQM over
+    seeds (band: its 95 % CI from 5 seeds on) and the seeds' mean checks at each env step; one that used
+    none is one point at 0 checks, its final success with its interval. None (and a note) when no
+    configuration logged both the metric and its checks, or none used a check."""
+    notes = [] if notes is None else notes
+    shown, dropped = _select(configs)
+    drawn = []
+    for c in shown:
+        m = c.metrics.get(metric)
+        if m is None or m.curve is None:
+            continue
+        checks = checks_at(c, m.curve.grid)
+        if checks is None:
+            notes.append(
+                f"{path.name}: {c.label} not drawn: its runs did not log {PRIVILEGE_COLLISION_CHECKS}."
+            )
+            continue
+        drawn.append((c, m, checks))
+    if not any(checks.max() > 0 for _, _, checks in drawn):
+        notes.append(f"{path.name}: not drawn: no configuration used a collision check.")
+        return None
+    fig, ax = plt.subplots(figsize=(8.8, 4.8), layout="constrained")
+    for (c, m, checks), color in zip(drawn, _colors(len(drawn)), strict=True):
+        label = f"{c.label} ({seeds_label(m.n_seeds)})"
+        if checks.max() == 0:
+            f = m.final
+            err = np.clip(np.array([[f.point - f.low], [f.high - f.point]]), 0, None)
+            ax.errorbar([0.0], [f.point], yerr=err, fmt="s", color=color, capsize=4, label=label + ", no map")
+            continue
+        cv = m.curve
+        some = cv.coverage > 0
+        if cv.has_ci:
+            ax.fill_between(checks, cv.low, cv.high, where=some, color=color, alpha=0.18, linewidth=0)
+        ax.plot(checks, np.where(some, cv.center, np.nan), color=color, linewidth=2, label=label)
+        ax.plot(checks[some][-1:], cv.center[some][-1:], "o", color=color)  # where the budget ends
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    ax.set_xscale("symlog", linthresh=CHECKS_LINEAR_BELOW)
+    ax.set_xlim(left=-CHECKS_LINEAR_BELOW * 0.3)
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos=None: _steps_label(x) if x >= 0 else ""))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.set_xlabel("ground-truth collision checks spent so far (log scale above 1,000; 0: no map)")
+    ax.set_ylabel(SUCCESS_AXIS[0])
+    ax.set_ylim(*SUCCESS_AXIS[1])
+    ax.grid(alpha=0.3)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(
+        handles,
+        [wrap(lab, 3.0, 8) for lab in labels],
+        loc="outside right center",
+        fontsize=8,
+        title=axis_name,
+    )
+    note = INTERVAL_NOTE + "; x: the seeds' mean checks at each env step; a dot: the last evaluation"
+    if dropped:
+        note += f"; {dropped} more configurations not drawn"
+    _suptitle(fig, f"{title}, by {axis_name}\n{note}")
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def final_success(

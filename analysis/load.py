@@ -41,6 +41,7 @@ from copilot_ray.keys import (
     PARENT_TAG,
     PATH_SUCCESS,
     PATHS_PREFIX,
+    PRIVILEGE_COLLISION_CHECKS,
     REPORT_ARTIFACT,
     RESOLVED_SPEC_ARTIFACT,
     ROLE_SWEEP,
@@ -488,7 +489,10 @@ def _trial(client, run, tasks: str = TEST, budgets: dict[str, float] | None = No
         budget=(budgets or {}).get(tags.get(PARENT_TAG, ""), float("nan")),
     )
     prefixes = (*DIAGNOSTIC_PREFIXES, PATHS_PREFIX, *((VALIDATION_PREFIX,) if tasks == VALIDATION else ()))
-    wanted = set(CURVE_METRICS) | {k for k in run.data.metrics if k.startswith(prefixes)}
+    # The collision checks too: success against the checks spent (the privilege-matched comparison).
+    wanted = {*CURVE_METRICS, PRIVILEGE_COLLISION_CHECKS} | {
+        k for k in run.data.metrics if k.startswith(prefixes)
+    }
     for key in sorted(wanted):
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
             trial.curves[key] = metric_curve(client, run.info.run_id, key)

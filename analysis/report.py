@@ -9,6 +9,10 @@ Reads one sweep from MLflow and writes, under --out (default `results/<experimen
                              when the runs hold several algorithms: copilot/eval/success (each
                              method's headline) against env steps and at the end (paper Fig. 4a, 2a
                              on the maze; 2c on the Ant maze)
+  success_vs_collision_checks.png
+                             when several methods ran and some used the map: copilot/eval/success
+                             against the ground-truth collision checks spent so far (paper Fig. 4c's
+                             axis); a method without checks is one point at 0
   return_vs_env_steps.png    copilot/eval/return (R for reaching a test goal, averaged) against env
                              steps on the Ant maze (paper Fig. 2d); elsewhere it is R x the goals
                              reached (R = 1 on the maze: a rate the report already shows), so it is not
@@ -64,6 +68,7 @@ from copilot_ray.keys import (
     EVAL_MASTERED,
     EVAL_RETURN,
     GIT_COMMIT_TAG,
+    PRIVILEGE_COLLISION_CHECKS,
     REACHED_DIRECT,
     REACHED_PLANNED,
     SUCCESS_METRICS,
@@ -73,7 +78,7 @@ from copilot_ray.keys import (
 from copilot_ray.privileges import DESCRIPTIONS
 
 from . import defaults, figures, paths, stats, tables, target
-from .aggregate import ConfigSummary, Missing, headline_metric, privileges_label, summarise
+from .aggregate import IMPROVEMENT_OVER, ConfigSummary, Missing, headline_metric, privileges_label, summarise
 from .export import METRICS_CSV, write_metrics_csv
 from .load import (
     AUTO,
@@ -151,6 +156,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="whose success the report shows: 'auto' (default): the validation tasks when every sweep is "
         "a search (it chose by them: a test figure beside it would invite choosing by the test tasks), "
         "else the test tasks",
+    )
+    p.add_argument(
+        "--improvement-over",
+        choices=IMPROVEMENT_OVER,
+        default="best",
+        help="whom CO-PILOT's default is held against in the probability of improvement: the best other "
+        "method (default), or each other configuration, its own variants included (an ablation's rows)",
     )
     p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
     p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
@@ -277,6 +289,17 @@ def main(argv: list[str] | None = None) -> int:
                     tasks=tasks,
                 ),
             )
+        if several and any(c.privilege_counts.get(PRIVILEGE_COLLISION_CHECKS, 0) > 0 for c in configs):
+            add(
+                "Success against collision checks (paper Fig. 4c's axis)",
+                figures.success_vs_checks(
+                    configs,
+                    "method",
+                    out / "success_vs_collision_checks.png",
+                    title=f"{tasks.capitalize()} success against collision checks",
+                    notes=left_out,
+                ),
+            )
         by = "method" if several else axes_shown
         ant = _return_configs(configs, left_out)
         if ant:
@@ -317,7 +340,9 @@ def main(argv: list[str] | None = None) -> int:
     frame = tables.summary_frame(configs, tasks)
     tables.write_csv(frame, out / "summary.csv")
     (out / "summary.md").write_text(tables.markdown(frame))
-    improvement = tables.improvement_frame(configs, reps=args.bootstrap_reps, seed=args.seed)
+    improvement = tables.improvement_frame(
+        configs, reps=args.bootstrap_reps, seed=args.seed, over=args.improvement_over
+    )
     if not improvement.empty:
         tables.write_csv(improvement, out / "improvement.csv")
     labels = {t.run_id: c.label for c in configs for t in c.all_trials}
@@ -335,7 +360,7 @@ def main(argv: list[str] | None = None) -> int:
     for line in provenance:
         if line.startswith("WARNING"):
             print(line, file=sys.stderr)
-    below = _improvement_blocks(configs, improvement, several)  # right under the summary tables
+    below = _improvement_blocks(configs, improvement, several, args.improvement_over)  # under the summary
     below += _target_blocks(configs, sweep.tasks, args)
     settings_table = defaults.defaults_table(configs)
     if settings_table is not None:
@@ -674,16 +699,21 @@ def _spec_lines(sweep: Sweep) -> list[str]:
     return out
 
 
-def _improvement_blocks(configs, frame, several: bool) -> list[tuple]:
-    """Under the headline table: P(CO-PILOT's default beats the best other method)."""
+def _improvement_blocks(configs, frame, several: bool, over: str = "best") -> list[tuple]:
+    """Under the headline table: P(CO-PILOT's default beats the best other method, or each other row)."""
     if not several or not any(m in c.metrics for c in configs for m in SUCCESS_METRICS):
         return []  # one method, or planners alone (no success of an agent to compare)
-    head = ("h2", "Probability of improvement over the best other method")
+    whom = (
+        "the best other method (highest final success)"
+        if over == "best"
+        else "each other configuration (its own variants, an ablation's rows, included)"
+    )
+    head = ("h2", f"Probability of improvement over {whom.split(' (')[0]}")
     why = (
         "P(X > Y) (Agarwal et al. 2021): the chance that a seed of CO-PILOT's default configuration "
         "(algorithm copilot, no preset; a variant such as the privileged after_failure restart is a row of "
-        "its own, its privileges beside it) scores higher than a seed of the best other method (highest final "
-        "success), ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
+        f"its own, its privileges beside it) scores higher than a seed of {whom}, "
+        "ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
         f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
         "seeds on each side. The last column says whether CO-PILOT's CI of final success lies wholly above "
         "the other method's (a CI on both sides needs as many seeds)."

@@ -249,13 +249,14 @@ def _duration(seconds: float) -> str:
 
 
 def improvement_frame(
-    configs: list[ConfigSummary], reps: int = stats.DEFAULT_REPS, seed: int = 0
+    configs: list[ConfigSummary], reps: int = stats.DEFAULT_REPS, seed: int = 0, over: str = "best"
 ) -> pd.DataFrame:
-    """One row per CO-PILOT default configuration: P(it beats the best other method) on final success
-    and on the success AUC, from the seeds' scores (`stats.improvement`)."""
+    """One row per pair of a CO-PILOT default configuration and the best other method (over="best") or
+    each other configuration (over="each"): P(CO-PILOT's beats it) on final success and on the success
+    AUC, from the seeds' scores (`stats.improvement`)."""
     metric = headline_metric(configs)
     rows = []
-    for x, y in improvement_pairs(configs, metric):
+    for x, y in improvement_pairs(configs, metric, over):
         mx, my = x.metrics[metric], y.metrics[metric]
         row: dict[str, object] = {"copilot": x.label, "other": y.label, "metric": metric}
         # a privileged CO-PILOT (after_failure restart) is paired too: its privileges stay beside it
@@ -286,7 +287,7 @@ def improvement_table(frame: pd.DataFrame) -> Table:
     table = Table(
         [
             "CO-PILOT (default preset; privileges)",
-            "best other method (privileges)",
+            "other (privileges)",
             "P(final success higher)",
             "P(AUC higher)",
             "final success CIs apart (CO-PILOT's above)",

@@ -933,6 +933,78 @@ def test_probability_of_improvement_in_the_report(honest):
     assert imp.loc[0, "p_final"] == 1.0 and imp.loc[0, "p_auc"] == 1.0
 
 
+def test_success_against_collision_checks_draws_each_method_at_the_checks_it_spent(honest):
+    """CO-PILOT spent checks (a line at the seeds' mean checks), SAC none (one point at 0), the old PPO
+    runs never logged the count (left out, said so)."""
+    from analysis.aggregate import summarise
+    from analysis.figures import checks_at
+    from analysis.load import load_sweep
+
+    png = honest["out"] / "success_vs_collision_checks.png"
+    assert png.exists() and mpimg.imread(png).shape[0] > 100
+    report = (honest["out"] / "report.md").read_text()
+    assert "success_vs_collision_checks.png" in report
+    assert "success_vs_collision_checks.png: algorithm=ppo not drawn: its runs did not log" in report
+    configs, _ = summarise(load_sweep(honest["uri"], HONEST), reps=200)
+    by = {c.algorithm: c for c in configs}
+    end = float(FRESH_STEPS[-1])
+    # seeds 0-4 end at 100 x (seed + 1) checks: their mean is 300; half way, half of it.
+    np.testing.assert_allclose(checks_at(by["copilot"], np.array([end / 2, end])), [150.0, 300.0])
+    np.testing.assert_allclose(checks_at(by["sac"], np.array([end])), [0.0])
+    assert checks_at(by["ppo"], np.array([end])) is None
+
+
+def test_improvement_over_each_other_configuration(honest, tmp_path):
+    """--improvement-over each: CO-PILOT's default against every other row (SAC and PPO), not the best alone."""
+    out = tmp_path / "each"
+    argv = [
+        HONEST,
+        "--tracking-uri",
+        honest["uri"],
+        "--out",
+        str(out),
+        "--no-log",
+        "--improvement-over",
+        "each",
+    ]
+    assert main(argv) == 0
+    imp = pd.read_csv(out / "improvement.csv")
+    assert sorted(imp["other"]) == ["algorithm=ppo", "algorithm=sac"]
+    report = (out / "report.md").read_text()
+    assert "## Probability of improvement over each other configuration" in report
+
+
+def test_each_other_row_is_held_against_the_plain_default_not_against_its_variants():
+    """--improvement-over each: the default as it ships is X; its variant (an ablation) is one of the
+    others, never an X of its own; with "best" the other is the best other algorithm only."""
+    from types import SimpleNamespace
+
+    from analysis.aggregate import improvement_pairs
+    from copilot_ray.keys import EVAL_SUCCESS, VARIANT_TAG
+
+    def config(name, algorithm, default, variant="", final=0.5):
+        metric = SimpleNamespace(final=SimpleNamespace(point=final))
+        trial = SimpleNamespace(tags={VARIANT_TAG: variant} if variant else {})
+        return SimpleNamespace(
+            label=name,
+            algorithm=algorithm,
+            is_copilot_default=default,
+            metrics={EVAL_SUCCESS: metric},
+            all_trials=[trial],
+        )
+
+    plain = config("copilot", "copilot", True)
+    frozen = config("frozen", "copilot", True, variant="frozen_planner")
+    sorb, her = config("sorb", "sorb", False, final=0.3), config("her", "her", False, final=0.2)
+    configs = [plain, frozen, sorb, her]
+    each = [(x.label, y.label) for x, y in improvement_pairs(configs, EVAL_SUCCESS, "each")]
+    assert each == [("copilot", "frozen"), ("copilot", "sorb"), ("copilot", "her")]
+    best = [(x.label, y.label) for x, y in improvement_pairs(configs, EVAL_SUCCESS, "best")]
+    assert best == [("copilot", "sorb"), ("frozen", "sorb")]
+    with pytest.raises(ValueError, match=r"over='all' is invalid"):
+        improvement_pairs(configs, EVAL_SUCCESS, "all")
+
+
 def test_whether_two_final_success_intervals_are_apart():
     from analysis import stats
     from analysis.tables import ci_apart
