@@ -8,8 +8,9 @@ import numpy as np
 import torch
 
 from copilot_ray import keys
-from copilot_ray.planning import SegmentCost, SubgoalPlanner, construct_trees
+from copilot_ray.planning import SegmentCost, SubgoalPlanner
 from copilot_ray.planning.path_metrics import CountedChecks, path_metrics, rrt_reference, score_paths
+from copilot_ray.planning.planner_phases import PlannerPhases
 from copilot_ray.trials.planning_trial import PlanningTrial
 
 
@@ -29,6 +30,8 @@ class SGTPGTrial(PlanningTrial):
             cfg.seed,
             geometry=maze.agent_geometry,
         )
+        # CO-PILOT's planner phase (std annealing included), on the Euclidean + collision cost alone.
+        self.phases = PlannerPhases(self.planner, cfg.planner)
         self.checks = CountedChecks(maze.segments_collide)
         self.cost = SegmentCost(
             alpha=1.0,
@@ -40,7 +43,6 @@ class SGTPGTrial(PlanningTrial):
         starts, goals = maze.tasks("test")
         self.test_starts, self.test_goals = starts[: cfg.eval_num_tasks], goals[: cfg.eval_num_tasks]
         self.rng = np.random.default_rng(cfg.seed)
-        self.phases = 0
         self.reference = None
         if cfg.rrt_reference_time_s > 0:
             self.reference = rrt_reference(
@@ -49,29 +51,16 @@ class SGTPGTrial(PlanningTrial):
 
     def iterate(self) -> tuple[dict[str, float], int, bool]:
         cfg = self.cfg
-        std_schedule = cfg.planner["std_final"] is not None
         for _ in range(cfg.phases_per_iteration):
-            if std_schedule:  # the same linear annealing as CO-PILOT's planner phase
-                frac = min(1.0, self.phases / cfg.planner["std_anneal_phases"])
-                self.planner.set_std(
-                    cfg.planner["std"] + frac * (cfg.planner["std_final"] - cfg.planner["std"])
-                )
             batch = min(cfg.task_batch_size, len(self.train_starts))
             idx = self.rng.choice(len(self.train_starts), size=batch, replace=False)
-            construct_trees(
-                self.planner,
-                self.train_starts[idx],
-                self.train_goals[idx],
-                cfg.tree_depth,
-                self.cost,
-                num_samples=cfg.planner["num_samples"],
-                rng=self.rng,
+            self.phases.run(
+                self.train_starts[idx], self.train_goals[idx], cfg.tree_depth, self.cost, self.rng
             )
-            self.phases += 1
         trees = self.planner.sample(self.test_starts, self.test_goals, deterministic=True)
         scores = score_paths(self.env.unwrapped, trees, self.test_goals)
         metrics = path_metrics(scores, self.checks.count, self.reference)
-        metrics[keys.PLANNER_UPDATES] = float(self.phases)
+        metrics[keys.PLANNER_UPDATES] = float(self.phases.count)
         return metrics, self.checks.count, False
 
     def state(self) -> dict[str, Any]:
@@ -79,7 +68,7 @@ class SGTPGTrial(PlanningTrial):
             "planner": self.planner.state_dict(),
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
-            "phases": self.phases,
+            "phases": self.phases.count,
             "checks": self.checks.count,
         }
 
@@ -87,4 +76,4 @@ class SGTPGTrial(PlanningTrial):
         self.planner.load_state_dict(state["planner"])
         self.rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"])
-        self.phases, self.checks.count = int(state["phases"]), int(state["checks"])
+        self.phases.count, self.checks.count = int(state["phases"]), int(state["checks"])
