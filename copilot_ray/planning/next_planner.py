@@ -462,16 +462,8 @@ def next_search(
         if model is None or r < s.goal_bias + s.uniform_share:
             target = goal if r < s.goal_bias else space.sample(rng)
             via = int(open_[np.argmin(space.dist(tree.states[open_], target))])
-        else:  # guided: UCB over the tree, then the best of the policy's candidates
-            log_w = math.log(float(tree.w[:n].sum()))
-            ucb = tree.value[open_] + s.exploration * np.sqrt(log_w / tree.w[open_])
-            via = int(open_[np.argmax(ucb)])
-            mean, _ = model.predict(tree.states[via][None], goal)
-            u = mean[0] + s.policy_std * rng.standard_normal((s.candidates, space.dim))
-            cands = space.clip(tree.states[via] + u * s.step / space.weights)
-            w = kernel_sum(cands, tree.attempts[: tree.a])
-            score = values(cands) + s.exploration * np.sqrt(log_w / (1.0 + w))
-            target = cands[int(np.argmax(score))]
+        else:
+            via, target = _guided_target(tree, open_, space, s, model, goal, rng, values, kernel_sum)
         new = space.steer(tree.states[via], target, s.step)
         if float(space.dist(tree.states[via], new)) < 1e-9:
             continue
@@ -490,7 +482,37 @@ def next_search(
             best = int(goals[np.argmin(tree.cost[goals])])
             if solved_at is None:
                 solved_at = it
-    if best >= 0:
+    return _search_result(tree, space, goal, best >= 0, checks, it)
+
+
+def _guided_target(
+    tree: _Tree,
+    open_: np.ndarray,
+    space: ConfigSpace,
+    s: SearchSettings,
+    model,
+    goal,
+    rng,
+    values,
+    kernel_sum,
+) -> tuple[int, np.ndarray]:
+    """NEXT's guided expansion: the open node with the highest UCB of its value, then the best-scored of
+    the policy's candidate steps from it; (that node, the target to steer towards)."""
+    n = tree.n
+    log_w = math.log(float(tree.w[:n].sum()))
+    ucb = tree.value[open_] + s.exploration * np.sqrt(log_w / tree.w[open_])
+    via = int(open_[np.argmax(ucb)])
+    mean, _ = model.predict(tree.states[via][None], goal)
+    u = mean[0] + s.policy_std * rng.standard_normal((s.candidates, space.dim))
+    cands = space.clip(tree.states[via] + u * s.step / space.weights)
+    w = kernel_sum(cands, tree.attempts[: tree.a])
+    score = values(cands) + s.exploration * np.sqrt(log_w / (1.0 + w))
+    return via, cands[int(np.argmax(score))]
+
+
+def _search_result(tree: _Tree, space: ConfigSpace, goal: np.ndarray, solved: bool, checks: int, it: int):
+    """The cheapest path to a terminal node, or (unsolved) the path to the node nearest the goal."""
+    if solved:
         goals = np.flatnonzero(tree.terminal[: tree.n])
         best = int(goals[np.argmin(tree.cost[goals])])
         path = tree.path_to(best)
