@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from copilot_ray.privileges import privileges_of
-from copilot_ray.settings import Setting, effective, logged_text
+from copilot_ray.settings import MAX_TREE_DEPTH, Setting, effective, logged_text
 
 ALGORITHMS: dict[str, tuple[str, str, str]] = {
     "copilot": (
@@ -174,8 +174,8 @@ class AlgorithmEntry:
         return _load(self.trial_class_path)
 
 
-# `<k>` in an algorithm's METRICS is a tree layer: 0..10, the deepest tree any setting allows.
-MAX_LAYER = 10
+# `<k>` in an algorithm's METRICS is a tree layer: 0..the deepest tree any setting allows.
+MAX_LAYER = MAX_TREE_DEPTH
 
 
 def metric_known(metric: str, patterns: Iterable[str]) -> bool:

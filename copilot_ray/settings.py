@@ -14,6 +14,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+# The deepest sub-goal tree any setting allows: 2^(K+1) - 1 sub-tasks per task, so K = 10 is already 2047
+# (the one place this limit is written: the algorithms' tree_depth settings and the registry's per-layer
+# metrics read it from here).
+MAX_TREE_DEPTH = 10
 # What a search domain may produce for a setting of each kind (an int range fits a float setting too).
 SETTING_KINDS = ("int", "float", "bool", "str", "list", "schedule")
 

@@ -35,6 +35,7 @@ from copilot_ray.planning.planner import ANGLE_MODES, MEAN_MODES, NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import (
+    MAX_TREE_DEPTH,
     Setting,
     bool_setting,
     choice_setting,
@@ -46,7 +47,6 @@ from copilot_ray.settings import (
     sizes_setting,
 )
 
-MAX_TREE_DEPTH = 10  # 2^(K+1) - 1 sub-tasks per task: K = 10 is already 2047; deeper is a typo
 # Where CoPilotConfig.from_settings puts a setting: .copilot(key=...), .agent(key=...) (the goal-conditioned
 # SAC agent's, sac/settings.py), .copilot(planner={field: ...}), .copilot(cost_model={field: ...}), one
 # field of the alpha schedule, .training(key=...).

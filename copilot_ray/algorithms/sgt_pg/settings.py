@@ -15,7 +15,7 @@ import dataclasses
 from copilot_ray import keys
 from copilot_ray.algorithms.copilot.settings import SETTINGS as COPILOT_SETTINGS
 from copilot_ray.privileges import COLLISION_CHECKS
-from copilot_ray.settings import float_setting, int_setting
+from copilot_ray.settings import MAX_TREE_DEPTH, float_setting, int_setting
 
 # SGT-PG as its reference code: where CO-PILOT's planner default is a measured addition, the reference's.
 _REFERENCE = {
@@ -39,7 +39,9 @@ _PLANNER = [
 SETTINGS = {
     s.key: s
     for s in (
-        int_setting("tree_depth", "sgt_pg", 5, "sub-goal tree depth K (2^K finest segments)", 1, 10),
+        int_setting(
+            "tree_depth", "sgt_pg", 5, "sub-goal tree depth K (2^K finest segments)", 1, MAX_TREE_DEPTH
+        ),
         int_setting("task_batch_size", "sgt_pg", 30, "training tasks per planner phase (paper 4.1)", 1),
         int_setting(
             "phases_per_iteration", "sgt_pg", 10, "planner phases per Tune iteration (then a score)", 1
