@@ -60,7 +60,7 @@ from copilot_ray.keys import (
     validation_key,
 )
 
-# Curves for the diagnostics page (copilot_ray.algorithms.copilot.diagnostics): every metric under these
+# Curves for the diagnostics page (copilot_ray.planning.plan_diagnostics): every metric under these
 # prefixes that a run logged.
 DIAGNOSTIC_PREFIXES = (DIAG_PREFIX, EVAL_PREFIX, AGENT_SUBTASK_SUCCESS_LAYER)
 # The pseudo-axis that labels configurations by their config key when no axis tag tells them apart.

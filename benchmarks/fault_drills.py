@@ -18,7 +18,7 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
   moment (`--kill-seed`) of the first trial's 3rd iteration: Ray restarts the actor, CO-PILOT counts the sub-tasks the runner took with it
   (`copilot/agent/subtasks_lost`, printed) and the trial goes on without a Tune retry.
 * nan: one configuration, seeds 0 and 1, and `COPILOT_RAY_FAULT=planner_nan@3:seed=1` (NaN into seed 1's
-  planner weights at iteration 3; copilot_ray/algorithms/copilot/health.py): seed 1 must stop with the
+  planner weights at iteration 3; copilot_ray/planning/health.py): seed 1 must stop with the
   reason in the console and in its MLflow run (FAILED, tag copilot.error) after its retries, seed 0 must
   finish; "lost" counts only runs that should have finished.
 

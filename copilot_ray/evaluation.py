@@ -1,5 +1,10 @@
 """Success rate on held-out tasks: the agent following the planner's path, and the agent alone.
 
+`AgentEvaluation` is the measuring protocol every agent-based method goes through (GoalSAC and its
+relatives, PPO, HRL): the same validation and test tasks, the same cadence, the same action modes and
+sampling seeds, the same success, return and area definitions, the same metric names. A method brings its
+rollouts (its policies on given tasks, in lockstep); the figures are computed here, once.
+
 Rollouts run N copies of the goal env in lockstep on the driver, with one batched policy call per
 step, so evaluating 100 test tasks costs a few seconds and needs no env runner.
 
@@ -22,12 +27,19 @@ from copilot_ray.envs import make
 from copilot_ray.envs.continuation import reset_toward
 from copilot_ray.envs.goal_observation import flat_observation
 from copilot_ray.keys import (
+    EVAL_ACTIONS,
+    EVAL_PREFIX,
+    EVAL_RETURN,
+    EVAL_SUCCESS,
+    EVAL_SUCCESS_AUC,
     REACHED_DIRECT,
     REACHED_PLANNED,
     SUBGOALS_REACHED_PLANNED,
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
+    eval_by_action,
     eval_leaf,
+    validation_key,
 )
 from copilot_ray.planning.path_metrics import PathScores, score_paths
 from copilot_ray.planning.subgoal_tree import path_indices
@@ -97,6 +109,92 @@ class SuccessCurve:
 
     def set_state(self, state: dict[str, list[float]]) -> None:
         self.steps, self.values = list(state.get("steps", [])), list(state.get("values", []))
+
+
+DETERMINISTIC, SAMPLED = EVAL_ACTIONS
+# One action mode's rollouts on one task set, as shares of its tasks, by `eval_leaf` name: success_direct
+# and reached_direct always; success_planned, reached_planned (and subgoals_reached_planned) where the
+# agent follows a plan.
+ActionFigures = Mapping[str, float]
+
+
+class AgentEvaluation:
+    """The one measuring protocol of every agent-based method (see the module docstring).
+
+    Tasks: the first `num_tasks` of the env's validation and test sets (as many of each: the fewer of
+    the two sets' sizes bounds it). Cadence: `EvaluationSchedule(every_iterations, every_env_steps)`.
+    Actions: the headline `eval_action` on both sets, and on the test set the other mode too; sampled
+    actions draw from their own stream seeded run seed + iteration (`action_seeds`), so that an evaluation
+    never moves training's randomness and methods at the same seed and iteration sample alike. Figures
+    (`figures`): success needs the goal reached with no collision; the headline `copilot/eval/success` is
+    the agent following its plan (alone where it has none); the return is `task_reward` (R) x the goals
+    reached along the plan; the area under each set's success curve so far (`SuccessCurve`).
+    Checkpointed with `get_state` / `set_state`."""
+
+    def __init__(
+        self,
+        env,
+        num_tasks: int,
+        eval_action: str,
+        every_iterations: int,
+        every_env_steps: int = 0,
+        task_reward: float = 1.0,
+    ):
+        if eval_action not in EVAL_ACTIONS:
+            raise ValueError(f"eval_action={eval_action!r} is invalid: use one of {EVAL_ACTIONS}")
+        sets = {split: env.tasks(split) for split in EVAL_SPLITS}
+        self.num_tasks = min(int(num_tasks), *(len(starts) for starts, _ in sets.values()))
+        self.tasks = {split: (s[: self.num_tasks], g[: self.num_tasks]) for split, (s, g) in sets.items()}
+        self.eval_action = eval_action
+        self.schedule = EvaluationSchedule(every_iterations, every_env_steps)
+        self.curves = {split: SuccessCurve() for split in EVAL_SPLITS}
+        self.task_reward = float(task_reward)
+
+    def action_seeds(self, split: str, run_seed: int | None, iteration: int) -> dict[str, int | None]:
+        """The action modes `split` is evaluated with, the headline first, each with its sampling seed
+        (None: deterministic actions); the validation set gets the headline mode only."""
+        seeds = {DETERMINISTIC: None, SAMPLED: (0 if run_seed is None else int(run_seed)) + int(iteration)}
+        if split != "test":
+            return {self.eval_action: seeds[self.eval_action]}
+        return {self.eval_action: seeds[self.eval_action], **seeds}
+
+    def figures(self, split: str, by_action: Mapping[str, ActionFigures], env_steps: int) -> dict[str, float]:
+        """One set's figures under their metric names (`copilot/eval/...` for the test set, the
+        validation twins for the validation set): the headline mode's figures, the common success, its
+        area so far, the return; on the test set every mode's figures too (`copilot/eval/<mode>/...`).
+        A mode without a plan's figures is its direct ones (the agent alone is what it follows)."""
+        full = {action: _with_plan(values) for action, values in by_action.items()}
+        headline = full[self.eval_action]
+        success = headline[eval_leaf(SUCCESS_PLANNED)]
+        named = {EVAL_PREFIX + leaf: value for leaf, value in headline.items()}
+        named[EVAL_SUCCESS] = success
+        named[EVAL_SUCCESS_AUC] = self.curves[split].add(env_steps, success)
+        named[EVAL_RETURN] = self.task_reward * headline[eval_leaf(REACHED_PLANNED)]
+        if split != "test":
+            return {validation_key(key): value for key, value in named.items()}
+        for action, values in full.items():
+            for leaf, value in values.items():
+                named[eval_by_action(EVAL_PREFIX + leaf, action)] = value
+        return named
+
+    def get_state(self) -> dict[str, Any]:
+        return {
+            "eval_schedule": self.schedule.get_state(),
+            "success_curves": {split: c.get_state() for split, c in self.curves.items()},
+        }
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        self.schedule.set_state(state.get("eval_schedule", {}))
+        for split, curve in state.get("success_curves", {}).items():
+            self.curves[split].set_state(curve)
+
+
+def _with_plan(values: ActionFigures) -> dict[str, float]:
+    """A mode's figures with the planned ones filled from the direct ones where there is no plan."""
+    out = dict(values)
+    for planned, direct in ((SUCCESS_PLANNED, SUCCESS_DIRECT), (REACHED_PLANNED, REACHED_DIRECT)):
+        out.setdefault(eval_leaf(planned), out[eval_leaf(direct)])
+    return out
 
 
 class ModulePolicy:

@@ -118,7 +118,7 @@ AGENT_SUBTASK_SUCCESS_LAYER = "copilot/agent/subtask_success_layer_"
 # before the next iteration; these are not traversed, so not learned from and not in D_tau).
 AGENT_SUBTASKS_LOST = "copilot/agent/subtasks_lost"
 
-# Diagnostics (copilot_ray.algorithms.copilot.diagnostics): why a run does (not) learn.
+# Diagnostics (copilot_ray.planning.plan_diagnostics): why a run does (not) learn.
 DIAG_PREFIX = "copilot/diag/"
 DIAG_Q_MEAN = "copilot/diag/q_mean"
 DIAG_SUCCESS_AFTER_REACHED = "copilot/diag/success_after_reached"

@@ -103,10 +103,10 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
     ).build_algo()
     try:
         results = [algo.train() for _ in range(2)]
-        assert algo.planner.max_grad_norm == 0.5  # CO-PILOT's default planner gradient clip
+        assert algo.curriculum.planner.max_grad_norm == 0.5  # CO-PILOT's default planner gradient clip
         # 3 warm-start phases, then one phase per repetition; the std annealed 0.05 -> 0.015 over 6.
-        assert algo._planner_phases == 3 + 2 * 2
-        assert algo.planner.std[0] == pytest.approx(0.015)
+        assert algo.curriculum.phases.count == 3 + 2 * 2
+        assert algo.curriculum.planner.std[0] == pytest.approx(0.015)
         assert lookup(results[0], ("copilot", "planner", "warm_start_s")) > 0
         # The headline metrics are the deterministic ones (eval_action's default).
         assert lookup(results[-1], ("copilot", "eval", "success_planned")) == lookup(
@@ -117,7 +117,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
         # Fig. 4c's checks: every segment the planner's cost asked about (at least one phase's
         # 5 tasks x 4 sampled trees x 7 segments).
         checks = [lookup(r, ("paths", "collision_checks")) for r in results]
-        assert 5 * 4 * 7 <= checks[0] < checks[1] == algo._planner_checks.count
+        assert 5 * 4 * 7 <= checks[0] < checks[1] == algo.curriculum.collision_checks
         assert [lookup(r, ("copilot", "privileges", "collision_checks")) for r in results] == checks
         # validation tasks are not test tasks: the sub-goal trees and per-action figures are test-only
         assert "deterministic" not in results[-1]["copilot"]["validation"]
@@ -132,7 +132,7 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
         assert lookup(results[-1], ("copilot", "dtau", "size")) == 500 + 2 * 2 * 3 * 7
         assert lookup(results[-1], ("learners", "default_policy", "num_module_steps_trained_lifetime")) > 0
         # The schedule ran 4 episodes (paper_per_task over b = 2: 0.9, 0.1, 0.9, 0.1).
-        assert algo.alpha_clock.episode == 4
+        assert algo.curriculum.alpha_clock.episode == 4
         assert lookup(results[-1], ("copilot", "alpha")) == pytest.approx(0.5)
         artefacts = sorted((Path(algo.logdir) / "copilot_trees").glob("*.npz"))
         assert len(artefacts) == 2
@@ -146,17 +146,17 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
         restored = tiny_config(fast_learner, runners, collision_cost=collision_cost).build_algo()
         try:
             restored.restore_from_path(path)
-            want, got = algo.planner.state_dict()["nets"], restored.planner.state_dict()["nets"]
+            want, got = algo.curriculum.planner.state_dict()["nets"], restored.curriculum.planner.state_dict()["nets"]
             for name in want:
                 torch.testing.assert_close(want[name], got[name])
-            assert len(restored.cost_model.dataset) == len(algo.cost_model.dataset)
-            assert restored.alpha_clock.episode == algo.alpha_clock.episode
+            assert len(restored.curriculum.cost_model.dataset) == len(algo.curriculum.cost_model.dataset)
+            assert restored.curriculum.alpha_clock.episode == algo.curriculum.alpha_clock.episode
             assert restored._rng.bit_generator.state == algo._rng.bit_generator.state
             assert restored.iteration == algo.iteration == 2
             assert restored.gradient_steps.get_state() == algo.gradient_steps.get_state()
-            assert restored._planner_phases == algo._planner_phases and restored._warm_started
-            assert restored._planner_checks.count == algo._planner_checks.count
-            assert restored.planner.std.tolist() == algo.planner.std.tolist()
+            assert restored.curriculum.phases.count == algo.curriculum.phases.count and restored.curriculum._warm_started
+            assert restored.curriculum.collision_checks == algo.curriculum.collision_checks
+            assert restored.curriculum.planner.std.tolist() == algo.curriculum.planner.std.tolist()
             # The task sampler continues where it stopped: both draw the same next mini-batch.
             assert (restored._rng.integers(1 << 30, size=4) == algo._rng.integers(1 << 30, size=4)).all()
             if fast_learner:
@@ -197,7 +197,7 @@ def test_the_last_iteration_ends_at_the_repetition_that_reaches_the_budget(ray_s
         algo = config.build_algo()
         try:
             algo.train()
-            steps[budget], phases[budget] = algo._env_steps(), algo._planner_phases
+            steps[budget], phases[budget] = algo._env_steps(), algo.curriculum.phases.count
         finally:
             algo.stop()
     assert phases == {None: 3 + 2, 1: 3 + 1}  # warm start, then one planner phase per repetition
@@ -206,13 +206,14 @@ def test_the_last_iteration_ends_at_the_repetition_that_reaches_the_budget(ray_s
 
 def _recording_planned_tasks(algo) -> list[tuple[int, ...]]:
     """The training tasks of every planner phase from now on (the batch each repetition plans for)."""
-    seen, trees = [], algo._trees
+    seen, trees = [], algo.curriculum.trees
 
-    def recording(idx, stats, timing):
-        seen.append(tuple(int(i) for i in idx))
-        return trees(idx, stats, timing)
+    def recording(starts, *args):
+        seen.append(tuple(int(i) for i in algo._batch))
+        assert len(starts) == len(algo._batch)  # the curriculum is given the whole batch
+        return trees(starts, *args)
 
-    algo._trees = recording
+    algo.curriculum.trees = recording
     return seen
 
 
@@ -228,13 +229,13 @@ def test_an_iteration_ends_at_the_repetition_past_an_evaluation_point_and_the_ne
     try:
         seen = _recording_planned_tasks(algo)
         results = [algo.train()]
-        assert (algo.alpha_clock.episode, algo._batch_done) == (1, 1)
+        assert (algo.curriculum.alpha_clock.episode, algo._batch_done) == (1, 1)
         path = algo.save_to_path(str(tmp_path / "ckpt"))
         results += [algo.train(), algo.train()]
         assert seen[0] == seen[1] != seen[2]  # the batch's two repetitions, then a new draw
-        assert (algo.alpha_clock.episode, algo._batch_done) == (3, 1)
+        assert (algo.curriculum.alpha_clock.episode, algo._batch_done) == (3, 1)
         # One evaluation per iteration, at the env steps where that iteration ended.
-        assert algo.success_curves["test"].steps == [float(lookup(r, env_steps)) for r in results]
+        assert algo.evaluation.curves["test"].steps == [float(lookup(r, env_steps)) for r in results]
 
         restored = tiny_config(num_env_runners=0).copilot(eval_every_env_steps=1).build_algo()
         try:
@@ -243,7 +244,7 @@ def test_an_iteration_ends_at_the_repetition_past_an_evaluation_point_and_the_ne
             restored_seen = _recording_planned_tasks(restored)
             restored.train()
             assert restored_seen == [seen[0]] and restored._batch is None
-            assert restored.alpha_clock.episode == 2
+            assert restored.curriculum.alpha_clock.episode == 2
         finally:
             restored.stop()
     finally:
@@ -251,7 +252,7 @@ def test_an_iteration_ends_at_the_repetition_past_an_evaluation_point_and_the_ne
 
 
 def test_non_finite_planner_weights_stop_the_run_naming_them(ray_session, monkeypatch):
-    from copilot_ray.algorithms.copilot.health import FAULT_ENV, NonFiniteStateError
+    from copilot_ray.planning.health import FAULT_ENV, NonFiniteStateError
 
     monkeypatch.setenv(FAULT_ENV, "planner_nan@2")  # the fault drill's hook: NaN at iteration 2's start
     algo = tiny_config(num_env_runners=0).build_algo()
@@ -299,18 +300,18 @@ def test_an_env_runner_dying_mid_iteration_loses_its_subtasks_countably_and_come
 
 
 def _planner_weights(algo) -> list[np.ndarray]:
-    return [p.detach().clone().numpy() for p in algo.planner.parameters()]
+    return [p.detach().clone().numpy() for p in algo.curriculum.planner.parameters()]
 
 
 def _recording_plan_sizes(algo) -> list[int]:
     """The number of tasks every planner phase plans from now on."""
-    sizes, plan = [], algo._plan
+    sizes, run = [], algo.curriculum.phases.run
 
-    def recording(starts, *args):
+    def recording(starts, *args, **kwargs):
         sizes.append(len(starts))
-        return plan(starts, *args)
+        return run(starts, *args, **kwargs)
 
-    algo._plan = recording
+    algo.curriculum.phases.run = recording
     return sizes
 
 
@@ -322,7 +323,7 @@ def test_a_frozen_planner_learns_nothing_after_its_warm_start_and_plans_only_the
     for frozen in (False, True):
         algo = tiny_config(num_env_runners=0).copilot(planner_frozen=frozen).build_algo()
         try:
-            algo._warm_start_planner()
+            algo.curriculum.prepare(1, algo._rng)
             before, checks = _planner_weights(algo), algo._collision_checks()
             planned = _recording_plan_sizes(algo)
             algo.train()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from copilot_ray import keys
-from copilot_ray.algorithms.copilot.diagnostics import (
+from copilot_ray.planning.plan_diagnostics import (
     plan_diagnostics,
     tau_hat_profile,
 )
@@ -92,7 +92,7 @@ def test_tau_hat_profile_measures_the_segments_it_was_given():
 
 
 def test_dtau_tuples_of_failed_subtasks_end_state_or_lower_bound():
-    from copilot_ray.algorithms.copilot.algorithm import dtau_tuples
+    from copilot_ray.planning.curriculum import dtau_tuples
 
     subtasks = {
         "start": np.array([[0.0, 0.0], [0.5, 0.5]]),

@@ -1,11 +1,11 @@
-"""copilot_ray.algorithms.copilot.health: the finiteness check and the fault drill's hook."""
+"""copilot_ray.planning.health: the finiteness check and the fault drill's hook."""
 
 import math
 
 import pytest
 import torch
 
-from copilot_ray.algorithms.copilot.health import (
+from copilot_ray.planning.health import (
     FAULT_ENV,
     NonFiniteStateError,
     check_finite,

@@ -98,7 +98,7 @@ def test_an_iteration_traverses_rrt_trees_counts_every_check_and_a_restore_plans
     try:
         assert algo.config.tau_max == 800 // 4
         result = algo.train()
-        trees = algo.rrt_trees
+        trees = algo.curriculum.planner
         assert trees.solved + trees.unsolved == 2 + 3 + 3  # 2 training tasks, 3 validation, 3 test
         assert result["copilot"]["privileges"]["collision_checks"] == trees.checks > 0
         assert result["copilot"]["curriculum"]["rrt_tasks"] == 8
@@ -108,8 +108,8 @@ def test_an_iteration_traverses_rrt_trees_counts_every_check_and_a_restore_plans
     restored = entry.build_config(values, run).build_algo()
     try:
         restored.set_state(state)
-        checks = restored.rrt_trees.checks
+        checks = restored.curriculum.planner.checks
         restored._evaluate()  # the same evaluation tasks: their trees are kept
-        assert restored.rrt_trees.checks == checks == trees.checks
+        assert restored.curriculum.planner.checks == checks == trees.checks
     finally:
         restored.stop()

@@ -13,6 +13,8 @@ cut the same way, and is counted as unsolved.
 
     trees = RRTTrees(env, depth=5, time_limit_s=0.5, seed=0)
     trees.sample(starts, goals)        # [N, 2^K + 1, d]; the planner interface evaluation takes
+
+`RRTTreeCurriculum` is the same trees as a curriculum the agent holds (`planning.curriculum`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+
+from copilot_ray import keys
 
 from .subgoal_tree import check_depth
 
@@ -117,3 +121,53 @@ class RRTTrees:
             for task, tree in zip(np.asarray(state["tasks"]), np.asarray(state["trees"]), strict=True):
                 self._kept[task.astype(np.float32).tobytes()] = tree
         self.checks, self.solved, self.unsolved = (int(state[k]) for k in ("checks", "solved", "unsolved"))
+
+
+class RRTTreeCurriculum:
+    """The classical-planner curriculum (`planning.curriculum.Curriculum`): each drawn task's RRT* tree,
+    the same trees for every repetition; nothing learned. `planner` (the RRTTrees) is also what
+    evaluation follows."""
+
+    state_key = "rrt_curriculum"
+
+    def __init__(self, env, depth: int, repetitions: int, time_limit_s: float, seed: int = 0):
+        self.depth, self.repetitions = check_depth(depth), int(repetitions)
+        self.planner = RRTTrees(env, depth, time_limit_s, seed=seed)
+
+    def prepare(self, iteration: int, rng) -> dict[str, float]:
+        return {}
+
+    def tasks_to_draw(self, traversed: int) -> int:
+        return traversed
+
+    def trees(self, starts, goals, traversed: int, rng) -> tuple[np.ndarray, dict[str, float]]:
+        """The traversed tasks' trees (RRT* plans a task the first time it is drawn)."""
+        return self.planner.sample(starts[:traversed], goals[:traversed]), {}
+
+    def learn(self, subtasks, rng) -> dict[str, float]:
+        return {}
+
+    def summary(self) -> dict[str, float]:
+        """Tasks planned so far and those RRT* did not solve in its time (evaluation tasks included)."""
+        trees = self.planner
+        return {
+            keys.CURRICULUM_RRT_TASKS: trees.solved + trees.unsolved,
+            keys.CURRICULUM_RRT_UNSOLVED: trees.unsolved,
+        }
+
+    @property
+    def collision_checks(self) -> int:
+        return self.planner.checks
+
+    def learned_parts(self) -> dict[str, list]:
+        return {}
+
+    def tree_extras(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        """The trees planned so far and RRT*'s counts: a resumed run plans no task twice."""
+        return self.planner.state_dict()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.planner.load_state_dict(state)

@@ -28,11 +28,10 @@ from copilot_ray.algorithms.hrl.rollout import Episode, run_episodes
 from copilot_ray.algorithms.hrl.transitions import high_level_rows, low_level_rows, subgoals_reached
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
-from copilot_ray.evaluation import EVAL_SPLITS, EvaluationSchedule, SuccessCurve
+from copilot_ray.evaluation import EVAL_SPLITS, AgentEvaluation
 
-DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
-# The evaluation's figures: the common ones, and the same per action mode.
-_EVAL_KEYS = (keys.SUCCESS_DIRECT, keys.REACHED_DIRECT, keys.EVAL_RETURN)
+# The evaluation's figures per action mode (the agent alone: what it follows is its own high level).
+_EVAL_KEYS = (keys.SUCCESS_DIRECT, keys.REACHED_DIRECT, keys.SUCCESS_PLANNED, keys.REACHED_PLANNED)
 
 
 class HRL:
@@ -68,14 +67,12 @@ class HRL:
         )
         self.high_schedule = GradientStepSchedule(cfg.high["updates_per_transition"])
         self.train_starts, self.train_goals = maze.tasks("train")
-        # Validation tasks for searchers and probes, test tasks for reports: both at every evaluation.
-        self.eval_tasks = {}
-        for split in EVAL_SPLITS:
-            starts, goals = maze.tasks(split)
-            self.eval_tasks[split] = (starts[: cfg.eval_num_tasks], goals[: cfg.eval_num_tasks])
-        self.test_starts, self.test_goals = self.eval_tasks["test"]
-        self.eval_schedule = EvaluationSchedule(cfg.eval_interval, cfg.eval_every_env_steps)
-        self.success_curves = {split: SuccessCurve() for split in EVAL_SPLITS}
+        # Validation tasks for searchers and probes, test tasks for reports: both at every evaluation,
+        # measured as every agent-based method is (copilot_ray.evaluation.AgentEvaluation).
+        reward = float(getattr(maze, "goal_reward", 1.0)) * cfg.reward_scale  # R, for the return
+        self.evaluation = AgentEvaluation(
+            maze, cfg.eval_num_tasks, cfg.eval_action, cfg.eval_interval, cfg.eval_every_env_steps, reward
+        )
         self.eval_envs: list | None = None
         self.env_steps = 0
         self.iteration = 0
@@ -170,7 +167,7 @@ class HRL:
         if corrected:
             metrics[S.CORRECTION_KEPT] = (self.high_buffer.num_kept - kept_before) / corrected
         metrics.update(dict.fromkeys(keys.PRIVILEGE_COUNTS, 0.0))  # none: its own episodes alone
-        fresh = self.eval_schedule.due(self.iteration, self.env_steps)
+        fresh = self.evaluation.schedule.due(self.iteration, self.env_steps)
         if fresh:
             self.last_eval = self.evaluate()
         metrics.update(self.last_eval or dict.fromkeys(self._eval_names(), float("nan")))
@@ -180,39 +177,27 @@ class HRL:
     # ------------------------------------------------------------------ evaluation
     def _eval_names(self) -> list[str]:
         per_action = [keys.eval_by_action(k, a) for k in _EVAL_KEYS for a in keys.EVAL_ACTIONS]
-        headline = [keys.EVAL_SUCCESS, keys.EVAL_SUCCESS_AUC, *_EVAL_KEYS]
+        headline = [keys.EVAL_SUCCESS, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN, *_EVAL_KEYS]
         return [*headline, *per_action, *keys.validation_metrics(*headline)]
 
     def evaluate(self) -> dict[str, float]:
         """The validation tasks (the headline action's figures, for searchers), then the test tasks."""
         out: dict[str, float] = {}
         for split in EVAL_SPLITS:
-            figures = self._evaluate_split(split)
-            if split == "test":
-                out.update(figures)
-            else:
-                out.update(
-                    {keys.validation_key(k): v for k, v in figures.items() if "/" not in keys.eval_leaf(k)}
-                )
+            out.update(self.evaluation.figures(split, self._rollouts(split), self.env_steps))
         return out
 
-    def _evaluate_split(self, split: str) -> dict[str, float]:
-        """Both levels on one task set, lockstep: deterministic (tanh of the means) and sampled
-        actions (the validation set: `eval_action`'s only); the headline figures are `eval_action`'s.
-        Success: the goal reached with no collision."""
+    def _rollouts(self, split: str) -> dict[str, dict[str, float]]:
+        """Both levels on one task set, lockstep, in the action modes `AgentEvaluation` asks for
+        (deterministic: tanh of the means; sampled: from its own seeded stream, so that an evaluation
+        does not move training's randomness). Success: the goal reached with no collision."""
         cfg = self.cfg
-        starts, goals = self.eval_tasks[split]
+        starts, goals = self.evaluation.tasks[split]
         if self.eval_envs is None:
             self.eval_envs = [make(cfg.env_id, **dict(cfg.env_config)) for _ in range(len(starts))]
-        out: dict[str, float] = {}
-        actions = keys.EVAL_ACTIONS if split == "test" else (cfg.eval_action,)
-        for action in actions:
-            # Its own stream per evaluation: sampled evaluations do not move training's randomness.
-            gen = (
-                torch.Generator().manual_seed(cfg.seed * 1_000_003 + self.iteration)
-                if action == SAMPLED
-                else None
-            )
+        by_action = {}
+        for action, seed in self.evaluation.action_seeds(split, cfg.seed, self.iteration).items():
+            gen = None if seed is None else torch.Generator().manual_seed(seed)
             episodes = self._episodes(
                 self.eval_envs[: len(starts)],
                 starts,
@@ -220,18 +205,11 @@ class HRL:
                 lambda x, g=gen: self.high.act(x, g),
                 lambda x, g=gen: self.low.act(x, g),
             )
-            figures = {
-                keys.SUCCESS_DIRECT: np.mean([ep.success for ep in episodes]),
-                keys.REACHED_DIRECT: np.mean([ep.terminated for ep in episodes]),
-                keys.EVAL_RETURN: np.mean([cfg.reward_scale * float(ep.rewards.sum()) for ep in episodes]),
+            by_action[action] = {
+                keys.eval_leaf(keys.SUCCESS_DIRECT): float(np.mean([ep.success for ep in episodes])),
+                keys.eval_leaf(keys.REACHED_DIRECT): float(np.mean([ep.terminated for ep in episodes])),
             }
-            for key, value in figures.items():
-                out[keys.eval_by_action(key, action)] = float(value)
-                if action == cfg.eval_action:
-                    out[key] = float(value)
-        out[keys.EVAL_SUCCESS] = out[keys.SUCCESS_DIRECT]
-        out[keys.EVAL_SUCCESS_AUC] = self.success_curves[split].add(self.env_steps, out[keys.EVAL_SUCCESS])
-        return out
+        return by_action
 
     # ------------------------------------------------------------------ state
     def get_state(self) -> dict[str, Any]:
@@ -250,8 +228,7 @@ class HRL:
             "env_steps": self.env_steps,
             "iteration": self.iteration,
             "last_eval": dict(self.last_eval),
-            "eval_schedule": self.eval_schedule.get_state(),
-            "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
+            **self.evaluation.get_state(),  # its schedule and success curves
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -267,9 +244,7 @@ class HRL:
         torch.set_rng_state(state["torch_rng"])
         self.env_steps, self.iteration = int(state["env_steps"]), int(state["iteration"])
         self.last_eval = dict(state["last_eval"])
-        self.eval_schedule.set_state(state.get("eval_schedule", {}))
-        for split, curve in state.get("success_curves", {}).items():
-            self.success_curves[split].set_state(curve)
+        self.evaluation.set_state(state)
 
     def stop(self) -> None:
         for env in self.envs + (self.eval_envs or []):

@@ -28,17 +28,10 @@ from copilot_ray.algorithms.ppo import settings as ppo_settings
 from copilot_ray.algorithms.sac.traversal_env import TraversalRules
 from copilot_ray.envs import make
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
-from copilot_ray.evaluation import (
-    EVAL_SPLITS,
-    EvaluationSchedule,
-    ModulePolicy,
-    SuccessCurve,
-    evaluate_copilot,
-)
+from copilot_ray.evaluation import EVAL_SPLITS, AgentEvaluation, ModulePolicy, evaluate_copilot
 from copilot_ray.registry import RunContext
 
 GOAL_TASK_ENV_ID = "copilot-goal-task"
-DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
 _TASK_KEYS = [s.key for s in ppo_settings.TASK]
 _STATE_KEY = "goal_ppo"
 _RULE_KEYS = [k for k in _TASK_KEYS if k in TraversalRules.__dataclass_fields__]
@@ -155,11 +148,19 @@ class GoalPPO(PPO):
     def setup(self, config) -> None:
         register_goal_task_env()
         super().setup(config)
-        self.goal_env = make(self.config.goal_env, **self.config.goal_env_config)
-        self.eval_tasks = {split: self.goal_env.unwrapped.tasks(split) for split in EVAL_SPLITS}
-        self.test_starts, self.test_goals = self.eval_tasks["test"]
-        self.eval_schedule = EvaluationSchedule(self.config.eval_interval, self.config.eval_every_env_steps)
-        self.success_curves = {split: SuccessCurve() for split in EVAL_SPLITS}
+        cfg = self.config
+        self.goal_env = make(cfg.goal_env, **cfg.goal_env_config)
+        self.test_starts, self.test_goals = self.goal_env.unwrapped.tasks("test")
+        # R: what reaching a task's goal is worth (the goal env's reward x reward_scale).
+        reward = float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * cfg.reward_scale
+        self.evaluation = AgentEvaluation(
+            self.goal_env.unwrapped,
+            cfg.eval_num_tasks,
+            cfg.eval_action,
+            cfg.eval_interval,
+            cfg.eval_every_env_steps,
+            reward,
+        )
 
     @override(PPO)
     def training_step(self) -> None:
@@ -167,65 +168,41 @@ class GoalPPO(PPO):
         for key in keys.PRIVILEGE_COUNTS:  # none: PPO learns from its own episodes alone
             self.metrics.log_value(keys.metric_path(key), 0, window=1)
         env_steps = int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
-        if self.eval_schedule.due(self.iteration + 1, env_steps):
+        if self.evaluation.schedule.due(self.iteration + 1, env_steps):
             for split in EVAL_SPLITS:
                 self._evaluate(split, env_steps)
 
     def _evaluate(self, split: str, env_steps: int) -> None:
+        """The agent alone on one task set, through the common protocol (`AgentEvaluation`)."""
         cfg = self.config
-        test = split == "test"
-        starts, goals = self.eval_tasks[split]
-        n = min(cfg.eval_num_tasks, len(starts))
+        starts, goals = self.evaluation.tasks[split]
         module = self.get_module(DEFAULT_MODULE_ID)
-        seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
         # PPO's Gaussian is not squashed: its actions are clipped, as GoalTaskEnv clips them.
         policies = {
-            DETERMINISTIC: ModulePolicy(module, squash="clip"),
-            SAMPLED: ModulePolicy(module, sampled=True, seed=seed, squash="clip"),
+            action: ModulePolicy(module, squash="clip")
+            if seed is None
+            else ModulePolicy(module, sampled=True, seed=seed, squash="clip")
+            for action, seed in self.evaluation.action_seeds(split, cfg.seed, self.iteration).items()
         }
-        policies = {cfg.eval_action: policies[cfg.eval_action], **(policies if test else {})}
         result = evaluate_copilot(
             goal_env_id=cfg.goal_env,
             goal_env_config=cfg.goal_env_config,
             policies=policies,
             planner=None,
-            starts=starts[:n],
-            goals=goals[:n],
+            starts=starts,
+            goals=goals,
             depth=0,
             tau_max=cfg.tau_max,
             with_delta=cfg.agent_input == "state_goal_delta",
         )
-
-        def log(key: str, value: float) -> None:
-            name = key if test else keys.validation_key(key)
-            self.metrics.log_value(keys.metric_path(name), value, window=1)
-
-        direct = (keys.SUCCESS_DIRECT, keys.REACHED_DIRECT)
-        for action, values in result.by_action.items():
-            for key in direct:
-                value = values[keys.eval_leaf(key)]
-                if test:
-                    self.metrics.log_value(
-                        keys.metric_path(keys.eval_by_action(key, action)), value, window=1
-                    )
-                if action == cfg.eval_action:
-                    log(key, value)
-        headline = result.by_action[cfg.eval_action]
-        success = headline[keys.eval_leaf(keys.SUCCESS_DIRECT)]
-        log(keys.EVAL_SUCCESS, success)
-        log(keys.EVAL_SUCCESS_AUC, self.success_curves[split].add(env_steps, success))
-        # R x reached (keys.EVAL_RETURN), R = the goal env's reward x reward_scale
-        reward = float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * cfg.reward_scale
-        log(keys.EVAL_RETURN, reward * headline[keys.eval_leaf(keys.REACHED_DIRECT)])
+        for key, value in self.evaluation.figures(split, result.by_action, env_steps).items():
+            self.metrics.log_value(keys.metric_path(key), value, window=1)
 
     @override(PPO)
     def get_state(self, components=None, *, not_components=None, **kwargs) -> dict[str, Any]:
         """PPO's state plus the evaluation's schedule and success curves."""
         state = super().get_state(components, not_components=not_components, **kwargs)
-        state[_STATE_KEY] = {
-            "eval_schedule": self.eval_schedule.get_state(),
-            "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
-        }
+        state[_STATE_KEY] = self.evaluation.get_state()
         return state
 
     @override(PPO)
@@ -234,6 +211,4 @@ class GoalPPO(PPO):
         own = state.get(_STATE_KEY)
         if own is None:
             return
-        self.eval_schedule.set_state(own["eval_schedule"])
-        for split, curve in own["success_curves"].items():
-            self.success_curves[split].set_state(curve)
+        self.evaluation.set_state(own)

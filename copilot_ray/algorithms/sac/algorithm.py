@@ -11,11 +11,13 @@ here every "tree" is the task itself, [s0, g]), whose learner is the fast goal-c
 (`copilot_ray.algorithms.gc_sac`, or RLlib's stock one with `fast_learner=False`), and which evaluates on
 the env's validation and test tasks. One `training_step`:
 
+    curriculum.prepare()                           CO-PILOT: the planner's warm start, once
     tasks    <- task_batch_size distinct training tasks (s0, g), or the batch an iteration left unfinished
+                (a curriculum's planner may learn from more: the agent traverses the first ones)
     repeat for its remaining repetitions (`repetitions`: 1 here; CO-PILOT's b):
-        trees    <- _trees(tasks)                      [s0, g]; CO-PILOT: a planner phase
+        trees    <- [s0, g], or curriculum.trees(tasks)   CO-PILOT: a planner phase
         traverse the trees on the env runners          one episode per sub-task, SAC updates in between
-        _after_traversal(sub-tasks)                    nothing here; CO-PILOT: D_tau, tau_hat, alpha
+        curriculum.learn(sub-tasks)                    CO-PILOT: D_tau, tau_hat, alpha
         stop early, keeping the batch, past an env-step evaluation point or the env-step budget
     log; evaluate when due (validation and test tasks)
 
@@ -33,7 +35,6 @@ from __future__ import annotations
 
 import copy
 import difflib
-import logging
 import time
 from collections import defaultdict
 from collections.abc import Mapping
@@ -49,7 +50,6 @@ from ray.rllib.utils.annotations import override
 from ray.rllib.utils.metrics import (
     ENV_RUNNER_RESULTS,
     LEARNER_RESULTS,
-    NUM_AGENT_STEPS_SAMPLED_LIFETIME,
     NUM_ENV_STEPS_SAMPLED_LIFETIME,
 )
 from ray.tune.registry import register_env
@@ -64,6 +64,12 @@ from copilot_ray.algorithms.gc_sac import (
 )
 from copilot_ray.algorithms.sac import settings as agent_settings
 from copilot_ray.algorithms.sac.agent_updates import FastLearnerUpdater, make_agent_updater, replay_capacity
+from copilot_ray.algorithms.sac.planned_evaluation import PlannedEvaluation
+from copilot_ray.algorithms.sac.runner_traversal import RunnerTraversal
+from copilot_ray.algorithms.sac.traversal_channel import (
+    Subtasks,
+    traversal_stats,
+)
 from copilot_ray.algorithms.sac.traversal_diagnostics import traversal_diagnostics
 from copilot_ray.algorithms.sac.traversal_env import (
     RULE_KEYS,
@@ -72,21 +78,14 @@ from copilot_ray.algorithms.sac.traversal_env import (
     make_traversal_env,
 )
 from copilot_ray.envs import make
-from copilot_ray.evaluation import (
-    EVAL_SPLITS,
-    EvaluationSchedule,
-    ModulePolicy,
-    SuccessCurve,
-    evaluate_copilot,
-)
-from copilot_ray.planning.path_metrics import path_metrics
+from copilot_ray.evaluation import AgentEvaluation
+from copilot_ray.planning.curriculum import Curriculum
+from copilot_ray.planning.health import check_finite, fill_nan, injected_fault
+from copilot_ray.planning.path_metrics import RRTReference
 from copilot_ray.registry import RunContext
 from copilot_ray.settings import Setting, check, keyword_arguments, route
 
-logger = logging.getLogger(__name__)
-RUNNER_RESTORE_TIMEOUT_S = 120  # waiting for a failed env runner to come back when none is left
 _STATE_KEY = "goal_sac"
-DETERMINISTIC, SAMPLED = keys.EVAL_ACTIONS
 
 
 def register_traversal_env() -> None:
@@ -297,6 +296,14 @@ class GoalSACConfig(SACConfig):
         """Whether the agent's replay is the hindsight buffer (HER, or an algorithm that reads states)."""
         return self.her.get("n_sampled_goal", 0) > 0
 
+    def make_curriculum(
+        self, env, train_tasks, probe_starts, reachable_length, rng, seed
+    ) -> Curriculum | None:
+        """What the agent traverses instead of its whole tasks (`copilot_ray.planning.curriculum`): none
+        here (SAC, HER, SoRB traverse [s0, g]); CO-PILOT and the RRT* curriculum give theirs. Built last
+        in the agent's setup, from the run's `rng`."""
+        return None
+
 
 class HERConfig(GoalSACConfig):
     """`GoalSACConfig` with hindsight relabelling on at SB3's defaults (`algorithm: her`)."""
@@ -308,10 +315,11 @@ class HERConfig(GoalSACConfig):
     NESTED: ClassVar[tuple[str, ...]] = ("her",)
 
 
-class GoalSAC(SAC):
-    """Goal-conditioned SAC on whole training tasks; HER when `her["n_sampled_goal"]` > 0 (module
-    docstring). Logs `copilot/eval/success` = success on the test tasks (the agent alone, `tau_max`
-    steps), as `success_direct` and `success_planned` (equal here: there is no plan)."""
+class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
+    """Goal-conditioned SAC on training tasks, or on the trees of its curriculum (`self.curriculum`, from
+    the config: CO-PILOT's planner, the RRT* curriculum); HER when `her["n_sampled_goal"]` > 0 (module
+    docstring). Logs `copilot/eval/success` = success on the test tasks: the agent following the
+    curriculum's plan, or alone (`tau_max` steps; then `success_direct` and `success_planned` agree)."""
 
     @classmethod
     @override(SAC)
@@ -333,15 +341,21 @@ class GoalSAC(SAC):
         self._rng = np.random.default_rng(seed)
         torch.manual_seed(seed)
         self.train_starts, self.train_goals = env.tasks("train")
-        # Validation tasks for searchers and probes, test tasks for reports: both at every evaluation.
-        self.eval_tasks = {split: env.tasks(split) for split in EVAL_SPLITS}
-        self.test_starts, self.test_goals = self.eval_tasks["test"]
-        self.eval_schedule = EvaluationSchedule(cfg.eval_interval, cfg.eval_every_env_steps)
-        self.success_curves = {split: SuccessCurve() for split in EVAL_SPLITS}
+        self.test_starts, self.test_goals = env.tasks("test")
         # Privileges used so far (copilot_ray.privileges): resets to a missed sub-goal and the map
         # queries behind them (after_failure="restart"); collision checks: `_collision_checks()`.
         self._privileged = {"resets": 0, "map_queries": 0}
         self.rules = cfg.traversal_rules()
+        # Validation tasks for searchers and probes, test tasks for reports: both at every evaluation,
+        # measured as every agent-based method is (copilot_ray.evaluation.AgentEvaluation).
+        self.evaluation = AgentEvaluation(
+            env,
+            cfg.eval_num_tasks,
+            cfg.eval_action,
+            cfg.eval_interval,
+            cfg.eval_every_env_steps,
+            self._task_reward(),
+        )
         self._subtasks_lost = 0  # this iteration's, taken by env runners that died (AGENT_SUBTASKS_LOST)
         # The task batch in progress and its repetitions done (an iteration may end mid-batch); checkpointed.
         self._batch: np.ndarray | None = None
@@ -352,6 +366,15 @@ class GoalSAC(SAC):
         # exact over the run instead of rounded per sampling round.
         self.gradient_steps = GradientStepSchedule(
             cfg.utd_ratio(), learning_starts=cfg.num_steps_sampled_before_learning_starts
+        )
+        self._rrt_cache: RRTReference | None = None  # computed at the first evaluation that needs it
+        self.curriculum = cfg.make_curriculum(
+            env,
+            (self.train_starts, self.train_goals),
+            self.test_starts,
+            self._reachable_length,
+            self._rng,
+            seed,
         )
 
     def _make_agent_updater(self):
@@ -393,28 +416,44 @@ class GoalSAC(SAC):
         """One iteration (module docstring): draw the tasks (or take up the unfinished batch), run their
         remaining of `repetitions` traversals with SAC updates in between, ending early, with the batch
         kept for the next iteration, past an env-step evaluation point or the run's env-step budget; log,
-        evaluate when due. Subclasses plan the trees (`_trees`) and learn from the finished sub-tasks
-        (`_after_traversal`)."""
+        evaluate when due. A curriculum plans the trees of each repetition and learns from its finished
+        sub-tasks."""
         cfg = self.config
-        self._before_iteration()
+        curriculum = self.curriculum
+        self._check_learned("at the start of the iteration", drill=True)
+        if curriculum is not None:
+            self._log(curriculum.prepare(self.iteration + 1, self._rng))
         self._subtasks_lost = 0
         self._update_seconds, self._updates_done = 0.0, 0  # this iteration's SAC updates (_learn)
         if self._batch is None:
             self._batch, self._batch_done = self._draw_tasks(), 0
         idx = self._batch
-        n_tasks = min(cfg.task_batch_size, len(idx))
+        n_tasks = min(cfg.task_batch_size, len(idx))  # the agent's tasks: the first of the batch
         stats: dict[str, list[float]] = defaultdict(list)  # averaged over the repetitions
         timing: dict[str, float] = defaultdict(float)
         while self._batch_done < cfg.repetitions:
-            trees = self._trees(idx, stats, timing)[:n_tasks]
+            if curriculum is None:
+                trees = np.stack([self.train_starts[idx], self.train_goals[idx]], axis=1)
+            else:
+                t0 = time.perf_counter()
+                trees, figures = curriculum.trees(
+                    self.train_starts[idx], self.train_goals[idx], n_tasks, self._rng
+                )
+                timing["planner_s"] += time.perf_counter() - t0
+                for key, value in figures.items():
+                    stats[key].append(value)
             t0 = time.perf_counter()
-            subtasks = self._traverse(trees, idx[:n_tasks])
+            subtasks = self._traverse(trees[:n_tasks], idx[:n_tasks])
             timing["agent_s"] += time.perf_counter() - t0
             self._privileged["resets"] += int(subtasks["reset_to_state"].sum())
             self._privileged["map_queries"] += int(subtasks["map_queries"].sum())
             for key, value in self._traversal_diagnostics(subtasks).items():
                 stats[key].append(value)
-            self._after_traversal(subtasks, stats, timing)
+            if curriculum is not None:
+                t0 = time.perf_counter()
+                for key, value in curriculum.learn(subtasks, self._rng).items():
+                    stats[key].append(value)
+                timing["cost_model_s"] += time.perf_counter() - t0
             for key, value in traversal_stats(subtasks, cfg.tree_depth).items():
                 stats[key].append(value)
             self._batch_done += 1
@@ -423,71 +462,80 @@ class GoalSAC(SAC):
                 # The run ends with this iteration: its other repetitions would only be experience past
                 # the budget that a method with short iterations never gets.
                 break
-            if self.eval_schedule.point_passed(env_steps):
+            if self.evaluation.schedule.point_passed(env_steps):
                 break  # evaluate now, on the cadence; the batch's other repetitions come next iteration
         if self._batch_done >= cfg.repetitions:
             self._batch = None
-        self._after_iteration()
+        self._check_learned("after its planner and cost-model updates")
 
-        for key, values in stats.items():
-            self.metrics.log_value(keys.metric_path(key), float(np.mean(values)), window=1)
-        self.metrics.log_value(keys.metric_path(keys.AGENT_SUBTASKS_LOST), self._subtasks_lost, window=1)
-        self._log_iteration(timing)
+        self._log({key: float(np.mean(values)) for key, values in stats.items()})
+        self._log({keys.AGENT_SUBTASKS_LOST: self._subtasks_lost, keys.AGENT_SAC_UPDATES: self._updates_done})
+        if curriculum is not None:
+            # The planner and cost-model phases should stay a small share of the iteration.
+            planning = timing["planner_s"] + timing["cost_model_s"]
+            self._log({keys.PLANNING_SHARE: planning / max(planning + timing["agent_s"], 1e-9)})
         # agent_s is the whole traversal (env stepping + SAC updates); the updates' part beside it.
         timing["agent_updates_s"] = self._update_seconds
-        self.metrics.log_value(keys.metric_path(keys.AGENT_SAC_UPDATES), self._updates_done, window=1)
         try:
             q_mean = float(self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, "qf_mean")))
         except KeyError:  # no learner update yet
             q_mean = None
         if q_mean is not None:
-            self.metrics.log_value(keys.metric_path(keys.DIAG_Q_MEAN), q_mean, window=1)
-        for key, value in timing.items():
-            self.metrics.log_value(keys.metric_path(keys.TIME_PREFIX + key), value, window=1)
-        if self.eval_schedule.due(self.iteration + 1, self._env_steps()):
+            self._log({keys.DIAG_Q_MEAN: q_mean})
+        self._log({keys.TIME_PREFIX + key: value for key, value in timing.items()})
+        if self.evaluation.schedule.due(self.iteration + 1, self._env_steps()):
             t = time.perf_counter()
             self._evaluate()
-            self.metrics.log_value(
-                keys.metric_path(keys.TIME_PREFIX + "eval_s"), time.perf_counter() - t, window=1
-            )
+            self._log({keys.TIME_PREFIX + "eval_s": time.perf_counter() - t})
         # After the evaluation: a method that plans its evaluation tasks with the map (SoRB with the map,
-        # the RRT* curriculum) counts those checks in the iteration that made them.
-        for key, count in (
-            (keys.PRIVILEGE_COLLISION_CHECKS, self._collision_checks()),
-            (keys.PRIVILEGE_RESETS, self._privileged["resets"]),
-            (keys.PRIVILEGE_MAP_QUERIES, self._privileged["map_queries"]),
-        ):
-            self.metrics.log_value(keys.metric_path(key), count, window=1)
+        # the RRT* curriculum) counts those checks, and those tasks, in the iteration that made them.
+        if curriculum is not None:
+            self._log(curriculum.summary())
+        self._log(
+            {
+                keys.PRIVILEGE_COLLISION_CHECKS: self._collision_checks(),
+                keys.PRIVILEGE_RESETS: self._privileged["resets"],
+                keys.PRIVILEGE_MAP_QUERIES: self._privileged["map_queries"],
+            }
+        )
+
+    def _log(self, figures: Mapping[str, float]) -> None:
+        """This iteration's figures (full metric names, `copilot_ray.keys`)."""
+        for key, value in figures.items():
+            self.metrics.log_value(keys.metric_path(key), value, window=1)
+
+    def _check_learned(self, when: str, drill: bool = False) -> None:
+        """The curriculum's learned weights are finite (`planning.health`), else the run stops naming
+        them; `drill`: first the fault drill's NaN, if one is set for this iteration (none in real runs)."""
+        parts = {} if self.curriculum is None else self.curriculum.learned_parts()
+        if not parts:
+            return
+        if drill and (broken := injected_fault(self.iteration + 1, self.config.seed)) is not None:
+            fill_nan(parts.get(broken, ()))
+        check_finite(parts, self.iteration + 1, when)
 
     def _env_steps(self) -> int:
         return int(self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))
 
     def _draw_tasks(self) -> np.ndarray:
-        """Indices of this iteration's training tasks: task_batch_size distinct ones (at most all)."""
+        """Indices of this iteration's training tasks: task_batch_size distinct ones, or as many as the
+        curriculum's planner learns from (the agent traverses the first task_batch_size); at most all."""
         n = min(self.config.task_batch_size, len(self.train_starts))
+        if self.curriculum is not None:
+            n = min(self.curriculum.tasks_to_draw(n), len(self.train_starts))
         return self._rng.choice(len(self.train_starts), size=n, replace=False)
 
-    def _trees(self, idx: np.ndarray, stats, timing) -> np.ndarray:
-        """What the agent traverses for tasks `idx`: here the task itself, [s0, g] per task."""
-        return np.stack([self.train_starts[idx], self.train_goals[idx]], axis=1)
-
-    def _after_traversal(self, subtasks: dict[str, np.ndarray], stats, timing) -> None:
-        """What an algorithm learns from the finished sub-tasks besides SAC's updates (nothing here)."""
-
-    def _before_iteration(self) -> None:
-        """Before an iteration's tasks are drawn (nothing here)."""
-
-    def _after_iteration(self) -> None:
-        """After its traversals, before its metrics are logged (nothing here)."""
-
-    def _log_iteration(self, timing: Mapping[str, float]) -> None:
-        """An algorithm's own per-iteration figures (nothing here)."""
-
     def _collision_checks(self) -> int:
-        """Ground-truth collision checks spent so far (a privilege): none here."""
-        return 0
+        """Ground-truth collision checks spent so far (a privilege): the curriculum's planner's."""
+        return 0 if self.curriculum is None else self.curriculum.collision_checks
 
-    def _traversal_diagnostics(self, subtasks: dict[str, np.ndarray]) -> dict[str, float]:
+    def _reachable_length(self, layer: int) -> float:
+        """The longest segment a layer-`layer` sub-task can cover (step limit x step + radius)."""
+        env = self.goal_env.unwrapped
+        steps = self.rules.step_limit_of(layer, self.config.tree_depth)
+        return steps * float(env.nominal_step_distance) + float(getattr(env, "success_radius", 0.0))
+
+    def _traversal_diagnostics(self, subtasks: Subtasks) -> dict[str, float]:
         env = self.goal_env.unwrapped
         return traversal_diagnostics(
             subtasks,
@@ -495,251 +543,25 @@ class GoalSAC(SAC):
             success_radius=float(getattr(env, "success_radius", 0.0)),
         )
 
-    # ---------------------------------------------------------------------------- traversal
-    def _runner_ids(self) -> list[int]:
-        """The runners to traverse on: the local one without remote runners, else the healthy remote
-        ones, after trying to bring back failed ones (as RLlib does before each iteration: a runner that
-        died in one repetition is back for the next)."""
-        group = self.env_runner_group
-        if group.num_remote_env_runners() == 0:
-            return [0]
-        if group.num_healthy_remote_env_runners() < group.num_remote_env_runners():
-            self.restore_env_runners(group)
-        # With none left, wait for Ray to restart one (its actors restart on their own, in seconds).
-        deadline = time.monotonic() + RUNNER_RESTORE_TIMEOUT_S
-        while not group.healthy_env_runner_ids() and time.monotonic() < deadline:
-            time.sleep(1.0)
-            self.restore_env_runners(group)
-        healthy = sorted(group.healthy_env_runner_ids())
-        if not healthy:
-            raise RuntimeError(
-                f"every env runner has failed and none came back within {RUNNER_RESTORE_TIMEOUT_S} s"
-            )
-        return healthy
-
-    def _traverse(self, trees: np.ndarray, task_ids: np.ndarray) -> dict[str, np.ndarray]:
-        """Bottom-up traversal of every tree on the env runners, with SAC updates in between.
-
-        Tasks are split over the runners; each round every runner runs its next
-        `subtasks_per_sample` sub-tasks, then the learner does `config.utd_ratio()` gradient steps
-        per new env step and the runners get the new weights.
-        """
-        cfg = self.config
-        runner_ids = self._runner_ids()
-        local = runner_ids == [0]
-        shares = {rid: np.arange(i, len(trees), len(runner_ids)) for i, rid in enumerate(runner_ids)}
-        plans = {rid: (trees[s], task_ids[s]) for rid, s in shares.items()}
-        depth = cfg.tree_depth
-
-        # Every call returns its runner's index: a runner that dies mid-iteration is simply missing from
-        # the results (RLlib's restart_failed_env_runners), and its sub-tasks are counted as lost.
-        def load(runner):
-            tr, ids = plans[runner.worker_index]
-            return runner.worker_index, runner.env.unwrapped.call("load_plan", tr, depth, ids)[0]
-
-        loaded = dict(
-            self.env_runner_group.foreach_env_runner(
-                load, local_env_runner=local, remote_worker_ids=None if local else runner_ids
-            )
-        )
-        per_tree = 2 ** (depth + 1) - 1  # sub-tasks of one tree, all layers
-        remaining = {}
-        for rid in runner_ids:
-            if rid in loaded:
-                remaining[rid] = loaded[rid]
-            else:
-                self._lose_subtasks(rid, len(shares[rid]) * per_tree)
-        chunk = cfg.subtasks_per_sample
-        records: list[dict[str, np.ndarray]] = []
-        while any(remaining.values()):
-
-            def sample(runner):
-                left = runner.env.unwrapped.call("remaining")[0]
-                if left == 0:
-                    return runner.worker_index, [], runner.get_metrics(), 0
-                episodes = runner.sample(num_episodes=min(chunk, left), explore=True)
-                left = runner.env.unwrapped.call("remaining")[0]
-                return runner.worker_index, episodes, runner.get_metrics(), left
-
-            active = [rid for rid, n in remaining.items() if n > 0]
-            results = self.env_runner_group.foreach_env_runner(
-                sample, local_env_runner=local, remote_worker_ids=None if local else active
-            )
-            episodes = []
-            runner_metrics = []
-            answered = set()
-            for rid, eps, metrics, left in results:
-                answered.add(rid)
-                remaining[rid] = left
-                episodes.extend(eps)
-                runner_metrics.append(metrics)
-            for rid in set(active) - answered:  # died during this round
-                self._lose_subtasks(rid, remaining.pop(rid))
-            self.metrics.aggregate(runner_metrics, key=ENV_RUNNER_RESULTS)
-            episodes = [e for e in episodes if not e.get_infos(-1).get("subtask_idle", False)]
-            if episodes:
-                records.append(subtask_records(episodes))
-                self._learn(episodes)
-        if not records:
-            raise RuntimeError("no sub-task of this repetition was traversed: every env runner failed")
-        return {k: np.concatenate([r[k] for r in records]) for k in records[0]}
-
-    def _lose_subtasks(self, runner_id: int, count: int) -> None:
-        """A runner died with `count` sub-tasks of this repetition: counted, logged, not hidden."""
-        self._subtasks_lost += int(count)
-        logger.warning(
-            "env runner %d failed during the traversal: its %d remaining sub-tasks of this repetition are "
-            "lost (%s; RLlib restores the runner before the next iteration)",
-            runner_id,
-            count,
-            keys.AGENT_SUBTASKS_LOST,
-        )
-
-    def _learn(self, episodes) -> None:
-        new_steps = sum(len(e) for e in episodes)
-        self.agent_updater.add(episodes)
-        num_updates = self.gradient_steps.on_env_steps(new_steps)
-        if num_updates == 0:
-            return
-        lifetime = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
-        timesteps = {
-            NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime,
-            NUM_AGENT_STEPS_SAMPLED_LIFETIME: lifetime,
-        }
-        t0 = time.perf_counter()
-        learner_results = self.agent_updater.update(num_updates, timesteps)
-        self._update_seconds += time.perf_counter() - t0
-        self._updates_done += num_updates
-        if learner_results:
-            self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
-        self.env_runner_group.sync_weights(
-            from_worker_or_learner_group=self.learner_group, inference_only=True
-        )
-
-    # ------------------------------------------------------------------------------- evaluation
-    def _evaluation_plan(self, n: int) -> dict[str, Any] | None:
-        """How the planned evaluation runs: the planner (anything with `sample(starts, goals,
-        deterministic=True)`; None: the agent alone), the steps per waypoint of layer k, optionally
-        `hop_limits(waypoints)` (per-task, per-hop steps, [N, P - 1]) and a total cap. None: nothing to
-        evaluate yet."""
-        return {
-            "planner": None,
-            "step_limit_of": lambda k: self.rules.step_limit_of(k, self.config.tree_depth),
-            "planned_total_steps": None,
-        }
-
-    def _evaluate_mastery(self, policy, planner, split: str) -> None:
-        """On an env with its own episode-level measure (the walker's mastered track distributions,
-        `mastery`): the agent following the plan of the first test task (all share one task there), or
-        alone without a planner, on the tracks of `split`."""
-        mastery = getattr(self.goal_env.unwrapped, "mastery", None)
-        if mastery is None:
-            return
-        path = None
-        if planner is not None:
-            path = planner.sample(self.test_starts[:1], self.test_goals[:1], deterministic=True)[0]
-        result = mastery(policy, path, with_delta=self.rules.agent_input == "state_goal_delta", split=split)
-        self._log_eval(split, keys.EVAL_MASTERED, result.mastered_fraction)
-        self._log_eval(split, keys.EVAL_ENV_RETURN, float(result.returns.mean()))
-
-    def _task_reward(self) -> float:
-        """R: what reaching a whole task's goal is worth (the goal env's reward x reward_scale)."""
-        return float(getattr(self.goal_env.unwrapped, "goal_reward", 1.0)) * self.rules.reward_scale
-
-    def _log_eval(self, split: str, key: str, value: float) -> None:
-        """An evaluation figure of `split`: `key` (copilot/eval/...) for test, its validation twin else."""
-        name = key if split == "test" else keys.validation_key(key)
-        self.metrics.log_value(keys.metric_path(name), value, window=1)
-
-    def _evaluate(self) -> None:
-        """The validation tasks (headline figures only: what searchers read), then the test tasks
-        (everything the report shows), with the same plan and policy."""
-        n = min(self.config.eval_num_tasks, min(len(s) for s, _ in self.eval_tasks.values()))
-        plan = self._evaluation_plan(n)
-        if plan is None:
-            return
-        env_steps = self._env_steps()
-        for split in EVAL_SPLITS:
-            self._evaluate_split(split, n, plan, env_steps)
-
-    def _evaluate_split(self, split: str, n: int, plan: dict[str, Any], env_steps: int) -> None:
-        cfg = self.config
-        test = split == "test"
-        starts, goals = (x[:n] for x in self.eval_tasks[split])
-        module = self.get_module(DEFAULT_MODULE_ID)
-        seed = (0 if cfg.seed is None else int(cfg.seed)) + self.iteration
-        policies = {
-            DETERMINISTIC: ModulePolicy(module),
-            SAMPLED: ModulePolicy(module, sampled=True, seed=seed),
-        }
-        # The headline action goes first: it also drives the sub-goal tree figure's rollouts. The
-        # validation tasks get the headline action only.
-        policies = {cfg.eval_action: policies[cfg.eval_action], **(policies if test else {})}
-        result = evaluate_copilot(
-            goal_env_id=cfg.goal_env,
-            goal_env_config=cfg.goal_env_config,
-            policies=policies,
-            starts=starts,
-            goals=goals,
-            depth=cfg.tree_depth,
-            tau_max=cfg.tau_max,
-            tree_tasks=self._tree_tasks(n) if test else 0,
-            with_delta=self.rules.agent_input == "state_goal_delta",
-            **plan,
-        )
-        headline = result.headline(cfg.eval_action)
-        for key, value in headline.items():
-            self._log_eval(split, keys.EVAL_PREFIX + key, value)
-        # The figure every algorithm reports: the agent following its plan (alone without one).
-        success = headline[keys.eval_leaf(keys.SUCCESS_PLANNED)]
-        self._log_eval(split, keys.EVAL_SUCCESS, success)
-        self._log_eval(split, keys.EVAL_SUCCESS_AUC, self.success_curves[split].add(env_steps, success))
-        reached = headline[keys.eval_leaf(keys.REACHED_PLANNED)]
-        self._log_eval(split, keys.EVAL_RETURN, self._task_reward() * reached)
-        self._evaluate_mastery(policies[cfg.eval_action], plan["planner"], split)
-        self._log_eval(split, keys.PLANNED_COLLISION_FREE, result.plan_collision_free)
-        if not test:
-            return
-        for action, values in result.by_action.items():
-            for key, value in values.items():
-                self.metrics.log_value(
-                    keys.metric_path(keys.eval_by_action(keys.EVAL_PREFIX + key, action)), value, window=1
-                )
-        if plan["planner"] is not None:  # without a plan, [s0, g] is not a path worth scoring
-            figures = path_metrics(result.plan_scores, self._collision_checks(), self._rrt_reference(n))
-            for key, value in figures.items():
-                self.metrics.log_value(keys.metric_path(key), value, window=1)
-        self._after_test_evaluation(result, env_steps)
-
-    def _tree_tasks(self, n: int) -> int:
-        """Test tasks whose sub-goal trees are traversed layer by layer for the tree figure (none here)."""
-        return 0
-
-    def _rrt_reference(self, n: int):
-        """The RRT* reference the paths' ratios divide by (none here)."""
-        return None
-
-    def _after_test_evaluation(self, result, env_steps: int) -> None:
-        """What an algorithm keeps of a test evaluation besides its figures (nothing here)."""
-
     # ------------------------------------------------------------------------------ checkpoints
     @override(Algorithm)
     def get_state(self, components=None, *, not_components=None, **kwargs) -> dict[str, Any]:
-        """Algorithm's state plus the driver-side state under "goal_sac" (and a subclass's, `_own_state`)."""
+        """Algorithm's state plus the driver-side state under "goal_sac" (and the curriculum's, under its
+        `state_key`: "copilot" for CO-PILOT's, as before it was a component)."""
         state = super().get_state(components, not_components=not_components, **kwargs)
         state[_STATE_KEY] = {
             "rng": self._rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "agent_updater": self.agent_updater.get_state(),
             "gradient_steps": self.gradient_steps.get_state(),
-            "eval_schedule": self.eval_schedule.get_state(),
-            "success_curves": {split: c.get_state() for split, c in self.success_curves.items()},
+            **self.evaluation.get_state(),  # its schedule and success curves
             "privileged": dict(self._privileged),
             "batch": None
             if self._batch is None
             else {"tasks": self._batch.tolist(), "done": self._batch_done},
         }
-        state.update(self._own_state())
+        if self.curriculum is not None:
+            state[self.curriculum.state_key] = self.curriculum.state_dict()
         return state
 
     @override(Algorithm)
@@ -753,53 +575,10 @@ class GoalSAC(SAC):
         torch.set_rng_state(own["torch_rng"])
         self.agent_updater.set_state(own["agent_updater"])
         self.gradient_steps.set_state(own["gradient_steps"])
-        self.eval_schedule.set_state(own.get("eval_schedule", {}))
-        for split, curve in own.get("success_curves", {}).items():
-            self.success_curves[split].set_state(curve)
+        self.evaluation.set_state(own)
         self._privileged.update(own.get("privileged", {}))
         batch = own.get("batch")  # absent in checkpoints from before iterations could end mid-batch
         self._batch = None if batch is None else np.asarray(batch["tasks"], dtype=np.int64)
         self._batch_done = 0 if batch is None else int(batch["done"])
-        self._set_own_state(state)
-
-    def _own_state(self) -> dict[str, Any]:
-        """A subclass's driver-side state, under keys of its own (nothing here)."""
-        return {}
-
-    def _set_own_state(self, state: dict[str, Any]) -> None:
-        """Restores `_own_state` (nothing here)."""
-
-
-def traversal_stats(subtasks: dict[str, np.ndarray], depth: int) -> dict[str, float]:
-    """Per layer: mean steps per sub-task, and how often the layer's traversal reached g."""
-    out = {}
-    layers, reached = subtasks["layer"], subtasks["reached"]
-    for k in range(depth + 1):
-        in_layer = layers == k
-        if not in_layer.any():
-            continue
-        out[keys.AGENT_STEPS_LAYER + str(k)] = float(subtasks["steps"][in_layer].mean())
-        # A layer's traversal succeeds when its last sub-task (the final goal g) is reached.
-        last = in_layer & (subtasks["index"] == 2**k)
-        if last.any():
-            out[keys.AGENT_SUCCESS_LAYER + str(k)] = float(reached[last].mean())
-        out[keys.AGENT_SUBTASK_SUCCESS_LAYER + str(k)] = float(reached[in_layer].mean())
-    return out
-
-
-def subtask_records(episodes) -> dict[str, np.ndarray]:
-    """(start, end, steps, layer, ...) of every finished sub-task, read off its last info."""
-    infos = [e.get_infos(-1) for e in episodes]
-    return {
-        "start": np.stack([i["subtask_start"] for i in infos]).astype(np.float32),
-        "end": np.stack([i["subtask_end"] for i in infos]).astype(np.float32),
-        "goal": np.stack([i["subtask_goal"] for i in infos]).astype(np.float32),
-        "steps": np.array([i["subtask_steps"] for i in infos], np.int64),
-        "layer": np.array([i["subtask_layer"] for i in infos], np.int64),
-        "index": np.array([i["subtask_index"] for i in infos], np.int64),
-        "task": np.array([i["subtask_task"] for i in infos], np.int64),
-        "reached": np.array([i["subtask_reached"] for i in infos], bool),
-        "collided": np.array([i.get("subtask_collided", False) for i in infos], bool),
-        "reset_to_state": np.array([i.get("subtask_reset_to_state", False) for i in infos], bool),
-        "map_queries": np.array([i.get("subtask_map_queries", 0) for i in infos], np.int64),
-    }
+        if self.curriculum is not None and self.curriculum.state_key in state:
+            self.curriculum.load_state_dict(state[self.curriculum.state_key])

@@ -40,6 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 from copilot_ray.algorithms.sac.settings import SETTINGS, TREE_TRAVERSAL
+from copilot_ray.algorithms.sac.traversal_channel import subtask_info
 from copilot_ray.envs import make
 from copilot_ray.envs.continuation import reset_toward
 from copilot_ray.envs.goal_observation import flat_observation, flat_observation_space
@@ -255,18 +256,20 @@ class TraversalEnv(gym.Env):
         out_info = {"collision": collision, "achieved_goal": self._position, "dense_reward": dense}
         if terminated or truncated:
             out_info.update(
-                subtask_idle=self._current is None,
-                subtask_task=-1 if self._current is None else self._current.task_id,
-                subtask_layer=layer,
-                subtask_index=0 if self._current is None else self._current.index,
-                subtask_start=self._start.copy(),
-                subtask_end=self._position.copy(),
-                subtask_goal=np.asarray(obs["desired_goal"], np.float32).copy(),
-                subtask_steps=self._steps,
-                subtask_reached=bool(reached),
-                subtask_collided=collision and not reached,
-                subtask_reset_to_state=self._reset_to_state,
-                subtask_map_queries=self._map_queries,
+                subtask_info(
+                    idle=self._current is None,
+                    task=-1 if self._current is None else self._current.task_id,
+                    layer=layer,
+                    index=0 if self._current is None else self._current.index,
+                    start=self._start.copy(),
+                    end=self._position.copy(),
+                    goal=np.asarray(obs["desired_goal"], np.float32).copy(),
+                    steps=self._steps,
+                    reached=bool(reached),
+                    collided=collision and not reached,
+                    reset_to_state=self._reset_to_state,
+                    map_queries=self._map_queries,
+                )
             )
             if not reached and self._current is not None:
                 self._missed = self._current.goal.copy()

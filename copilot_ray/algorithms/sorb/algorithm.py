@@ -49,6 +49,7 @@ from copilot_ray.algorithms.sorb_map import settings as sorb_map_settings
 from copilot_ray.planning.path_metrics import CountedChecks
 from copilot_ray.settings import Setting
 
+_STATE_KEY = "sorb"
 # Rows per critic call when building the graph (memory: rows x hidden floats per layer).
 _CRITIC_CHUNK = 32_768
 
@@ -106,15 +107,19 @@ class SoRB(GoalSAC):
 
     @override(GoalSAC)
     def _collision_checks(self) -> int:
-        return self._edge_checks.count
+        return super()._collision_checks() + self._edge_checks.count
 
     @override(GoalSAC)
-    def _own_state(self) -> dict[str, Any]:
-        return {"sorb": {"edge_checks": self._edge_checks.count}}
+    def get_state(self, components=None, *, not_components=None, **kwargs) -> dict[str, Any]:
+        """GoalSAC's state plus the graph's map checks so far ("sorb")."""
+        state = super().get_state(components, not_components=not_components, **kwargs)
+        state[_STATE_KEY] = {"edge_checks": self._edge_checks.count}
+        return state
 
     @override(GoalSAC)
-    def _set_own_state(self, state: dict[str, Any]) -> None:
-        self._edge_checks.count = int(state.get("sorb", {}).get("edge_checks", 0))
+    def set_state(self, state: dict[str, Any]) -> None:
+        super().set_state(state)
+        self._edge_checks.count = int(state.get(_STATE_KEY, {}).get("edge_checks", 0))
 
     @torch.no_grad()
     def critic_distance(

@@ -2,7 +2,7 @@
 
 A NaN or an inf in the planner's or the cost model's weights poisons every plan after it and, left
 alone, surfaces much later as an error about something else (a sub-goal outside the maze, a failed
-assertion in an env). `check_finite` names the component and the iteration instead: CoPilot calls it at
+assertion in an env). `check_finite` names the component and the iteration instead: the agent (GoalSAC) calls it on its curriculum's weights at
 the start and the end of every iteration, and the error stops the trial there (a sweep retries it from
 its last checkpoint, `fault_tolerance.max_failures` times, then marks it ERROR with this message and goes
 on with the other trials).

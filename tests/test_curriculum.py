@@ -1,0 +1,108 @@
+"""CO-PILOT's curriculum as a plain object (no Ray): its iteration returns its metrics, and its state keeps
+the layout checkpoints have had under "copilot" since before it was a component."""
+
+import numpy as np
+import pytest
+
+from copilot_ray import keys
+from copilot_ray.algorithms.copilot.settings import SETTINGS
+from copilot_ray.envs import make
+from copilot_ray.planning.curriculum import CoPilotCurriculum
+
+# The keys CoPilot's checkpoints held under "copilot" before the curriculum was its own object.
+OLD_STATE_KEYS = {"planner", "cost_model", "alpha_clock", "planner_phases", "planner_checks", "warm_started"}
+
+
+def _settings(**over):
+    values = {key: s.default for key, s in SETTINGS.items() if "." not in key}
+    nested = {
+        target: {s.field: s.default for s in SETTINGS.values() if s.target == target}
+        for target in ("planner", "cost_model")
+    }
+    values.update(nested)
+    values.update(
+        tree_depth=2,
+        repetitions=2,
+        planner_warm_start=2,
+        planner_task_batch_size=4,
+        alpha_schedule={"kind": "constant", "alpha": 0.5},
+        collision_penalty=10.0,
+    )
+    values["planner"] = {**values["planner"], "num_samples": 4}
+    values["cost_model"] = {**values["cost_model"], "init_euclidean": 200, "fit_steps": 3}
+    values.update(over)
+    return values
+
+
+def _curriculum(seed=0, **over):
+    env = make("maze-point", layout="u-maze").unwrapped
+    rng = np.random.default_rng(seed)
+    train = env.tasks("train")
+    return CoPilotCurriculum(env, _settings(**over), train, env.tasks("test")[0], lambda k: 0.1, rng, seed), rng
+
+
+def _subtasks(trees):
+    """Finished sub-tasks as the traversal would report them: every finest segment reached."""
+    starts, ends = trees[:, :-1].reshape(-1, 2), trees[:, 1:].reshape(-1, 2)
+    n = len(starts)
+    return {
+        "start": starts,
+        "end": ends,
+        "goal": ends,
+        "steps": np.full(n, 5),
+        "layer": np.full(n, 2),
+        "index": np.tile(np.arange(1, 5), len(trees)),
+        "task": np.repeat(np.arange(len(trees)), 4),
+        "reached": np.ones(n, bool),
+        "collided": np.zeros(n, bool),
+        "reset_to_state": np.zeros(n, bool),
+        "map_queries": np.zeros(n, np.int64),
+    }
+
+
+def test_an_iteration_of_the_curriculum_returns_its_metrics_and_traverses_the_first_tasks():
+    curriculum, rng = _curriculum()
+    warm = curriculum.prepare(1, rng)
+    assert set(warm) == {keys.PLANNER_PREFIX + "warm_start_s", keys.PLANNER_PREFIX + "warm_start_cost"}
+    assert curriculum.prepare(2, rng) == {}  # once per run
+    assert curriculum.tasks_to_draw(2) == 4  # the planner's batch; the agent traverses 2 of it
+    starts, goals = (x[:4] for x in curriculum.env.tasks("train"))
+    checks = curriculum.collision_checks
+    trees, metrics = curriculum.trees(starts, goals, 2, rng)
+    assert trees.shape == (2, 5, 2)
+    np.testing.assert_allclose(trees[:, 0], starts[:2])
+    assert metrics[keys.ALPHA] == 0.5 and keys.PLANNER_APPROX_KL_MAX in metrics
+    assert curriculum.collision_checks > checks
+    learned = curriculum.learn(_subtasks(trees), rng)
+    assert set(learned) == {keys.COST_MODEL_LOSS} and curriculum.alpha_clock.episode == 1
+    assert curriculum.summary()[keys.DTAU_SIZE] == 200 + 8
+    assert set(curriculum.learned_parts()) == {"planner", "cost_model"}
+
+
+def test_its_state_has_the_layout_old_checkpoints_hold_and_restores_them():
+    curriculum, rng = _curriculum()
+    curriculum.prepare(1, rng)
+    state = curriculum.state_dict()
+    assert set(state) == OLD_STATE_KEYS
+    fresh, _ = _curriculum(seed=1)
+    fresh.load_state_dict(state)
+    assert fresh.phases.count == curriculum.phases.count == 2
+    assert fresh.collision_checks == curriculum.collision_checks and fresh.prepare(1, rng) == {}
+    for a, b in zip(fresh.planner.parameters(), curriculum.planner.parameters(), strict=True):
+        np.testing.assert_array_equal(a.detach().numpy(), b.detach().numpy())
+    # A checkpoint from before the counters existed: the planner learned, the warm start done.
+    oldest = {k: v for k, v in state.items() if k not in ("planner_phases", "planner_checks", "warm_started")}
+    older, _ = _curriculum(seed=2)
+    older.load_state_dict(oldest)
+    assert (older.phases.count, older.collision_checks, older.prepare(1, rng)) == (0, 0, {})
+
+
+def test_collision_cost_length_needs_the_envs_hook():
+    class NoLengths:
+        def __getattr__(self, name):
+            if name == "collision_lengths":
+                raise AttributeError(name)
+            return getattr(make("maze-point").unwrapped, name)
+
+    with pytest.raises(ValueError, match=r"collision_cost='length' is invalid for env NoLengths"):
+        CoPilotCurriculum(NoLengths(), _settings(collision_cost="length"), None, None, None, None, 0)
