@@ -46,6 +46,21 @@ def format_plan(
             )
         else:
             lines.append(f"  best_of {b.sweep!r}: " + ", ".join(f"{k}={v!r}" for k, v in b.chosen.items()))
+    lines.extend(_what_runs(spec))
+    if spec.scheduler is not None:
+        sch = spec.scheduler
+        args = {k: v for k, v in sch.model_dump().items() if k != "type" and v is not None}
+        lines.append(f"  scheduler: {sch.type} on {keys.ENV_STEPS} {args}")
+    lines.extend(_budget_lines(spec))
+    lines.append(wall_time_line(spec))
+    if warning := cpu_warning(spec, cpus_available, where):
+        lines.append(warning)
+    return "\n".join(lines)
+
+
+def _what_runs(spec: SweepSpec) -> list[str]:
+    """The grid's configurations as a table, or the searched space and the first trial of each study."""
+    lines = []
     seeds = ", ".join(str(s) for s in spec.seeds)
     if spec.searcher.type == "grid":
         points = spec.grid_points()
@@ -75,10 +90,13 @@ def format_plan(
                 "    first trial of each study: the defaults "
                 + ", ".join(f"{k}={v!r}" for k, v in first.items())
             )
-    if spec.scheduler is not None:
-        sch = spec.scheduler
-        args = {k: v for k, v in sch.model_dump().items() if k != "type" and v is not None}
-        lines.append(f"  scheduler: {sch.type} on {keys.ENV_STEPS} {args}")
+    return lines
+
+
+def _budget_lines(spec: SweepSpec) -> list[str]:
+    """Trials, env steps, concurrency and CPUs; checkpoints and retries; each trial's iteration size,
+    evaluations and how far past the budget it may run."""
+    lines = []
     b = spec.budget()
     stop = " and ".join(
         t
@@ -116,10 +134,7 @@ def format_plan(
                 else "stop.env_steps (the budget is checked when an iteration ends)"
             )
         )
-    lines.append(wall_time_line(spec))
-    if warning := cpu_warning(spec, cpus_available, where):
-        lines.append(warning)
-    return "\n".join(lines)
+    return lines
 
 
 def default_point(spec: SweepSpec) -> dict[str, Any]:
