@@ -189,7 +189,9 @@ def join_other_stores(sweep: Sweep, args: argparse.Namespace) -> None:
     """Adds the trial runs of each --also-from store, read from --also-experiment (default: the report's)."""
     experiment = args.also_experiment or args.experiment
     for extra in args.also_from:
-        add_trials_from(sweep, resolve_tracking_uri(extra, experiment=experiment), experiment)
+        add_trials_from(
+            sweep, resolve_tracking_uri(extra, experiment=experiment, flag="--also-from"), experiment
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
