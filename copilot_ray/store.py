@@ -6,6 +6,7 @@ typo is one clear line instead of an MLflow traceback after Ray is up. Standard 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 # MLflow's tracking stores: an embedded SQLite file, a tracking server, or a database it writes to.
@@ -45,6 +46,33 @@ def missing_sqlite_file(uri: str) -> Path | None:
         return None
     path = Path(uri[len("sqlite:///") :])
     return None if path.is_file() else path
+
+
+def unwritable(path: str | Path, kind: str = "folder") -> str | None:
+    """Why a `kind` ("folder" or "file") cannot be created or written at `path`, or None when it can.
+    Nothing is created: the path itself, or else the nearest folder on its way that exists, is looked at
+    (a file where a folder must be, or no write permission)."""
+    path = Path(path).expanduser().absolute()
+    if path.exists():
+        if kind == "folder" and not path.is_dir():
+            return f"{path} is a file, not a folder"
+        if kind == "file" and path.is_dir():
+            return f"{path} is a folder, not a file"
+        return None if os.access(path, os.W_OK) else f"{path} is not writable"
+    existing = next(p for p in path.parents if p.exists())
+    if not existing.is_dir():
+        return f"{existing} is a file, so no {kind} can be made under it"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable, so {path} cannot be made"
+    return None
+
+
+def unwritable_store(uri: str) -> str | None:
+    """Why an embedded SQLite store cannot be written (its file, or its folder to make); None for a
+    store that is not a local file."""
+    if not uri.startswith("sqlite:///"):
+        return None
+    return unwritable(uri[len("sqlite:///") :], "file")
 
 
 def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> str:

@@ -70,7 +70,7 @@ from copilot_ray.keys import (
     result_value,
     validation_key,
 )
-from copilot_ray.store import tracking_uri_problem, ui_hint
+from copilot_ray.store import tracking_uri_problem, ui_hint, unwritable, unwritable_store
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
 from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
@@ -618,6 +618,8 @@ def main(argv: list[str] | None = None) -> int:
         specs = load_specs(args.spec)
     except SpecError as err:
         problems += err.problems
+    if not problems:
+        problems += storage_problems(specs, args.tracking_uri)
     no_gpus = []  # on a local Ray, trials asking for GPUs the machine lacks would wait for ever
     if not problems and not args.address and any(spec.resources.gpus_per_trial > 0 for spec in specs):
         gpus = local_gpus()
@@ -639,6 +641,22 @@ def main(argv: list[str] | None = None) -> int:
     if len(specs) == 1:
         return _run_one(specs[0], args, resume=args.resume)
     return _run_parts(specs, args)
+
+
+def storage_problems(specs: Sequence[Any], tracking_uri: str | None = None) -> list[str]:
+    """Where a spec's results would go but cannot be written (a file in the way, no permission), one line
+    each naming the key and its value: said before Ray starts, not as a traceback from the sweep."""
+    lines = []
+    for spec in specs:
+        where = f"{spec.source}" + (f" (part {spec.name!r})" if len(specs) > 1 else "")
+        if (why := unwritable(sweep_root(spec))) is not None:
+            lines.append(f"{where}: tracking.storage: {spec.tracking.storage!r} is invalid: {why}")
+        given_uri = ((spec.document or {}).get("tracking") or {}).get("uri")  # else under the storage
+        if tracking_uri is None and given_uri and (why := unwritable_store(spec.tracking.uri)) is not None:
+            lines.append(f"{where}: tracking.uri: {spec.tracking.uri!r} is invalid: {why}")
+    if tracking_uri is not None and (why := unwritable_store(tracking_uri)) is not None:
+        lines.append(f"--tracking-uri {tracking_uri!r} is invalid: {why}")
+    return list(dict.fromkeys(lines))
 
 
 def _available_cpus(address: str | None) -> tuple[int | None, str]:

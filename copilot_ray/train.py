@@ -24,7 +24,13 @@ from copilot_ray import keys
 from copilot_ray.envs import UnknownEnvError, make
 from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
-from copilot_ray.store import default_tracking_uri, tracking_uri_problem, ui_hint
+from copilot_ray.store import (
+    default_tracking_uri,
+    tracking_uri_problem,
+    ui_hint,
+    unwritable,
+    unwritable_store,
+)
 from copilot_ray.sweep_spec import load_yaml_value
 
 ALGORITHM = "copilot"
@@ -157,8 +163,16 @@ def run_problems(args: argparse.Namespace) -> list[str]:
             out.append(f"{flag} {value!r} is invalid: must be {need}")
     if args.tracking_uri is not None and (why := tracking_uri_problem(args.tracking_uri)) is not None:
         out.append(f"--tracking-uri {args.tracking_uri!r} is invalid: {why}")
-    if args.checkpoint_dir is not None and Path(args.checkpoint_dir).is_file():
-        out.append(f"--checkpoint-dir {args.checkpoint_dir!r} is invalid: it is a file, not a folder")
+    elif not args.no_tracking:
+        # the run's store must be writable before Ray starts (the default one: under ./results/train)
+        uri = args.tracking_uri or default_tracking_uri(RESULTS)
+        if (why := unwritable_store(uri)) is not None:
+            out.append(f"--tracking-uri {uri!r}{'' if args.tracking_uri else ' (default)'} is invalid: {why}")
+    checkpoints = args.checkpoint_dir or RESULTS
+    if (why := unwritable(checkpoints)) is not None:
+        out.append(
+            f"--checkpoint-dir {str(checkpoints)!r}{'' if args.checkpoint_dir else ' (default)'} is invalid: {why}"
+        )
     return out
 
 

@@ -2,11 +2,14 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from copilot_ray import train
 from copilot_ray.algorithms.copilot.settings import SETTINGS
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_preset_flag_sets_the_readings_and_explicit_flags_override_it():
@@ -81,6 +84,15 @@ NEWCOMERS_BAD_FLAGS = [
     (["--planner-hidden", "[64,64"], "--planner-hidden: '[64,64' is invalid: not a value"),
     (["--layout", "nope"], "--layout 'nope' is invalid"),
     (["--env", "maze-pont"], "--env 'maze-pont' is invalid: unknown env id"),
+    # a store or checkpoint folder under a file: refused before Ray, not a FileNotFoundError after it
+    (
+        ["--tracking-uri", f"sqlite:///{ROOT}/pyproject.toml/mlflow.db"],
+        f"--tracking-uri 'sqlite:///{ROOT}/pyproject.toml/mlflow.db' is invalid: {ROOT}/pyproject.toml is a file",
+    ),
+    (
+        ["--checkpoint-dir", f"{ROOT}/pyproject.toml/run"],
+        f"--checkpoint-dir '{ROOT}/pyproject.toml/run' is invalid: {ROOT}/pyproject.toml is a file",
+    ),
 ]
 
 
@@ -108,6 +120,20 @@ def test_bad_flags_exit_2_in_one_line_before_ray_is_imported():
     ):
         assert (rc, ray_imported) == (2, False), (argv, err)
         assert message in err and "Traceback" not in err, (argv, err)
+
+
+def test_a_default_results_folder_that_cannot_be_made_is_refused(tmp_path, monkeypatch, capsys):
+    """`results` is a file here: the default store and checkpoint folder (results/train) are named."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "results").write_text("not a folder")
+    assert train.main(["--stop-iters", "1"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        f"error: --tracking-uri 'sqlite:///{tmp_path}/results/train/mlflow.db' (default) is invalid: "
+        f"{tmp_path}/results is a file, so no file can be made under it",
+        f"error: --checkpoint-dir 'results/train' (default) is invalid: {tmp_path}/results is a file, "
+        "so no folder can be made under it",
+    ]
 
 
 def test_every_problem_is_reported_at_once(capsys):
