@@ -52,13 +52,13 @@ import argparse
 import datetime as _dt
 import html
 import re
-import shlex
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from copilot_ray.commands import python_module
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     EVAL_MASTERED,
@@ -182,7 +182,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def command_line(argv: list[str]) -> str:
     """The command that produced the report, as one can paste it again."""
-    return shlex.join(["python", "-m", "analysis.report", *argv])
+    return python_module("analysis.report", *argv)
 
 
 def join_other_stores(sweep: Sweep, args: argparse.Namespace) -> None:

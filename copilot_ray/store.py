@@ -9,6 +9,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from copilot_ray.commands import UI_PORT, mlflow_ui
+
 # MLflow's tracking stores: an embedded SQLite file, a tracking server, or a database it writes to.
 SCHEMES = ("sqlite", "http", "https", "postgresql", "mysql", "mssql", "databricks")
 ACCEPTED = "sqlite:///<file>, http(s)://<server>[:port] or a database URL (postgresql://, mysql://, mssql://)"
@@ -75,10 +77,12 @@ def unwritable_store(uri: str) -> str | None:
     return unwritable(uri[len("sqlite:///") :], "file")
 
 
-def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> str:
-    """How to look at a store's runs in MLflow's UI. MLflow 3's UI opens an experiment on its GenAI pages
-    (whatever the experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""
+def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> list[str]:
+    """How to look at a store's runs in MLflow's UI: the command that serves a local store (this
+    install's MLflow, without its job runner) and the page to open. MLflow 3's UI opens an experiment on
+    its GenAI pages (whatever the experiment's tags say); `?workflowType=machine_learning` opens it on
+    its runs."""
     page = f"#/experiments/{experiment_id}?workflowType=machine_learning" if experiment_id else ""
     if tracking_uri.startswith(("http://", "https://")):
-        return f"open {tracking_uri.rstrip('/')}/{page}"
-    return f"mlflow ui --backend-store-uri {tracking_uri}, then open http://127.0.0.1:5000/{page}"
+        return [f"open {tracking_uri.rstrip('/')}/{page}"]
+    return [mlflow_ui(tracking_uri), f"then open http://127.0.0.1:{UI_PORT}/{page}"]

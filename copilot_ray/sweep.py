@@ -47,6 +47,7 @@ from typing import Any
 import yaml
 
 from copilot_ray import tracking
+from copilot_ray.commands import python_module
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     BUDGET_PARAM,
@@ -442,6 +443,10 @@ def _import_runtime():
     # On Ctrl-C Tune waits for each trial's current iteration to end before stopping it, by default up
     # to 600 s (one demo iteration takes minutes); the state is saved already, so stop them sooner.
     os.environ.setdefault("TUNE_FORCE_TRIAL_CLEANUP_S", "20")
+    # Tune's newer console output prints a box of the experiment's settings and a TensorBoard command
+    # (not installed here) even at verbose=0; the older one prints nothing there. ProgressPrinter prints
+    # the sweep's own lines.
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     from copilot_ray import tune_runtime
 
     return tune_runtime
@@ -569,15 +574,15 @@ def report_sweep(
     _say("")
     _say(f"Tune results: {', '.join(tune_paths)}")
     _say(f"MLflow store: {uri} (experiment {spec.experiment!r}, parent run {parent_id})")
-    _say(f"  {ui_hint(uri, exp_id)}")
+    command, *then = ui_hint(uri, exp_id)
+    _say(f"MLflow UI: {command}")
+    for line in then:
+        _say(f"  {line}")
     _say(f"Report: {report_command(spec, uri)}")
     if interrupted:
-        _say(f"interrupted: state saved. Resume with: python -m copilot_ray.sweep {spec.source} --resume")
+        _say(f"interrupted: state saved. Resume with: {resume_command(spec)}")
     elif errored:
-        _say(
-            f"some trials failed; retry them from their last checkpoint with: "
-            f"python -m copilot_ray.sweep {spec.source} --resume"
-        )
+        _say(f"some trials failed; retry them from their last checkpoint with: {resume_command(spec)}")
     code = EXIT_INTERRUPTED if interrupted else (1 if errored else 0)
     return SweepOutcome(status, code, rows, summary, uri, parent_id, tune_paths, wall)
 
@@ -585,7 +590,12 @@ def report_sweep(
 def report_command(spec, uri: str) -> str:
     """The exact command that draws this sweep's report: every sweep of its experiment (the parts of a
     comparison file, stage-2 of a two-stage one) from the store it wrote to."""
-    return f"python -m analysis.report {spec.experiment} --parent-run all --tracking-uri {uri}"
+    return python_module("analysis.report", spec.experiment, "--parent-run", "all", "--tracking-uri", uri)
+
+
+def resume_command(spec) -> str:
+    """The command that continues this sweep file where it stopped."""
+    return python_module("copilot_ray.sweep", spec.source, "--resume")
 
 
 def _say(line: str) -> None:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from copilot_ray import keys
+from copilot_ray.commands import python_module
 from copilot_ray.envs import UnknownEnvError, make
 from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
@@ -39,11 +40,18 @@ _ALIASES = {"eval_num_tasks": ["--eval-tasks"]}
 
 
 RESULTS = Path("results") / "train"  # the default store and the runs' checkpoint folders, under the cwd
-EXAMPLE = """example (about an hour on two cores; --help lists every setting):
-  python -m copilot_ray.train --layout four-rooms --preset paper_literal --stop-env-steps 300000 --seed 1
-  mlflow ui --backend-store-uri sqlite:///$PWD/results/train/mlflow.db
-  (then http://127.0.0.1:5000/#/experiments/<id>?workflowType=machine_learning: the runs, not the GenAI
-  pages MLflow 3's UI opens on by default)"""
+
+
+def example() -> str:
+    """--help's closing example, naming this install's Python and MLflow (they run as printed)."""
+    run = python_module(
+        "copilot_ray.train", "--layout", "four-rooms", "--preset", "paper_literal", "--stop-env-steps", 300000
+    )
+    ui, then = ui_hint(default_tracking_uri(RESULTS), "<id>")
+    return (
+        f"example (about an hour on two cores; --help lists every setting):\n  {run} --seed 1\n  {ui}\n"
+        f"  ({then}: the runs, not the GenAI pages MLflow 3's UI opens on by default)"
+    )
 
 
 class _Parser(argparse.ArgumentParser):
@@ -58,7 +66,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         prog="python -m copilot_ray.train",
         usage="%(prog)s [--env ENV] [--layout LAYOUT] [--stop-env-steps N] [--seed S] [--SETTING VALUE ...]",
         description=__doc__.split("\n\n")[0],
-        epilog=EXAMPLE,
+        epilog=example(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run = p.add_argument_group("the run")
@@ -314,7 +322,10 @@ def main(argv: list[str] | None = None) -> int:
             if trees.is_dir():
                 run.log_artifacts(trees, keys.TREES_DIR)
             run.end(status)
-            print(f"compare runs: {ui_hint(tracking_uri, run.run.info.experiment_id)}")
+            command, *then = ui_hint(tracking_uri, run.run.info.experiment_id)
+            print(f"compare runs: {command}")
+            for line in then:
+                print(f"  {line}")
         algo.stop()
         ray.shutdown()
     return 0 if status == "FINISHED" else 130

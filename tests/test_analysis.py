@@ -15,6 +15,7 @@ import pytest
 
 from analysis import stats
 from analysis.report import main
+from copilot_ray.commands import python
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     ALPHA_SCHEDULE_TAG,
@@ -959,7 +960,10 @@ def test_provenance_block_and_metrics_export(honest, store):
     assert honest["uri"] in head and f"experiment: {HONEST}" in head
     assert f"runs:/{honest['parent']}/spec.resolved.yaml" in head
     assert f"command: {command_line(honest['argv'])}" in head
-    assert command_line(honest["argv"]).startswith("python -m analysis.report honest-sweep --tracking-uri")
+    # this install's interpreter, so that the command runs again as written
+    assert command_line(honest["argv"]).startswith(
+        f"{python()} -m analysis.report honest-sweep --tracking-uri"
+    )
     html_head = (honest["out"] / "report.html").read_text().split("Missing or incomplete")[0]
     assert "Provenance" in html_head and "1111111aaaaaaa" in html_head
     # the single-commit store: its commit, no warning

@@ -329,6 +329,17 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     assert main([str(path)]) == 0
     out = capsys.readouterr().out
     assert out.index("part 1 of 2: p_rrt") < out.index("part 2 of 2: p_sgt")
+    # The closing commands run as printed (the report's with an --out of the test's own, the UI's asked
+    # for its help: it serves in tests/test_printed_commands.py).
+    lines = out.splitlines()
+    report = [line.removeprefix("Report: ") for line in lines if line.startswith("Report: ")][-1]
+    done = subprocess.run(
+        ["bash", "-c", f"{report} --out {tmp_path / 'report'}"], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "report" / "report.md").is_file()
+    ui = [line.removeprefix("MLflow UI: ") for line in lines if line.startswith("MLflow UI: ")][-1]
+    assert subprocess.run(["bash", "-c", f"{ui} --help"], capture_output=True, timeout=120).returncode == 0
     # One RRT* reference per agent, stored by the RRT* part and divided by in the SGT-PG part.
     # (the test session's cache, set in conftest.py before Ray started: trial workers see it too)
     cache = Path(os.environ["COPILOT_RAY_CACHE"]) / "rrt_reference"
