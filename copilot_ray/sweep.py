@@ -47,7 +47,8 @@ from typing import Any
 import yaml
 
 from copilot_ray import tracking
-from copilot_ray.commands import python_module
+from copilot_ray.commands import python_module, relative_path
+from copilot_ray.console import quiet_console
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     BUDGET_PARAM,
@@ -616,6 +617,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="Ray cluster address, e.g. auto (default: a local Ray of its own, whatever RAY_ADDRESS says)",
     )
     p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI (default: the spec's)")
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="show Ray's, RLlib's, Tune's and MLflow's notices on the console (default: only in "
+        "<storage>/<name>/console.log)",
+    )
     return p.parse_args(argv)
 
 
@@ -648,9 +655,20 @@ def main(argv: list[str] | None = None) -> int:
         for why in no_gpus:
             print(f"warning: {why}")
         return 0
-    if len(specs) == 1:
-        return _run_one(specs[0], args, resume=args.resume)
-    return _run_parts(specs, args)
+    console = quiet_console(args.verbose)
+    try:
+        if console is not None:
+            console.log_to(sweep_root(specs[0]) / "console.log")
+            _say(
+                f"sweep {args.spec}: starting Ray; its, Tune's and MLflow's notices go to "
+                f"{relative_path(console.path)} (--verbose shows them)"
+            )
+        if len(specs) == 1:
+            return _run_one(specs[0], args, resume=args.resume)
+        return _run_parts(specs, args)
+    finally:
+        if console is not None:
+            console.close()
 
 
 def storage_problems(specs: Sequence[Any], tracking_uri: str | None = None) -> list[str]:

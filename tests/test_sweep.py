@@ -329,9 +329,14 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     assert main([str(path)]) == 0
     out = capsys.readouterr().out
     assert out.index("part 1 of 2: p_rrt") < out.index("part 2 of 2: p_sgt")
-    # The closing commands run as printed (the report's with an --out of the test's own, the UI's asked
-    # for its help: it serves in tests/test_printed_commands.py).
+    # Quiet: the first line says where the notices went; the closing commands run as printed (the
+    # report's with an --out of the test's own, the UI's asked for its help: it serves in
+    # tests/test_printed_commands.py).
     lines = out.splitlines()
+    assert (
+        lines[0].startswith(f"sweep {path}: starting Ray")
+        and (tmp_path / "results" / "p_rrt" / "console.log").is_file()
+    )
     report = [line.removeprefix("Report: ") for line in lines if line.startswith("Report: ")][-1]
     done = subprocess.run(
         ["bash", "-c", f"{report} --out {tmp_path / 'report'}"], capture_output=True, text=True, timeout=300
