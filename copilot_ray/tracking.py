@@ -99,15 +99,21 @@ class MlflowRun:
     """A thin context manager around one MLflow run (used by `copilot_ray.train`)."""
 
     def __init__(self, tracking_uri: str, experiment: str, run_name: str, tags: Mapping[str, str]):
-        import mlflow
-
-        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
-        self.mlflow = mlflow
-        self.client = mlflow.MlflowClient(tracking_uri)
+        self.client = _client(tracking_uri)
         exp = self.client.get_experiment_by_name(experiment)
         exp_id = exp.experiment_id if exp else self.client.create_experiment(experiment)
         self.run = self.client.create_run(exp_id, run_name=run_name, tags=dict(tags))
         self.run_id = self.run.info.run_id
+
+    @classmethod
+    def reopen(cls, tracking_uri: str, run_id: str) -> MlflowRun:
+        """The run `run_id` of the store, RUNNING again (`train --resume`: the run goes on in it)."""
+        self = cls.__new__(cls)
+        self.client = _client(tracking_uri)
+        self.run = self.client.get_run(run_id)
+        self.run_id = run_id
+        self.client.update_run(run_id, status="RUNNING")
+        return self
 
     def log_params(self, params: Mapping[str, str]) -> None:
         from mlflow.entities import Param

@@ -336,7 +336,10 @@ class CoPilot(GoalSAC):
         t0 = time.perf_counter()
         cost = self._segment_cost(1.0)
         n = min(WARM_START_TASKS, len(self.train_starts))
-        for _ in range(self.config.planner_warm_start):
+        phases = self.config.planner_warm_start
+        self.heartbeat.say(f"planner warm start: {phases} planner phases on {n} tasks each (no env steps)")
+        for phase in range(phases):
+            self.heartbeat.beat(lambda phase=phase: f"planner warm start: phase {phase + 1} of {phases}")
             idx = self._rng.choice(len(self.train_starts), size=n, replace=False)
             built = self._planner_phase(self.train_starts[idx], self.train_goals[idx], cost, mean_tree=True)
         self._warm_started = True

@@ -79,6 +79,7 @@ from copilot_ray.evaluation import (
     SuccessCurve,
     evaluate_copilot,
 )
+from copilot_ray.heartbeat import Heartbeat
 from copilot_ray.planning.path_metrics import path_metrics
 from copilot_ray.registry import RunContext
 from copilot_ray.settings import Setting, check, keyword_arguments, route
@@ -345,6 +346,7 @@ class GoalSAC(SAC):
         self._batch: np.ndarray | None = None
         self._batch_done = 0
         self._update_seconds, self._updates_done = 0.0, 0
+        self.heartbeat = Heartbeat()  # a line every few seconds inside an iteration (`train` prints it)
         self.agent_updater = self._make_agent_updater()
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
         # exact over the run instead of rounded per sampling round.
@@ -576,6 +578,13 @@ class GoalSAC(SAC):
             if episodes:
                 records.append(subtask_records(episodes))
                 self._learn(episodes)
+            self.heartbeat.beat(
+                lambda: (
+                    f"iteration {self.iteration + 1}: repetition {self._batch_done + 1} of "
+                    f"{cfg.repetitions}, {self._env_steps():,} env steps, {self._updates_done:,} SAC updates "
+                    "this iteration"
+                )
+            )
         if not records:
             raise RuntimeError("no sub-task of this repetition was traversed: every env runner failed")
         return {k: np.concatenate([r[k] for r in records]) for k in records[0]}
@@ -655,6 +664,7 @@ class GoalSAC(SAC):
         if plan is None:
             return
         env_steps = self._env_steps()
+        self.heartbeat.say(f"evaluating on {n} validation and {n} test tasks at {env_steps:,} env steps")
         for split in EVAL_SPLITS:
             self._evaluate_split(split, n, plan, env_steps)
 
