@@ -34,7 +34,7 @@ from copilot_ray.commands import python_module, relative_path
 from copilot_ray.console import quiet_console
 from copilot_ray.envs import UnknownEnvError, make
 from copilot_ray.heartbeat import LOGGER_NAME as HEARTBEAT_LOGGER
-from copilot_ray.heartbeat import Heartbeat
+from copilot_ray.heartbeat import Heartbeat, watched
 from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
 from copilot_ray.store import (
@@ -482,7 +482,8 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
                 f"resumed from {checkpoint_dir}: iteration {algo.iteration}, {steps:,} env steps", flush=True
             )
         while not _done(args, algo.iteration, steps):
-            result = algo.train()
+            with watched(algo.heartbeat):  # a line even when one planner phase outlasts the interval
+                result = algo.train()
             with stops.held():  # the iteration the checkpoint will hold is logged whole
                 steps = int(keys.result_value(result, keys.ENV_STEPS) or 0)
                 if run is not None:
@@ -526,24 +527,10 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
     return code
 
 
-@contextlib.contextmanager
 def ticking(what: str):
     """A heartbeat line every few seconds while a blocking step that reports nothing (Ray's start,
-    RLlib's build of the algorithm) runs, from a thread of its own."""
-    stop = threading.Event()
-    beat = Heartbeat()
-
-    def tick() -> None:
-        while not stop.wait(beat.interval_s):
-            beat.say(f"{what}...")
-
-    thread = threading.Thread(target=tick, name="train-heartbeat", daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join()
+    RLlib's build of the algorithm) runs."""
+    return watched(Heartbeat(doing=f"{what}..."))
 
 
 def _done(args: argparse.Namespace, iteration: int, steps: int) -> bool:
