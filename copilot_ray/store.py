@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from copilot_ray import mlflow_view
 from copilot_ray.commands import UI_PORT, mlflow_ui
 
 # MLflow's tracking stores: an embedded SQLite file, a tracking server, or a database it writes to.
@@ -77,12 +78,24 @@ def unwritable_store(uri: str) -> str | None:
     return unwritable(uri[len("sqlite:///") :], "file")
 
 
-def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> list[str]:
+def ui_hint(tracking_uri: str, experiment_id: str | None = None, trials_view: bool = False) -> list[str]:
     """How to look at a store's runs in MLflow's UI: the command that serves a local store (this
-    install's MLflow, without its job runner) and the page to open. MLflow 3's UI opens an experiment on
-    its GenAI pages (whatever the experiment's tags say); `?workflowType=machine_learning` opens it on
-    its runs."""
-    page = f"#/experiments/{experiment_id}?workflowType=machine_learning" if experiment_id else ""
-    if tracking_uri.startswith(("http://", "https://")):
-        return [f"open {tracking_uri.rstrip('/')}/{page}"]
-    return [mlflow_ui(tracking_uri), f"then open http://127.0.0.1:{UI_PORT}/{page}"]
+    install's MLflow, without its job runner) and the pages to open. `trials_view`: a sweep's
+    experiment, which carries a view of its trials by configuration (copilot_ray.mlflow_view): its table
+    and its chart. Else MLflow 3's UI would open an experiment on its GenAI pages (whatever the
+    experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""
+    if experiment_id is None:
+        pages = [""]
+    elif trials_view:
+        pages = [
+            mlflow_view.page(experiment_id, mlflow_view.TABLE),
+            mlflow_view.page(experiment_id, mlflow_view.CHART),
+        ]
+    else:
+        pages = [f"#/experiments/{experiment_id}?workflowType=machine_learning"]
+    remote = tracking_uri.startswith(("http://", "https://"))
+    base = tracking_uri.rstrip("/") if remote else f"http://127.0.0.1:{UI_PORT}"
+    lines = [] if remote else [mlflow_ui(tracking_uri)]
+    lines.append(f"{'open' if remote else 'then open'} {base}/{pages[0]}")
+    lines += [f"success against env steps by configuration: {base}/{p}" for p in pages[1:]]
+    return lines

@@ -52,6 +52,7 @@ from copilot_ray.console import quiet_console
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     BUDGET_PARAM,
+    ENV_PARAM,
     ENV_STEPS,
     ENV_TAG,
     EVAL_FRESH,
@@ -69,9 +70,11 @@ from copilot_ray.keys import (
     SUCCESS_PLANNED,
     TIME_TOTAL_S,
     TUNE_PATH_TAG,
+    VARIANT_TAG,
     result_value,
     validation_key,
 )
+from copilot_ray.mlflow_view import column
 from copilot_ray.store import tracking_uri_problem, ui_hint, unwritable, unwritable_store
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
@@ -470,6 +473,7 @@ def open_tracking(run: SweepRun) -> tuple[str, str]:
         artifact_location=tracking.local_artifact_location(run.uri, run.root / "mlartifacts"),
         description=spec.description,
     )
+    tracking.show_trials(run.uri, exp_id, *trials_view_of(spec))
     if not reused:
         files = {RESOLVED_SPEC_ARTIFACT: run.saved_spec}
         if not run.resume and run.given.is_file():
@@ -480,6 +484,30 @@ def open_tracking(run: SweepRun) -> tuple[str, str]:
         f"MLflow {run.uri} (parent run {parent_id}{', resumed' if reused else ''})"
     )
     return exp_id, parent_id
+
+
+def trials_view_of(spec) -> tuple[list[tuple[str, str]] | None, list[str], list[str]]:
+    """What the MLflow link shows of this part (copilot_ray.mlflow_view): its configurations (a grid's,
+    known in advance; None for a search), the columns (what it varies, the seed, the figures the
+    terminal summary shows (a search: none of the test tasks'), env steps) and what the chart draws."""
+    searched = spec.searcher.type in SEARCHES
+    configurations = (
+        None if searched else sorted({(spec.algorithm, config_key(flat)) for flat in spec.trial_plan()})
+    )
+    varied = [*spec.searched_keys, *([ENV_PARAM] if len(spec.env.ids) > 1 else []), SEED_PARAM]
+    columns = [
+        *([column("tags", VARIANT_TAG)] if spec.variants else []),
+        *(column("params", p) for p in varied),
+    ]
+    # the summary's headline figures (its planned / direct split stays in the summary: a table that fits)
+    shown = [
+        k
+        for k in summary_keys(searched)
+        if k not in (validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT))
+    ]
+    columns += [column("metrics", m) for m in (*shown, ENV_STEPS)]
+    charts = [validation_key(EVAL_SUCCESS), *([] if searched else [PATH_SUCCESS])]
+    return configurations, columns, charts
 
 
 def _sweep_params(spec) -> dict[str, Any]:
@@ -575,7 +603,7 @@ def report_sweep(
     _say("")
     _say(f"Tune results: {', '.join(tune_paths)}")
     _say(f"MLflow store: {uri} (experiment {spec.experiment!r}, parent run {parent_id})")
-    command, *then = ui_hint(uri, exp_id)
+    command, *then = ui_hint(uri, exp_id, trials_view=True)
     _say(f"MLflow UI: {command}")
     for line in then:
         _say(f"  {line}")
@@ -660,8 +688,8 @@ def main(argv: list[str] | None = None) -> int:
         if console is not None:
             console.log_to(sweep_root(specs[0]) / "console.log")
             _say(
-                f"sweep {args.spec}: starting Ray; its, Tune's and MLflow's notices go to "
-                f"{relative_path(console.path)} (--verbose shows them)"
+                f"sweep {args.spec}: starting Ray (Ray's, RLlib's, Tune's and MLflow's notices go to "
+                f"{relative_path(console.path)}; --verbose shows them)"
             )
         if len(specs) == 1:
             return _run_one(specs[0], args, resume=args.resume)
