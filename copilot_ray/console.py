@@ -24,6 +24,7 @@ NOTICES = tuple(
         r"You are running \w+ on the new API stack",  # RLlib, once per config built
         r"DeprecationWarning: `RLModule\(config=",  # RLlib's own use of its old RLModule signature
         r"-- Started a local Ray instance",
+        r"-- (Connecting to existing Ray cluster at address|Connected to Ray cluster)",
         r"Install gputil for GPU system monitoring",
         r"Trainable\.setup took [\d.]+ seconds",
         r"mlflow\.store\.db\.utils: (Creating initial MLflow database tables|Updating database tables)",

@@ -15,6 +15,7 @@ from copilot_ray.console import is_notice, quiet_console
 # Lines a sweep and a train run printed before the console was quiet (Ray 2.60, MLflow 3).
 NOTICES = [
     "2026-11-28 03:37:12,286\tINFO worker.py:2038 -- Started a local Ray instance.",
+    "2026-11-28 05:45:01,366\tINFO worker.py:2038 -- Connected to Ray cluster.",
     "2026/11/28 03:37:20 INFO mlflow.store.db.utils: Creating initial MLflow database tables...",
     "2026/11/28 03:37:20 INFO mlflow.store.db.utils: Updating database tables",
     "2026-11-28 03:37:27,787\tWARNING algorithm_config.py:5160 -- You are running CoPilot on the new API "
