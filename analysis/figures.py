@@ -130,6 +130,16 @@ def steps_axis(ax, log: bool = False) -> None:
     ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
 
 
+def constant_value(curves) -> float | None:
+    """The one value every point of `curves` ((steps, values) pairs) has, or None when they vary (or hold
+    no number): a panel of such curves is a flat line that says nothing a table does not say better."""
+    values = np.concatenate([np.asarray(v, dtype=float) for _, v in curves]) if curves else np.array([])
+    values = values[np.isfinite(values)]
+    if not values.size or np.ptp(values) > 1e-9 * max(1.0, float(np.abs(values).max())):
+        return None
+    return float(values[0])
+
+
 def _has_curve(c: ConfigSummary, metric: str) -> bool:
     return metric in c.metrics and c.metrics[metric].curve is not None
 
@@ -609,6 +619,16 @@ def diagnostics(
     empty = [title for title, _, _ in named if title not in {p[0] for p in panels}]
     if empty:
         notes.append(f"{path.name}: panels left out (no run logged their metrics): {'; '.join(empty)}.")
+    flat_panels = []
+    for title, lines, needs in list(panels):
+        curves = [
+            t.curves[k] for _, t in trials for k, _ in diagnostic_keys(t, lines, needs) if k in t.curves
+        ]
+        if (value := constant_value(curves)) is not None:
+            panels.remove((title, lines, needs))
+            flat_panels.append(f"{title} (every line at {value:g})")
+    if flat_panels:
+        notes.append(f"{path.name}: panels left out (flat, no signal): {'; '.join(flat_panels)}.")
     flat = sorted({c.label for c, t in trials if depth_of(t) == 0})
     if flat:
         notes.append(
@@ -617,6 +637,7 @@ def diagnostics(
             "method plans (its planned success differs from the agent alone's, as SoRB's graph)."
         )
     if not panels:
+        notes.append(f"{path.name}: not drawn: no panel has a line that changes.")
         return None
     drawn = [c for c in shown if any(c is d for d, _ in trials)]
     colors = dict(zip([c.key for c in drawn], _colors(len(drawn)), strict=True))

@@ -59,6 +59,7 @@ from copilot_ray.keys import (
     VALIDATION_PREFIX,
     validation_key,
 )
+from copilot_ray.store import missing_sqlite_file, tracking_uri_problem
 
 # Curves for the diagnostics page (copilot_ray.planning.plan_diagnostics): every metric under these
 # prefixes that a run logged.
@@ -278,16 +279,23 @@ def configurations(trials: list[Trial]) -> dict[tuple, list[Trial]]:
 # ---------------------------------------------------------------------------------------------- store
 
 
-def resolve_tracking_uri(arg: str | None, cwd: str | Path = ".", experiment: str | None = None) -> str:
-    """`--tracking-uri`, else `$MLFLOW_TRACKING_URI`, else an existing SQLite store that holds the
+def resolve_tracking_uri(
+    arg: str | None, cwd: str | Path = ".", experiment: str | None = None, flag: str = "--tracking-uri"
+) -> str:
+    """`arg` (given as `flag`), else `$MLFLOW_TRACKING_URI` (a SQLite store's file must exist), else an existing SQLite store that holds the
     experiment: `./mlflow.db` (ARCHITECTURE.md, "Conventions") or `./results/*/mlflow.db` (the sweep spec's default
     `tracking.storage`). Never a fresh empty store: MLflow would create one silently and then report that
     the experiment does not exist, which hides the real mistake (a wrong directory).
     """
-    if arg:
-        return arg
-    if os.environ.get("MLFLOW_TRACKING_URI"):
-        return os.environ["MLFLOW_TRACKING_URI"]
+    given = arg or os.environ.get("MLFLOW_TRACKING_URI")
+    if given:
+        where = flag if arg else "MLFLOW_TRACKING_URI"
+        if (why := tracking_uri_problem(given)) is not None:
+            raise AnalysisError(f"{where} {given!r} is invalid: {why}")
+        if (missing := missing_sqlite_file(given)) is not None:
+            # MLflow would create an empty store there and then report that the experiment is missing.
+            raise AnalysisError(f"{where} {given!r} is invalid: there is no store file {missing}")
+        return given
     cwd = Path(cwd).resolve()
     candidates = [cwd / "mlflow.db", *sorted((cwd / "results").glob("*/mlflow.db"))]
     existing = [p for p in candidates if p.is_file()]

@@ -33,7 +33,7 @@ from copilot_ray.keys import (  # noqa: E402
 )
 
 from .aggregate import ConfigSummary, privileges_label  # noqa: E402
-from .figures import steps_axis, wrap  # noqa: E402
+from .figures import constant_value, steps_axis, wrap  # noqa: E402
 from .load import Trial  # noqa: E402
 from .tables import Table  # noqa: E402
 
@@ -185,6 +185,16 @@ def path_figure(
             notes.append(
                 f"{path.name}: no '{PANEL_TITLES[k]}' row: no run logged {k} (it needs RRT*'s reference)."
             )
+    for k in list(panels):
+        value = constant_value([c for _, g in groups.values() for c in _seed_curves(g, k)])
+        if value is not None:
+            panels.remove(k)
+            notes.append(
+                f"{path.name}: no '{PANEL_TITLES[k]}' row: every method's curve is flat at {value:g} "
+                "(no signal to draw; the value is in the table)."
+            )
+    if not panels:
+        return None
     envs = sorted({env for env, _ in groups})
     methods = sorted({method for _, method in groups})
     # the planner-only methods report collision checks as their env steps

@@ -56,13 +56,13 @@ import argparse
 import datetime as _dt
 import html
 import re
-import shlex
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from copilot_ray.commands import python_module
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     EVAL_MASTERED,
@@ -74,6 +74,7 @@ from copilot_ray.keys import (
     SUCCESS_METRICS,
     SUCCESS_PLANNED,
     TREES_DIR,
+    validation_key,
 )
 from copilot_ray.privileges import DESCRIPTIONS
 
@@ -194,14 +195,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def command_line(argv: list[str]) -> str:
     """The command that produced the report, as one can paste it again."""
-    return shlex.join(["python", "-m", "analysis.report", *argv])
+    return python_module("analysis.report", *argv)
 
 
 def join_other_stores(sweep: Sweep, args: argparse.Namespace) -> None:
     """Adds the trial runs of each --also-from store, read from --also-experiment (default: the report's)."""
     experiment = args.also_experiment or args.experiment
     for extra in args.also_from:
-        add_trials_from(sweep, resolve_tracking_uri(extra, experiment=experiment), experiment)
+        add_trials_from(
+            sweep, resolve_tracking_uri(extra, experiment=experiment, flag="--also-from"), experiment
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -360,7 +363,12 @@ def main(argv: list[str] | None = None) -> int:
     for line in provenance:
         if line.startswith("WARNING"):
             print(line, file=sys.stderr)
-    below = _improvement_blocks(configs, improvement, several, args.improvement_over)  # under the summary
+    # right under the summary tables (a look at one seed each compares nothing)
+    below = (
+        []
+        if one_seed_each(configs)
+        else _improvement_blocks(configs, improvement, several, args.improvement_over)
+    )
     below += _target_blocks(configs, sweep.tasks, args)
     settings_table = defaults.defaults_table(configs)
     if settings_table is not None:
@@ -410,8 +418,8 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
     at or below it the line says the rule allows the few (else "lacks seeds" reads as a defect). [] for
     validation reports and runs that logged no validation success."""
     short = [c for c in configs if 0 < c.n_seeds < stats.MIN_SEEDS_FOR_CI]
-    if sweep.tasks != TEST or not short:
-        return []
+    if sweep.tasks != TEST or not short or one_seed_each(configs):
+        return []  # (one seed each: a demo's look at its runs, not a comparison the rule is about)
     try:
         validation = load_sweep(sweep.tracking_uri, sweep.experiment, args.parent_run, tasks=VALIDATION)
         join_other_stores(validation, args)
@@ -426,7 +434,7 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
         if finals.size and np.nanmean(finals) > MORE_SEEDS_ABOVE:
             more = _unused_seeds(c, stats.MIN_SEEDS_FOR_CI - c.n_seeds)
             out.append(
-                f"{c.label}: {c.n_seeds} seed(s), and its final validation success ({metric}) is "
+                f"{c.label}: {c.n_seeds} seed(s), and its final validation success ({validation_key(metric)}) is "
                 f"{np.nanmean(finals):.2f}, above {MORE_SEEDS_ABOVE}: a method above it gets "
                 f"{stats.MIN_SEEDS_FOR_CI} seeds in a comparison (decided on the validation tasks, not on "
                 f"these test figures). Run seeds {more} as a part of their own, with the same config (or "
@@ -436,10 +444,17 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
         elif finals.size:
             out.append(
                 f"{c.label}: {c.n_seeds} seed(s), within the comparison's seed rule: its final validation "
-                f"success ({metric}) is {np.nanmean(finals):.2f}, not above {MORE_SEEDS_ABOVE}, so "
+                f"success ({validation_key(metric)}) is {np.nanmean(finals):.2f}, not above {MORE_SEEDS_ABOVE}, so "
                 f"{c.n_seeds} may do (decided on the validation tasks, not on these test figures)."
             )
     return out
+
+
+def one_seed_each(configs: list[ConfigSummary]) -> bool:
+    """Every configuration has (at most) one seed: a demo or a first look, not a comparison; its report
+    leaves out what only a comparison needs (the long summary of the statistics, the seed rule's notes,
+    the probability of improvement)."""
+    return all(c.n_seeds <= 1 for c in configs)
 
 
 def _unused_seeds(config: ConfigSummary, count: int) -> list[int]:
@@ -762,8 +777,18 @@ def _summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str) -> s
         if m is not None:
             lo, hi = m.auc_window
             windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
+    which = f"Validation tasks only ({tasks_why}). " if tasks == VALIDATION else "Test tasks only. "
+    if one_seed_each(configs):
+        return (
+            "One seed per configuration: a look at how the runs went, not a comparison (no spread, no "
+            f"confidence interval, no probability of improvement: a comparison runs {stats.MIN_SEEDS_FOR_CI} "
+            f"seeds or more, as sweeps/fair_maze.yaml does). {which}Final = the success at the env-step "
+            "budget, linear between the evaluations on either side; AUC = the area under the success "
+            "curve over the env steps " + (", ".join(windows) or "none") + ", divided by their length; "
+            "steps to a threshold = the first evaluation at or above it."
+        )
     return (
-        (f"Validation tasks only ({tasks_why}). " if tasks == VALIDATION else "Test tasks only. ")
+        which
         + "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method "
         "of a comparison), linear between its evaluations on either side; a seed whose evaluations end "
         "before it (still running) or a sweep without one: its last evaluation; one first evaluated "

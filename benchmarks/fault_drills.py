@@ -44,6 +44,8 @@ from pathlib import Path
 
 import yaml
 
+from copilot_ray.keys import SUCCESS_PLANNED, validation_key
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -201,15 +203,19 @@ def kill_driver_then_resume(spec: Path, tune_dir: Path) -> None:
         raise RuntimeError(f"--resume exited {resumed.returncode} (log next to {spec})")
 
 
+def spec_driver(directory: Path, iterations: int) -> Path:
+    return write_spec(directory, "drill_driver", iterations)
+
+
 def drill_driver(directory: Path, iterations: int) -> dict[str, int]:
-    spec = write_spec(directory, "drill_driver", iterations)
+    spec = spec_driver(directory, iterations)
     kill_driver_then_resume(spec, directory / "results" / "drill_driver" / "tune")
     return audit(spec, iterations)
 
 
-def drill_driver_her(directory: Path, iterations: int) -> dict[str, int]:
-    """The driver drill on the HER baseline, seeds 0 and 1: its relabelling buffer is in the checkpoint."""
-    spec = write_spec(
+def spec_driver_her(directory: Path, iterations: int) -> Path:
+    """The smoke sweep on the HER baseline, seeds 0 and 1."""
+    return write_spec(
         directory,
         "drill_her",
         iterations,
@@ -224,14 +230,18 @@ def drill_driver_her(directory: Path, iterations: int) -> dict[str, int]:
         search=None,
         seeds=[0, 1],
     )
+
+
+def drill_driver_her(directory: Path, iterations: int) -> dict[str, int]:
+    """The driver drill on the HER baseline, seeds 0 and 1: its relabelling buffer is in the checkpoint."""
+    spec = spec_driver_her(directory, iterations)
     kill_driver_then_resume(spec, directory / "results" / "drill_her" / "tune")
     return audit(spec, iterations)
 
 
-def drill_driver_hrl(directory: Path, iterations: int) -> dict[str, int]:
-    """The driver drill on the HIRO-style hierarchy (a plain Tune Trainable with its own env loop),
-    seeds 0 and 1: both levels' learners and replays are in its checkpoint."""
-    spec = write_spec(
+def spec_driver_hrl(directory: Path, iterations: int) -> Path:
+    """The smoke sweep on the HIRO-style hierarchy, seeds 0 and 1."""
+    return write_spec(
         directory,
         "drill_hrl",
         iterations,
@@ -247,26 +257,38 @@ def drill_driver_hrl(directory: Path, iterations: int) -> dict[str, int]:
         search=None,
         seeds=[0, 1],
     )
+
+
+def drill_driver_hrl(directory: Path, iterations: int) -> dict[str, int]:
+    """The driver drill on the HIRO-style hierarchy (a plain Tune Trainable with its own env loop),
+    seeds 0 and 1: both levels' learners and replays are in its checkpoint."""
+    spec = spec_driver_hrl(directory, iterations)
     kill_driver_then_resume(spec, directory / "results" / "drill_hrl" / "tune")
     return audit(spec, iterations)
 
 
-def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
-    import optuna
-
-    spec = write_spec(
+def spec_driver_optuna(directory: Path, iterations: int) -> Path:
+    """The smoke sweep searched by Optuna (3 samples of tree depth 1 or 2) on a validation metric: a
+    searcher may not look at the test tasks (the spec check refuses it)."""
+    return write_spec(
         directory,
         "drill_optuna",
         iterations,
         search={"tree_depth": {"categorical": [1, 2]}},
         searcher={
             "type": "optuna",
-            "metric": "copilot/eval/success_planned",
+            "metric": validation_key(SUCCESS_PLANNED),
             "mode": "max",
             "num_samples": 3,
             "seed": 0,
         },
     )
+
+
+def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
+    import optuna
+
+    spec = spec_driver_optuna(directory, iterations)
     kill_driver_then_resume(spec, directory / "results" / "drill_optuna" / "tune")
     found = audit(spec, iterations)
     storage = f"sqlite:///{directory / 'results' / 'drill_optuna' / 'optuna.db'}"
@@ -278,8 +300,12 @@ def drill_driver_optuna(directory: Path, iterations: int) -> dict[str, int]:
     return found
 
 
+def spec_trial(directory: Path, iterations: int) -> Path:
+    return write_spec(directory, "drill_trial", iterations)
+
+
 def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
-    spec = write_spec(directory, "drill_trial", iterations)
+    spec = spec_trial(directory, iterations)
     proc = sweep(spec)
     rows = wait_for_results(directory / "results" / "drill_trial" / "tune", 3, proc)
     pid = int(rows[-1]["pid"])
@@ -295,16 +321,21 @@ def drill_trial(directory: Path, iterations: int) -> dict[str, int]:
 KILL_SEED = 0  # set by --kill-seed
 
 
+def spec_runner(directory: Path, iterations: int) -> Path:
+    """The smoke sweep with one env runner per trial and one sub-task per sampling round: many rounds
+    per iteration, so the kill lands inside one."""
+    config = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())["config"]
+    config["subtasks_per_sample"] = 1
+    return write_spec(directory, "drill_runner", iterations, resources={"num_env_runners": 1}, config=config)
+
+
 def drill_runner(directory: Path, iterations: int) -> dict[str, int]:
     import mlflow
 
     from copilot_ray.keys import AGENT_SUBTASKS_LOST
     from copilot_ray.sweep_spec import load_spec
 
-    config = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())["config"]
-    # one sub-task per sampling round: many rounds per iteration, so the kill lands inside one
-    config["subtasks_per_sample"] = 1
-    spec = write_spec(directory, "drill_runner", iterations, resources={"num_env_runners": 1}, config=config)
+    spec = spec_runner(directory, iterations)
     proc = sweep(spec)
     rows = wait_for_results(directory / "results" / "drill_runner" / "tune", 2, proc)
     # Anywhere in the next iteration (checkpoint, sampling, updates, weight sync, evaluation): a delay
@@ -347,8 +378,12 @@ def _cmdline(pid: int) -> str:
         return ""
 
 
+def spec_nan(directory: Path, iterations: int) -> Path:
+    return write_spec(directory, "drill_nan", iterations, search={"tree_depth": {"grid": [1]}}, seeds=[0, 1])
+
+
 def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
-    spec = write_spec(directory, "drill_nan", iterations, search={"tree_depth": {"grid": [1]}}, seeds=[0, 1])
+    spec = spec_nan(directory, iterations)
     proc = sweep(spec, env_extra={"COPILOT_RAY_FAULT": "planner_nan@3:seed=1"})
     code = proc.wait(timeout=900)
     log = max(directory.glob("drill_nan.*.log")).read_text()
@@ -359,6 +394,18 @@ def drill_nan(directory: Path, iterations: int) -> dict[str, int]:
         found["lost"] += 1
     return found
 
+
+# Each drill's spec, written without running it (tests/test_benchmark_specs.py runs them through the
+# spec check, so a new rule cannot break a drill unseen).
+DRILL_SPECS = {
+    "driver": spec_driver,
+    "driver_her": spec_driver_her,
+    "driver_hrl": spec_driver_hrl,
+    "driver_optuna": spec_driver_optuna,
+    "trial": spec_trial,
+    "runner": spec_runner,
+    "nan": spec_nan,
+}
 
 DRILLS = {
     "driver": drill_driver,

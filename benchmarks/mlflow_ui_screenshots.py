@@ -1,29 +1,26 @@
 """Screenshots of MLflow's UI on a sweep store, taken by headless Chromium: what a user sees first.
 
-Starts `mlflow ui` on the given store (its own process group, on 127.0.0.1), waits until it answers,
-takes the screenshots below with Chromium, stops the server it started (by its PID's process group)
-and prints every file it wrote:
+Starts MLflow's UI on the given store with the command a sweep prints (`copilot_ray.commands.mlflow_ui`:
+this install's mlflow, no job runner, one worker; its own process group, on 127.0.0.1), waits until it
+answers, takes the screenshots below with Chromium, stops the server it started (by its PID's process
+group) and prints every file it wrote:
 
-  experiment.png     http://HOST:PORT/#/experiments/<id>             what the experiment link opens on
-  runs.png           http://HOST:PORT/#/experiments/<id>/runs        the runs page (parents and trials)
-  run.png            http://HOST:PORT/#/experiments/<id>/runs/<run>  one trial (child) run
-  experiment_ml.png  the experiment link with ?workflowType=machine_learning
-  runs_ml.png        the runs page with ?workflowType=machine_learning
+  trials_table.png  the link a sweep prints: its trials by configuration, swept values and figures as columns
+  trials_chart.png  the chart link it prints beside: success against env steps, one line per configuration
+  experiment.png    http://HOST:PORT/#/experiments/<id>?workflowType=machine_learning (no view: MLflow's own)
+  run.png           one trial (child) run's page
 
-Why the last two: MLflow 3.17's UI has a GenAI / Model training switch (`workflowType`: the URL's
-`?workflowType=genai|machine_learning`, else the browser's saved choice, else `genai`) that decides the
-experiment's pages; with it on (3.17.2: always) the experiment's `mlflow.experimentKind` tag is not what
-picks them. A fresh browser (these screenshots: a throwaway profile) sees what a new user sees.
+The view is the experiment's `mlflow.sharedViewState.trials` tag, which the sweep writes
+(copilot_ray.mlflow_view); a store from before it has none, and its links fall back to MLflow's default.
+A fresh browser (these screenshots: a throwaway profile each) sees what a new user sees.
 
-Usage (a copy of the store: `--set-kind` writes the tag the sweep now sets, and MLflow may migrate the
-schema of an older store):
+Usage (on a copy of the store: MLflow may migrate the schema of an older one):
 
-    cp results/choose_defaults.db /tmp/cd.db
-    .venv/bin/python benchmarks/mlflow_ui_screenshots.py /tmp/cd.db /tmp/mlflow_ui \\
-        --experiment choose-defaults --set-kind [--set-note TEXT] [--run RUN_ID] [--port 5055]
+    cp results/demo/mlflow.db /tmp/demo.db
+    .venv/bin/python benchmarks/mlflow_ui_screenshots.py /tmp/demo.db docs/mlflow_ui \\
+        --experiment demo [--set-note TEXT] [--run RUN_ID] [--port 5055]
 
-Needs Debian's Chromium (`apt-get install -y chromium`; `--chromium PATH` for another binary). The
-server runs with MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false (no job runner) and one worker; Chromium with
+Needs Debian's Chromium (`apt-get install -y chromium`; `--chromium PATH` for another binary), run with
 the flags of `CHROMIUM_FLAGS` (no sandbox, no GPU, no network beyond the page, a throwaway profile).
 Exit status: 0 all written, 1 a screenshot missing, 2 the server did not start.
 """
@@ -41,8 +38,9 @@ import time
 import urllib.request
 from pathlib import Path
 
-EXPERIMENT_KIND_TAG = "mlflow.experimentKind"  # what copilot_ray.tracking sets on every sweep experiment
-EXPERIMENT_KIND = "custom_model_development"
+from copilot_ray import mlflow_view
+from copilot_ray.commands import mlflow_ui
+
 NOTE_TAG = "mlflow.note.content"  # the spec's description, which the sweep sets as the experiment's note
 CHROMIUM_FLAGS = (
     "--headless",
@@ -63,9 +61,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--experiment", help="experiment name (default: the first one that is not 'Default')")
     p.add_argument("--run", help="the run to show (default: the experiment's first trial run)")
     p.add_argument(
-        "--set-kind", action="store_true", help=f"set {EXPERIMENT_KIND_TAG} on the experiment first"
-    )
-    p.add_argument(
         "--set-note",
         metavar="TEXT",
         help=f"set {NOTE_TAG} (the experiment's description) on the experiment first",
@@ -73,9 +68,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=5055)
     p.add_argument("--window-size", default="1600,1000")
-    p.add_argument("--budget-ms", type=int, default=15000, help="Chromium's --virtual-time-budget")
+    p.add_argument(
+        "--budget-ms", type=int, default=60000, help="Chromium's --virtual-time-budget (charts need ~40 s)"
+    )
     p.add_argument("--chromium", default=shutil.which("chromium") or "chromium")
-    p.add_argument("--mlflow", default=str(Path(sys.executable).with_name("mlflow")))
     return p.parse_args(argv)
 
 
@@ -83,10 +79,8 @@ def store_uri(store: str) -> str:
     return store if "://" in store else f"sqlite:///{Path(store).resolve()}"
 
 
-def pick(
-    uri: str, experiment: str | None, run: str | None, set_kind: bool, note: str | None
-) -> tuple[str, str]:
-    """(experiment id, run id) to show; sets the experiment-kind tag and the note when asked."""
+def pick(uri: str, experiment: str | None, run: str | None, note: str | None) -> tuple[str, str]:
+    """(experiment id, run id) to show; sets the note when asked."""
     import mlflow
 
     client = mlflow.MlflowClient(uri)
@@ -99,8 +93,6 @@ def pick(
         if not exps:
             raise SystemExit(f"error: no experiment in {uri}")
         exp = exps[0]
-    if set_kind:
-        client.set_experiment_tag(exp.experiment_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
     if note:
         client.set_experiment_tag(exp.experiment_id, NOTE_TAG, note)
     if run is None:
@@ -166,22 +158,23 @@ def stop(proc: subprocess.Popen) -> None:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     uri = store_uri(args.store)
-    exp_id, run_id = pick(uri, args.experiment, args.run, args.set_kind, args.set_note)
+    exp_id, run_id = pick(uri, args.experiment, args.run, args.set_note)
     args.out.mkdir(parents=True, exist_ok=True)
-    env = {
-        **os.environ,
-        "MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false",
-        "MLFLOW_DISABLE_TELEMETRY": "true",
-        "DO_NOT_TRACK": "true",
-    }
-    cmd = [args.mlflow, "ui", "--backend-store-uri", uri, "--host", args.host, "--port", str(args.port)]
-    cmd += ["--workers", "1"]
+    env = {**os.environ, "MLFLOW_DISABLE_TELEMETRY": "true", "DO_NOT_TRACK": "true"}
+    # the command a sweep prints, on this script's host and port
+    command = mlflow_ui(uri, args.port).replace(
+        f" --port {args.port} ", f" --host {args.host} --port {args.port} "
+    )
     log = args.out / "mlflow_ui.log"
     with open(log, "w") as log_file:
         proc = subprocess.Popen(
-            cmd, env=env, stdout=log_file, stderr=subprocess.STDOUT, start_new_session=True
+            ["bash", "-c", f"exec env {command}"],
+            env=env,
+            stdout=log_file,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
         )
-    print(f"mlflow ui: PID {proc.pid}, {' '.join(cmd)}")
+    print(f"mlflow ui: PID {proc.pid}, {command}")
     base = f"http://{args.host}:{args.port}"
     written = [log]
     try:
@@ -190,11 +183,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         ml = "?workflowType=machine_learning"
         pages = {
-            "experiment.png": f"{base}/#/experiments/{exp_id}",
-            "runs.png": f"{base}/#/experiments/{exp_id}/runs",
-            "run.png": f"{base}/#/experiments/{exp_id}/runs/{run_id}",
-            "experiment_ml.png": f"{base}/#/experiments/{exp_id}{ml}",
-            "runs_ml.png": f"{base}/#/experiments/{exp_id}/runs{ml}",
+            "trials_table.png": f"{base}/{mlflow_view.page(exp_id, mlflow_view.TABLE)}",
+            "trials_chart.png": f"{base}/{mlflow_view.page(exp_id, mlflow_view.CHART)}",
+            "experiment.png": f"{base}/#/experiments/{exp_id}{ml}",
+            "run.png": f"{base}/#/experiments/{exp_id}/runs/{run_id}{ml}",
         }
         missing = []
         for name, url in pages.items():

@@ -230,7 +230,7 @@ def _commits(args) -> list[str]:
     return sorted({r.data.tags.get(keys.GIT_COMMIT_TAG, "?")[:7] for r in runs})
 
 
-def main() -> None:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--algorithms", nargs="+", default=["copilot", "sac"], help="('all' with --from-store)"
@@ -250,7 +250,11 @@ def main() -> None:
         "--sweeps", nargs="+", help="with --from-store: only these sweeps' runs (their names)"
     )
     parser.add_argument("--write", action="store_true", help="store N = 1 and 2 in measured_throughput.json")
-    args = parser.parse_args()
+    return parser.parse_args(argv)
+
+
+def main() -> None:
+    args = parse_args()
     bad = [n for n in args.concurrent if n < 1]
     if bad or args.env_steps < 1000 or args.budget < 1:
         raise SystemExit(

@@ -167,6 +167,9 @@ BUDGET_PARAM = "stop.env_steps"
 TRIAL_ID_TAG = "copilot.trial_id"
 ERROR_TAG = "copilot.error"  # a FAILED trial run: the last line of its error (exception and message)
 CONFIG_KEY_TAG = "copilot.config_key"
+# "<algorithm> <config key>": one configuration of an experiment whose parts run several algorithms (the
+# MLflow view groups a trial run's seeds by it; copilot_ray.mlflow_view)
+CONFIGURATION_TAG = "copilot.configuration"
 TUNE_PATH_TAG = "copilot.tune_path"
 PARENT_TAG = "mlflow.parentRunId"
 GIT_COMMIT_TAG = "git_commit"

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from copilot_ray import keys, tracking
+from copilot_ray.store import missing_sqlite_file
 from copilot_ray.sweep_spec import SpecError, load_specs
 from copilot_ray.sweep_spec.estimate import duration_text, wall_seconds
 
@@ -229,11 +230,21 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with contextlib.chdir(root):  # relative stores and storage resolve where the sweep was started
             specs = load_specs(spec_path)
-            lines = report(specs)
     except SpecError as err:
         for line in err.problems:
             print(line, file=sys.stderr)
         return 2
+    uris = dict.fromkeys(spec.tracking.uri for spec in specs)
+    missing = [path for uri in uris if (path := missing_sqlite_file(uri)) is not None]
+    if len(missing) == len(uris):  # nothing of it ran from --root (or a typo): say so, create no store
+        print(
+            f"error: tracking.uri {next(iter(uris))!r} of {spec_path} is invalid: there is no store file "
+            f"{missing[0]} (nothing of it has run from {root}; --root names the folder it was started from)",
+            file=sys.stderr,
+        )
+        return 2
+    with contextlib.chdir(root):
+        lines = report(specs)
     print(f"{spec_path} from {root} (store {specs[0].tracking.uri}):")
     for line in lines:
         print(line)

@@ -196,8 +196,11 @@ def main(argv: list[str] | None = None) -> int:
     if (why := tracking_uri_problem(args.tracking_uri)) is not None:
         print(f"error: --tracking-uri {args.tracking_uri!r} is invalid: {why}", file=sys.stderr)
         return 2
-    if missing_sqlite_file(args.tracking_uri) is not None:
-        print(f"error: --tracking-uri {args.tracking_uri!r} is invalid: no such file", file=sys.stderr)
+    if (missing := missing_sqlite_file(args.tracking_uri)) is not None:
+        print(
+            f"error: --tracking-uri {args.tracking_uri!r} is invalid: there is no store file {missing}",
+            file=sys.stderr,
+        )
         return 2
     import os
 

@@ -6,7 +6,11 @@ typo is one clear line instead of an MLflow traceback after Ray is up. Standard 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+from copilot_ray import mlflow_view
+from copilot_ray.commands import UI_PORT, mlflow_ui
 
 # MLflow's tracking stores: an embedded SQLite file, a tracking server, or a database it writes to.
 SCHEMES = ("sqlite", "http", "https", "postgresql", "mysql", "mssql", "databricks")
@@ -47,10 +51,51 @@ def missing_sqlite_file(uri: str) -> Path | None:
     return None if path.is_file() else path
 
 
-def ui_hint(tracking_uri: str, experiment_id: str | None = None) -> str:
-    """How to look at a store's runs in MLflow's UI. MLflow 3's UI opens an experiment on its GenAI pages
-    (whatever the experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""
-    page = f"#/experiments/{experiment_id}?workflowType=machine_learning" if experiment_id else ""
-    if tracking_uri.startswith(("http://", "https://")):
-        return f"open {tracking_uri.rstrip('/')}/{page}"
-    return f"mlflow ui --backend-store-uri {tracking_uri}, then open http://127.0.0.1:5000/{page}"
+def unwritable(path: str | Path, kind: str = "folder") -> str | None:
+    """Why a `kind` ("folder" or "file") cannot be created or written at `path`, or None when it can.
+    Nothing is created: the path itself, or else the nearest folder on its way that exists, is looked at
+    (a file where a folder must be, or no write permission)."""
+    path = Path(path).expanduser().absolute()
+    if path.exists():
+        if kind == "folder" and not path.is_dir():
+            return f"{path} is a file, not a folder"
+        if kind == "file" and path.is_dir():
+            return f"{path} is a folder, not a file"
+        return None if os.access(path, os.W_OK) else f"{path} is not writable"
+    existing = next(p for p in path.parents if p.exists())
+    if not existing.is_dir():
+        return f"{existing} is a file, so no {kind} can be made under it"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable, so {path} cannot be made"
+    return None
+
+
+def unwritable_store(uri: str) -> str | None:
+    """Why an embedded SQLite store cannot be written (its file, or its folder to make); None for a
+    store that is not a local file."""
+    if not uri.startswith("sqlite:///"):
+        return None
+    return unwritable(uri[len("sqlite:///") :], "file")
+
+
+def ui_hint(tracking_uri: str, experiment_id: str | None = None, trials_view: bool = False) -> list[str]:
+    """How to look at a store's runs in MLflow's UI: the command that serves a local store (this
+    install's MLflow, without its job runner) and the pages to open. `trials_view`: a sweep's
+    experiment, which carries a view of its trials by configuration (copilot_ray.mlflow_view): its table
+    and its chart. Else MLflow 3's UI would open an experiment on its GenAI pages (whatever the
+    experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""
+    if experiment_id is None:
+        pages = [""]
+    elif trials_view:
+        pages = [
+            mlflow_view.page(experiment_id, mlflow_view.TABLE),
+            mlflow_view.page(experiment_id, mlflow_view.CHART),
+        ]
+    else:
+        pages = [f"#/experiments/{experiment_id}?workflowType=machine_learning"]
+    remote = tracking_uri.startswith(("http://", "https://"))
+    base = tracking_uri.rstrip("/") if remote else f"http://127.0.0.1:{UI_PORT}"
+    lines = [] if remote else [mlflow_ui(tracking_uri)]
+    lines.append(f"{'open' if remote else 'then open'} {base}/{pages[0]}")
+    lines += [f"success against env steps by configuration: {base}/{p}" for p in pages[1:]]
+    return lines

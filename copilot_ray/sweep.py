@@ -47,9 +47,12 @@ from typing import Any
 import yaml
 
 from copilot_ray import tracking
+from copilot_ray.commands import python_module, relative_path
+from copilot_ray.console import quiet_console
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     BUDGET_PARAM,
+    ENV_PARAM,
     ENV_STEPS,
     ENV_TAG,
     EVAL_FRESH,
@@ -67,10 +70,12 @@ from copilot_ray.keys import (
     SUCCESS_PLANNED,
     TIME_TOTAL_S,
     TUNE_PATH_TAG,
+    VARIANT_TAG,
     result_value,
     validation_key,
 )
-from copilot_ray.store import tracking_uri_problem, ui_hint
+from copilot_ray.mlflow_view import column
+from copilot_ray.store import tracking_uri_problem, ui_hint, unwritable, unwritable_store
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
 from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
@@ -442,6 +447,10 @@ def _import_runtime():
     # On Ctrl-C Tune waits for each trial's current iteration to end before stopping it, by default up
     # to 600 s (one demo iteration takes minutes); the state is saved already, so stop them sooner.
     os.environ.setdefault("TUNE_FORCE_TRIAL_CLEANUP_S", "20")
+    # Tune's newer console output prints a box of the experiment's settings and a TensorBoard command
+    # (not installed here) even at verbose=0; the older one prints nothing there. ProgressPrinter prints
+    # the sweep's own lines.
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     from copilot_ray import tune_runtime
 
     return tune_runtime
@@ -464,6 +473,7 @@ def open_tracking(run: SweepRun) -> tuple[str, str]:
         artifact_location=tracking.local_artifact_location(run.uri, run.root / "mlartifacts"),
         description=spec.description,
     )
+    tracking.show_trials(run.uri, exp_id, *trials_view_of(spec))
     if not reused:
         files = {RESOLVED_SPEC_ARTIFACT: run.saved_spec}
         if not run.resume and run.given.is_file():
@@ -474,6 +484,30 @@ def open_tracking(run: SweepRun) -> tuple[str, str]:
         f"MLflow {run.uri} (parent run {parent_id}{', resumed' if reused else ''})"
     )
     return exp_id, parent_id
+
+
+def trials_view_of(spec) -> tuple[list[tuple[str, str]] | None, list[str], list[str]]:
+    """What the MLflow link shows of this part (copilot_ray.mlflow_view): its configurations (a grid's,
+    known in advance; None for a search), the columns (what it varies, the seed, the figures the
+    terminal summary shows (a search: none of the test tasks'), env steps) and what the chart draws."""
+    searched = spec.searcher.type in SEARCHES
+    configurations = (
+        None if searched else sorted({(spec.algorithm, config_key(flat)) for flat in spec.trial_plan()})
+    )
+    varied = [*spec.searched_keys, *([ENV_PARAM] if len(spec.env.ids) > 1 else []), SEED_PARAM]
+    columns = [
+        *([column("tags", VARIANT_TAG)] if spec.variants else []),
+        *(column("params", p) for p in varied),
+    ]
+    # the summary's headline figures (its planned / direct split stays in the summary: a table that fits)
+    shown = [
+        k
+        for k in summary_keys(searched)
+        if k not in (validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT))
+    ]
+    columns += [column("metrics", m) for m in (*shown, ENV_STEPS)]
+    charts = [validation_key(EVAL_SUCCESS), *([] if searched else [PATH_SUCCESS])]
+    return configurations, columns, charts
 
 
 def _sweep_params(spec) -> dict[str, Any]:
@@ -569,15 +603,15 @@ def report_sweep(
     _say("")
     _say(f"Tune results: {', '.join(tune_paths)}")
     _say(f"MLflow store: {uri} (experiment {spec.experiment!r}, parent run {parent_id})")
-    _say(f"  {ui_hint(uri, exp_id)}")
+    command, *then = ui_hint(uri, exp_id, trials_view=True)
+    _say(f"MLflow UI: {command}")
+    for line in then:
+        _say(f"  {line}")
     _say(f"Report: {report_command(spec, uri)}")
     if interrupted:
-        _say(f"interrupted: state saved. Resume with: python -m copilot_ray.sweep {spec.source} --resume")
+        _say(f"interrupted: state saved. Resume with: {resume_command(spec)}")
     elif errored:
-        _say(
-            f"some trials failed; retry them from their last checkpoint with: "
-            f"python -m copilot_ray.sweep {spec.source} --resume"
-        )
+        _say(f"some trials failed; retry them from their last checkpoint with: {resume_command(spec)}")
     code = EXIT_INTERRUPTED if interrupted else (1 if errored else 0)
     return SweepOutcome(status, code, rows, summary, uri, parent_id, tune_paths, wall)
 
@@ -585,7 +619,12 @@ def report_sweep(
 def report_command(spec, uri: str) -> str:
     """The exact command that draws this sweep's report: every sweep of its experiment (the parts of a
     comparison file, stage-2 of a two-stage one) from the store it wrote to."""
-    return f"python -m analysis.report {spec.experiment} --parent-run all --tracking-uri {uri}"
+    return python_module("analysis.report", spec.experiment, "--parent-run", "all", "--tracking-uri", uri)
+
+
+def resume_command(spec) -> str:
+    """The command that continues this sweep file where it stopped."""
+    return python_module("copilot_ray.sweep", spec.source, "--resume")
 
 
 def _say(line: str) -> None:
@@ -606,6 +645,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="Ray cluster address, e.g. auto (default: a local Ray of its own, whatever RAY_ADDRESS says)",
     )
     p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI (default: the spec's)")
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="show Ray's, RLlib's, Tune's and MLflow's notices on the console (default: only in "
+        "<storage>/<name>/console.log)",
+    )
     return p.parse_args(argv)
 
 
@@ -618,6 +663,8 @@ def main(argv: list[str] | None = None) -> int:
         specs = load_specs(args.spec)
     except SpecError as err:
         problems += err.problems
+    if not problems:
+        problems += storage_problems(specs, args.tracking_uri)
     no_gpus = []  # on a local Ray, trials asking for GPUs the machine lacks would wait for ever
     if not problems and not args.address and any(spec.resources.gpus_per_trial > 0 for spec in specs):
         gpus = local_gpus()
@@ -636,9 +683,36 @@ def main(argv: list[str] | None = None) -> int:
         for why in no_gpus:
             print(f"warning: {why}")
         return 0
-    if len(specs) == 1:
-        return _run_one(specs[0], args, resume=args.resume)
-    return _run_parts(specs, args)
+    console = quiet_console(args.verbose)
+    try:
+        if console is not None:
+            console.log_to(sweep_root(specs[0]) / "console.log")
+            _say(
+                f"sweep {args.spec}: starting Ray (Ray's, RLlib's, Tune's and MLflow's notices go to "
+                f"{relative_path(console.path)}; --verbose shows them)"
+            )
+        if len(specs) == 1:
+            return _run_one(specs[0], args, resume=args.resume)
+        return _run_parts(specs, args)
+    finally:
+        if console is not None:
+            console.close()
+
+
+def storage_problems(specs: Sequence[Any], tracking_uri: str | None = None) -> list[str]:
+    """Where a spec's results would go but cannot be written (a file in the way, no permission), one line
+    each naming the key and its value: said before Ray starts, not as a traceback from the sweep."""
+    lines = []
+    for spec in specs:
+        where = f"{spec.source}" + (f" (part {spec.name!r})" if len(specs) > 1 else "")
+        if (why := unwritable(sweep_root(spec))) is not None:
+            lines.append(f"{where}: tracking.storage: {spec.tracking.storage!r} is invalid: {why}")
+        given_uri = ((spec.document or {}).get("tracking") or {}).get("uri")  # else under the storage
+        if tracking_uri is None and given_uri and (why := unwritable_store(spec.tracking.uri)) is not None:
+            lines.append(f"{where}: tracking.uri: {spec.tracking.uri!r} is invalid: {why}")
+    if tracking_uri is not None and (why := unwritable_store(tracking_uri)) is not None:
+        lines.append(f"--tracking-uri {tracking_uri!r} is invalid: {why}")
+    return list(dict.fromkeys(lines))
 
 
 def _available_cpus(address: str | None) -> tuple[int | None, str]:

@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from copilot_ray import mlflow_view
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     ALPHA_SCHEDULE_TAG,
@@ -21,6 +22,7 @@ from copilot_ray.keys import (
     CHECKPOINT_ARTIFACT,
     CONFIG_ARTIFACT,
     CONFIG_KEY_TAG,
+    CONFIGURATION_TAG,
     ENV_STEPS,
     ENV_TAG,
     ERROR_ARTIFACT,
@@ -46,6 +48,7 @@ from copilot_ray.keys import (
     is_rllib_internal,
     result_value,
 )
+from copilot_ray.mlflow_view import configuration
 from copilot_ray.privileges import tag_value
 from copilot_ray.settings import logged_text
 from copilot_ray.store import missing_sqlite_file
@@ -99,15 +102,21 @@ class MlflowRun:
     """A thin context manager around one MLflow run (used by `copilot_ray.train`)."""
 
     def __init__(self, tracking_uri: str, experiment: str, run_name: str, tags: Mapping[str, str]):
-        import mlflow
-
-        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
-        self.mlflow = mlflow
-        self.client = mlflow.MlflowClient(tracking_uri)
+        self.client = _client(tracking_uri)
         exp = self.client.get_experiment_by_name(experiment)
         exp_id = exp.experiment_id if exp else self.client.create_experiment(experiment)
         self.run = self.client.create_run(exp_id, run_name=run_name, tags=dict(tags))
         self.run_id = self.run.info.run_id
+
+    @classmethod
+    def reopen(cls, tracking_uri: str, run_id: str) -> MlflowRun:
+        """The run `run_id` of the store, RUNNING again (`train --resume`: the run goes on in it)."""
+        self = cls.__new__(cls)
+        self.client = _client(tracking_uri)
+        self.run = self.client.get_run(run_id)
+        self.run_id = run_id
+        self.client.update_run(run_id, status="RUNNING")
+        return self
 
     def log_params(self, params: Mapping[str, str]) -> None:
         from mlflow.entities import Param
@@ -142,10 +151,13 @@ class MlflowRun:
 #                                      git_commit, mlflow.runName=<name>
 #                                params  the sweep's shape (algorithm, env, searcher, seeds, trials, stop)
 #                                artifacts  spec.yaml (as given), spec.resolved.yaml (what ran), summary.md
+#   experiment                   tags  mlflow.sharedViewState.trials: the view its printed link opens
+#                                      (copilot_ray.mlflow_view), mlflow.experimentKind, mlflow.note.content
 #   child run (one per trial)    tags  mlflow.parentRunId, copilot.role=trial, copilot.sweep,
-#                                      copilot.trial_id, copilot.config_key, algorithm, env, K, b,
+#                                      copilot.trial_id, copilot.config_key, copilot.configuration
+#                                      ("<algorithm> <config key>"), algorithm, env, K, b,
 #                                      alpha_schedule, preset, variant, copilot.privileges, seed,
-#                                      git_commit
+#                                      git_commit; run name "<configuration> seed <seed>"
 #                                params  every setting of the algorithm at its effective value, seed, env.*
 #                                metrics  metrics_from_result + time_total_s + training_iteration,
 #                                         step = env steps (keys.ENV_STEPS)
@@ -251,6 +263,15 @@ def open_sweep_run(
     if params:
         _log_params(client, run_id, params_for_mlflow(dict(params)))
     return exp_id, run_id, False
+
+
+def show_trials(tracking_uri: str, experiment_id: str, configurations, columns, chart_metrics) -> None:
+    """Sets the experiment's view of its trials (copilot_ray.mlflow_view), adding to the one an earlier
+    part of the sweep file set."""
+    client = _client(tracking_uri)
+    earlier = mlflow_view.decode(client.get_experiment(experiment_id).tags.get(mlflow_view.VIEW_TAG))
+    view = mlflow_view.trials_view(configurations, columns, chart_metrics, earlier)
+    client.set_experiment_tag(experiment_id, mlflow_view.VIEW_TAG, mlflow_view.encode(view))
 
 
 def sweep_runs_in_store(tracking_uri: str, experiment: str, sweep: str) -> tuple[str | None, list[str]]:
@@ -414,7 +435,8 @@ class TrialRuns:
 
     def _create_run(self, trial) -> str:
         info = describe_trial(trial.config)
-        name = f"{info['config_key']}-seed{info['seed']}"
+        # what the row says in MLflow's table: the configuration and the seed
+        name = f"{configuration(info['algorithm'], info['config_key'])} seed {info['seed']}"
         run = self.client.create_run(self.experiment_id, run_name=name, tags=self._tags(trial, info))
         run_id = run.info.run_id
         # (params and tags agree: the preset a run used is "default" when none was named)
@@ -437,6 +459,7 @@ class TrialRuns:
             SWEEP_TAG: self.sweep,
             TRIAL_ID_TAG: trial.trial_id,
             CONFIG_KEY_TAG: info["config_key"],
+            CONFIGURATION_TAG: configuration(info["algorithm"], info["config_key"]),
             ALGORITHM_TAG: info["algorithm"],
             ENV_TAG: info["env"],
             **{tag: str(info[key]) for tag, key in ((K_TAG, "K"), (B_TAG, "b")) if info[key] is not None},

@@ -5,26 +5,45 @@
 
 Every CO-PILOT setting is a flag (`--planner-std-final 0.015`, `--preset paper_literal`; values are
 written as in a sweep spec, so `null`, `[64, 64]` and `1e-3` work); `--help` lists them with their
-rules and defaults. Prints one progress line per iteration; the run is tracked in MLflow (by default
-in the embedded store results/train/mlflow.db; `--no-tracking` for none) and its checkpoint (at the end
-and on Ctrl-C) goes to a folder of its own named after the run. Every bad argument is reported, each
-naming the flag and its value, before Ray starts (exit status 2).
+rules and defaults. Prints a first line at once, one progress line per iteration and, inside an
+iteration, a line at least every 10 s (the planner's warm start, the traversal's env steps and SAC
+updates, evaluations); Ray's, RLlib's and MLflow's notices go to `<checkpoint folder>.console.log`
+(`--verbose` shows them). The run is tracked in MLflow (by default in the embedded store
+results/train/mlflow.db; `--no-tracking` for none) and its checkpoint (at the end, on Ctrl-C and on
+SIGTERM, which stop it alike: the MLflow run KILLED, exit status 130 / 143) goes to a folder of its own
+named after the run; `--resume THAT_FOLDER` continues the run there, in the same MLflow run. Every bad
+argument is reported, each naming the flag and its value, before Ray starts (exit status 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
+import logging
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
 from copilot_ray import keys
+from copilot_ray.commands import python_module, relative_path
+from copilot_ray.console import quiet_console
 from copilot_ray.envs import UnknownEnvError, make
+from copilot_ray.heartbeat import LOGGER_NAME as HEARTBEAT_LOGGER
+from copilot_ray.heartbeat import Heartbeat, watched
 from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
-from copilot_ray.store import default_tracking_uri, tracking_uri_problem, ui_hint
+from copilot_ray.store import (
+    default_tracking_uri,
+    tracking_uri_problem,
+    ui_hint,
+    unwritable,
+    unwritable_store,
+)
 from copilot_ray.sweep_spec import load_yaml_value
 
 ALGORITHM = "copilot"
@@ -33,11 +52,23 @@ _ALIASES = {"eval_num_tasks": ["--eval-tasks"]}
 
 
 RESULTS = Path("results") / "train"  # the default store and the runs' checkpoint folders, under the cwd
-EXAMPLE = """example (about an hour on two cores; --help lists every setting):
-  python -m copilot_ray.train --layout four-rooms --preset paper_literal --stop-env-steps 300000 --seed 1
-  mlflow ui --backend-store-uri sqlite:///$PWD/results/train/mlflow.db
-  (then http://127.0.0.1:5000/#/experiments/<id>?workflowType=machine_learning: the runs, not the GenAI
-  pages MLflow 3's UI opens on by default)"""
+RUN_FILE = "train_run.json"  # in the checkpoint folder: the run's flags, MLflow run and store (--resume)
+# What --resume may be given with: the budget may grow; the rest is the run's own (RUN_FILE).
+RESUME_FLAGS = ("--resume", "--stop-env-steps", "--stop-iters", "--verbose")
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143  # Ctrl-C, SIGTERM (128 + the signal's number)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def example() -> str:
+    """--help's closing example, naming this install's Python and MLflow (they run as printed)."""
+    run = python_module(
+        "copilot_ray.train", "--layout", "four-rooms", "--preset", "paper_literal", "--stop-env-steps", 300000
+    )
+    ui, then = ui_hint(default_tracking_uri(RESULTS), "<id>")
+    return (
+        f"example (about an hour on two cores; --help lists every setting):\n  {run} --seed 1\n  {ui}\n"
+        f"  ({then}: the runs, not the GenAI pages MLflow 3's UI opens on by default)"
+    )
 
 
 class _Parser(argparse.ArgumentParser):
@@ -52,8 +83,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         prog="python -m copilot_ray.train",
         usage="%(prog)s [--env ENV] [--layout LAYOUT] [--stop-env-steps N] [--seed S] [--SETTING VALUE ...]",
         description=__doc__.split("\n\n")[0],
-        epilog=EXAMPLE,
+        epilog=example(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        allow_abbrev=False,  # --resume tells the flags given from the run's own by their full names
     )
     run = p.add_argument_group("the run")
     run.add_argument(
@@ -89,6 +121,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     run.add_argument("--no-tracking", action="store_true", help="log nothing to MLflow")
     run.add_argument(
         "--experiment", default="copilot-train", help="MLflow experiment (default copilot-train)"
+    )
+    run.add_argument(
+        "--resume",
+        metavar="CHECKPOINT_DIR",
+        default=None,
+        help="continue the run whose checkpoint folder this is, in its MLflow run, with the flags it began "
+        "with (only --stop-env-steps and --stop-iters may be given with it, to go further)",
+    )
+    run.add_argument(
+        "--verbose",
+        action="store_true",
+        help="show Ray's, RLlib's and MLflow's notices on the console (default: only in "
+        "<checkpoint folder>.console.log)",
     )
     settings = p.add_argument_group("CO-PILOT settings (default: the setting's own; see the README's table)")
     for s in get_algorithm(ALGORITHM).settings.values():
@@ -157,13 +202,30 @@ def run_problems(args: argparse.Namespace) -> list[str]:
             out.append(f"{flag} {value!r} is invalid: must be {need}")
     if args.tracking_uri is not None and (why := tracking_uri_problem(args.tracking_uri)) is not None:
         out.append(f"--tracking-uri {args.tracking_uri!r} is invalid: {why}")
-    if args.checkpoint_dir is not None and Path(args.checkpoint_dir).is_file():
-        out.append(f"--checkpoint-dir {args.checkpoint_dir!r} is invalid: it is a file, not a folder")
+    elif not args.no_tracking:
+        # the run's store must be writable before Ray starts (the default one: under ./results/train)
+        uri = args.tracking_uri or default_tracking_uri(RESULTS)
+        if (why := unwritable_store(uri)) is not None:
+            out.append(f"--tracking-uri {uri!r}{'' if args.tracking_uri else ' (default)'} is invalid: {why}")
+    checkpoints = args.checkpoint_dir or RESULTS
+    if (why := unwritable(checkpoints)) is not None:
+        out.append(
+            f"--checkpoint-dir {str(checkpoints)!r}{'' if args.checkpoint_dir else ' (default)'} is invalid: {why}"
+        )
     return out
 
 
 def build_config(args: argparse.Namespace):
     """Builds and validates the algorithm config; raises ArgumentsError naming every bad flag and value."""
+    values, run = checked_run(args)
+    config = get_algorithm(ALGORITHM).build_config(values, run)
+    config.copy(copy_frozen=False).validate()
+    return config
+
+
+def checked_run(args: argparse.Namespace) -> tuple[dict[str, Any], RunContext]:
+    """The settings given and the run's context, every flag checked (no RLlib import yet); raises
+    ArgumentsError naming every bad flag and value."""
     entry = get_algorithm(ALGORITHM)
     values = setting_values(args)
     found = problems(entry.settings, values)
@@ -194,9 +256,7 @@ def build_config(args: argparse.Namespace):
         num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners),
         env_step_budget=args.stop_env_steps,
     )
-    config = entry.build_config(values, run)
-    config.copy(copy_frozen=False).validate()
-    return config
+    return values, run
 
 
 def progress_line(result: dict[str, Any], started: float) -> str:
@@ -225,35 +285,163 @@ def run_name(args: argparse.Namespace, config, results: Path = RESULTS) -> str:
     return name
 
 
+def resumed_args(args: argparse.Namespace, argv: list[str]) -> tuple[argparse.Namespace, dict[str, Any]]:
+    """`--resume DIR`: the flags the run began with (DIR/RUN_FILE), its budget raised by the
+    --stop-env-steps / --stop-iters given now, and what RUN_FILE says of its MLflow run."""
+    folder = Path(args.resume).expanduser().absolute()
+    saved_file = folder / RUN_FILE
+    if not saved_file.is_file():
+        raise ArgumentsError(
+            [
+                f"--resume {args.resume!r} is invalid: {saved_file} does not exist (give the folder a run "
+                "of `train` wrote its checkpoint to)"
+            ]  # fmt: skip
+        )
+    given = [token.split("=", 1)[0] for token in argv if token.startswith("--")]
+    others = [flag for flag in given if flag not in RESUME_FLAGS]
+    if others:
+        raise ArgumentsError(
+            [
+                f"{others[0]} is invalid with --resume: the run keeps the flags it began with ({saved_file}); "
+                "only --stop-env-steps and --stop-iters may be given, to go further"
+            ]  # fmt: skip
+        )
+    saved = json.loads(saved_file.read_text())
+    resumed = parse_args(saved["argv"])
+    resumed.stop_env_steps = args.stop_env_steps if "--stop-env-steps" in given else saved["stop_env_steps"]
+    resumed.stop_iters = args.stop_iters if "--stop-iters" in given else saved["stop_iters"]
+    resumed.resume, resumed.verbose, resumed.argv = str(folder), args.verbose, saved["argv"]
+    resumed.checkpoint_dir = str(folder)
+    return resumed, saved
+
+
+def first_line(args: argparse.Namespace, values: dict[str, Any]) -> str:
+    """What the run is, said before the minute Ray and RLlib take to start."""
+    layout = f" ({args.layout})" if args.layout else ""
+    depth, b = values.get("tree_depth"), values.get("repetitions")
+    shape = "".join(f" {name}={v}" for name, v in (("K", depth), ("b", b)) if v is not None)
+    stop = f"{args.stop_env_steps:,} env steps" + (
+        f" or {args.stop_iters} iterations" if args.stop_iters is not None else ""
+    )
+    what = "resuming" if args.resume else "training"
+    return (
+        f"train: {what} CO-PILOT{shape} on {args.env}{layout}, seed {args.seed}, until {stop}; "
+        "starting Ray and building the algorithm"
+    )
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled as Ctrl-C is (a checkpoint, the MLflow run KILLED), with its own exit status."""
+
+
+class _Stops:
+    """Ctrl-C and SIGTERM as exceptions in the main thread (KeyboardInterrupt, Terminated), held back
+    while an iteration's result is being recorded, so that the checkpoint and MLflow agree."""
+
+    def __init__(self) -> None:
+        self._holding = False
+        self._pending: type[KeyboardInterrupt] | None = None
+
+    def handle(self, signum, frame) -> None:
+        stop = Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+        if self._holding:
+            self._pending = stop
+            return
+        raise stop()
+
+    @contextlib.contextmanager
+    def held(self):
+        self._holding = True
+        try:
+            yield
+        finally:
+            self._holding = False
+            if self._pending is not None:
+                stop, self._pending = self._pending, None
+                raise stop()
+
+
+class _SinceStart(logging.Formatter):
+    def __init__(self, started: float) -> None:
+        super().__init__()
+        self.started = started
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"  ... {record.getMessage()}  wall {record.created - self.started:7.1f}s"
+
+
+def _print_heartbeat(started: float) -> logging.Handler:
+    """The algorithm's heartbeat lines (copilot_ray.heartbeat) on this console."""
+    handler = logging.StreamHandler(sys.stdout)
+    handler.setFormatter(_SinceStart(started))
+    logger = logging.getLogger(HEARTBEAT_LOGGER)
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    return handler
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
+    args.argv = argv  # what --resume starts from again
+    saved = None
     try:
-        config = build_config(args)
+        if args.resume is not None:
+            args, saved = resumed_args(args, argv)
+        values, _ = checked_run(args)
     except ArgumentsError as err:
         for line in err.lines:
             print(f"error: {line}", file=sys.stderr)
         return 2
-    except (ValueError, KeyError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    started = time.time()
+    print(first_line(args, values), flush=True)
+    console = quiet_console(args.verbose)
+    heartbeat = _print_heartbeat(started)
+    try:
+        try:
+            config = build_config(args)
+        except (ValueError, KeyError, FileNotFoundError) as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 2
+        return _run(args, config, console, saved, started)
+    finally:
+        logging.getLogger(HEARTBEAT_LOGGER).removeHandler(heartbeat)
+        if console is not None:
+            console.close()
 
+
+def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None, started: float) -> int:
+    """Runs (or, with `saved`, resumes) the run until its budget, Ctrl-C or SIGTERM: the exit status."""
     import ray
 
     from copilot_ray.privileges import tag_value
     from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
 
-    name = run_name(args, config)
-    checkpoint_dir = Path(args.checkpoint_dir or RESULTS / name).resolve()
-    tracking_uri = None if args.no_tracking else args.tracking_uri or default_tracking_uri(RESULTS)
+    name = saved["name"] if saved else run_name(args, config)
+    checkpoint_dir = Path(args.checkpoint_dir or RESULTS / name).absolute()
+    if console is not None:
+        console.log_to(checkpoint_dir.parent / f"{checkpoint_dir.name}.console.log")
+        print(f"Ray's, RLlib's and MLflow's notices: {relative_path(console.path)} (--verbose shows them)")
+    if saved:
+        tracking_uri = saved["tracking_uri"]
+    else:
+        tracking_uri = None if args.no_tracking else args.tracking_uri or default_tracking_uri(RESULTS)
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
-    ray.init(
-        address="local",  # our own Ray, never one that RAY_ADDRESS or `ray start` points at
-        num_cpus=max(os.cpu_count() or 1, args.num_env_runners + 1),
-        include_dashboard=False,
-        log_to_driver=False,
-    )
+    own_ray = not ray.is_initialized()  # a test's session Ray is used as it is, and left running
+    if own_ray:
+        with ticking("starting Ray"):
+            ray.init(
+                address="local",  # our own Ray, never one that RAY_ADDRESS or `ray start` points at
+                num_cpus=max(os.cpu_count() or 1, args.num_env_runners + 1),
+                include_dashboard=False,
+                log_to_driver=False,
+            )
     run = None
-    if tracking_uri:
+    if tracking_uri and saved:
+        run = MlflowRun.reopen(tracking_uri, saved["run_id"])
+        print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}, resumed", flush=True)
+    elif tracking_uri:
         RESULTS.mkdir(parents=True, exist_ok=True)
         run = MlflowRun(
             tracking_uri,
@@ -271,39 +459,95 @@ def main(argv: list[str] | None = None) -> int:
                 keys.GIT_COMMIT_TAG: git_commit(),
             },
         )
-        run_args = {k: v for k, v in vars(args).items() if not k.startswith("setting:")}
+        how = ("argv", "resume", "verbose")  # how it was started, not what it is
+        run_args = {k: v for k, v in vars(args).items() if not k.startswith("setting:") and k not in how}
         settings = {**config.setting_values(), "preset": config.preset or "default"}
         run.log_params(params_for_mlflow({**run_args, **settings, "checkpoint_dir": str(checkpoint_dir)}))
         print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}", flush=True)
-    algo = config.build_algo()
-    started = time.time()
-    status = "FINISHED"
+    status, code = "FINISHED", 0
+    algo = None
+    main_thread = threading.current_thread() is threading.main_thread()
+    # Ray's driver exits on SIGTERM (a crash dump, the run left FINISHED); stop as Ctrl-C does instead.
+    stops = _Stops()
+    previous = {sig: signal.signal(sig, stops.handle) for sig in STOP_SIGNALS} if main_thread else {}
     try:
-        while True:
-            result = algo.train()
-            print(progress_line(result, started), flush=True)
-            steps = int(keys.result_value(result, keys.ENV_STEPS) or 0)
-            if run is not None:
-                run.log_metrics(metrics_from_result(result), step=steps)
-            if steps >= args.stop_env_steps:
-                break
-            if args.stop_iters is not None and result[keys.TRAINING_ITERATION] >= args.stop_iters:
-                break
-    except KeyboardInterrupt:
-        status = "KILLED"
-        print("interrupted: writing a checkpoint before exiting", file=sys.stderr)
+        with ticking("building the algorithm (RLlib's env runner and learner)"):
+            algo = config.build_algo()
+        steps = 0
+        if saved:
+            with ticking(f"restoring the checkpoint {relative_path(checkpoint_dir)}"):
+                algo.restore_from_path(str(checkpoint_dir))
+            steps = algo._env_steps()  # noqa: SLF001 - the lifetime count the checkpoint holds
+            print(
+                f"resumed from {checkpoint_dir}: iteration {algo.iteration}, {steps:,} env steps", flush=True
+            )
+        while not _done(args, algo.iteration, steps):
+            with watched(algo.heartbeat):  # a line even when one planner phase outlasts the interval
+                result = algo.train()
+            with stops.held():  # the iteration the checkpoint will hold is logged whole
+                steps = int(keys.result_value(result, keys.ENV_STEPS) or 0)
+                if run is not None:
+                    metrics = metrics_from_result(result)
+                    metrics[keys.TRAINING_ITERATION] = float(result[keys.TRAINING_ITERATION])
+                    run.log_metrics(metrics, step=steps)
+                print(progress_line(result, started), flush=True)
+    except KeyboardInterrupt as stop:
+        status, code = "KILLED", EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED
+        why = "terminated (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
+        print(f"{why}: writing a checkpoint before exiting", file=sys.stderr, flush=True)
+    except BaseException:
+        status = "FAILED"
+        raise
     finally:
-        algo.save_to_path(str(checkpoint_dir))
-        print(f"checkpoint: {checkpoint_dir}")
+        if main_thread:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the checkpoint is written whole
+        if algo is not None:
+            algo.save_to_path(str(checkpoint_dir))
+            _write_run_file(checkpoint_dir, args, name, tracking_uri, run)
+            print(f"checkpoint: {checkpoint_dir}")
+            if status != "FINISHED":
+                print(
+                    f"continue it with: {python_module('copilot_ray.train', '--resume', relative_path(checkpoint_dir))}"
+                )
         if run is not None:
-            trees = Path(algo.logdir) / keys.TREES_DIR
-            if trees.is_dir():
+            trees = Path(algo.logdir) / keys.TREES_DIR if algo is not None else None
+            if trees is not None and trees.is_dir():
                 run.log_artifacts(trees, keys.TREES_DIR)
             run.end(status)
-            print(f"compare runs: {ui_hint(tracking_uri, run.run.info.experiment_id)}")
-        algo.stop()
-        ray.shutdown()
-    return 0 if status == "FINISHED" else 130
+            command, *then = ui_hint(tracking_uri, run.run.info.experiment_id)
+            print(f"compare runs: {command}")
+            for line in then:
+                print(f"  {line}")
+        if algo is not None:
+            algo.stop()
+        if own_ray:
+            ray.shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return code
+
+
+def ticking(what: str):
+    """A heartbeat line every few seconds while a blocking step that reports nothing (Ray's start,
+    RLlib's build of the algorithm) runs."""
+    return watched(Heartbeat(doing=f"{what}..."))
+
+
+def _done(args: argparse.Namespace, iteration: int, steps: int) -> bool:
+    return steps >= args.stop_env_steps or (args.stop_iters is not None and iteration >= args.stop_iters)
+
+
+def _write_run_file(folder: Path, args: argparse.Namespace, name: str, tracking_uri, run) -> None:
+    """What --resume reads: the flags the run began with, its budget now, its MLflow run and store."""
+    record = {
+        "argv": args.argv,
+        "stop_env_steps": args.stop_env_steps,
+        "stop_iters": args.stop_iters,
+        "name": name,
+        "tracking_uri": tracking_uri,
+        "run_id": None if run is None else run.run_id,
+    }
+    (folder / RUN_FILE).write_text(json.dumps(record, indent=1) + "\n")
 
 
 if __name__ == "__main__":

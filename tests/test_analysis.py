@@ -15,6 +15,7 @@ import pytest
 
 from analysis import stats
 from analysis.report import main
+from copilot_ray.commands import python
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     ALPHA_SCHEDULE_TAG,
@@ -1031,7 +1032,10 @@ def test_provenance_block_and_metrics_export(honest, store):
     assert honest["uri"] in head and f"experiment: {HONEST}" in head
     assert f"runs:/{honest['parent']}/spec.resolved.yaml" in head
     assert f"command: {command_line(honest['argv'])}" in head
-    assert command_line(honest["argv"]).startswith("python -m analysis.report honest-sweep --tracking-uri")
+    # this install's interpreter, so that the command runs again as written
+    assert command_line(honest["argv"]).startswith(
+        f"{python()} -m analysis.report honest-sweep --tracking-uri"
+    )
     html_head = (honest["out"] / "report.html").read_text().split("Missing or incomplete")[0]
     assert "Provenance" in html_head and "1111111aaaaaaa" in html_head
     # the single-commit store: its commit, no warning
@@ -1398,6 +1402,8 @@ def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_s
     assert len(notes) == 2 and notes[1].startswith("note: algorithm=sac:") and "0.30, above 0.1" in notes[1]
     # below the bar the few seeds are the rule's, said so beside "lacks seeds"
     assert notes[0].startswith("note: algorithm=ppo: 2 seed(s), within") and "0.05, not above 0.1" in notes[0]
+    # each note names the metric it read: the validation twin, not the test metric
+    assert all(f"final validation success ({validation_key(EVAL_SUCCESS)}) is" in n for n in notes)
     notes = notes[1:]
     # what to do: the seeds not used yet, in a part of their own (a started part keeps its seeds)
     assert "Run seeds [2, 3, 4] as a part of their own" in notes[0] and "`seeds: [2, 3, 4]`" in notes[0]
@@ -1591,3 +1597,59 @@ def test_a_method_rerun_in_its_own_experiment_joins_the_comparison_with_also_exp
         main(["rerun", "--tracking-uri", uris["rerun"], "--also-experiment", "comparison"])
     assert exit_.value.code == 2
     assert "--also-experiment comparison" in capsys.readouterr().err
+
+
+def test_a_one_seed_look_gets_a_short_report_and_flat_panels_are_named_not_drawn(tmp_path, capsys):
+    """A demo (one seed per configuration) is a look at its runs, not a comparison: a short summary, no
+    seed-rule notes, no probability of improvement. Its open maze leaves some figures without signal:
+    the diagnostics' flat panels and the paths' flat rows are named, not drawn."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import EVAL_FRESH, EVAL_SUCCESS, PATH_SUCCESS, validation_key
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    now = int(time.time() * 1000)
+    exp_id = client.create_experiment("demo", artifact_location=(tmp_path / "a").as_uri())
+    pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "demo"}).info.run_id
+    for k, rises in ((1, [0.2, 0.5, 0.9, 1.0]), (2, [0.4, 0.8, 1.0, 1.0])):
+        key = f"tree_depth={k}"
+        tags = {PARENT_TAG: pid, ROLE_TAG: ROLE_TRIAL, SWEEP_TAG: "demo", SEED_TAG: "0", K_TAG: str(k)}
+        tags |= {CONFIG_KEY_TAG: key, ALGORITHM_TAG: "copilot", ENV_TAG: "maze-point"}
+        rid = client.create_run(exp_id, run_name=key, tags=tags).info.run_id
+        curves = {
+            EVAL_FRESH: [1.0] * 4,
+            EVAL_SUCCESS: rises,
+            SUCCESS_PLANNED: rises,
+            SUCCESS_DIRECT: rises,
+            validation_key(EVAL_SUCCESS): rises,
+            ENV_STEPS: STEPS,
+            PATH_SUCCESS: [1.0] * 4,  # every plan reaches the goal in an open maze: a flat row
+            DIAG_SUBGOAL_IN_OBSTACLE_LAYER + str(k): [0.0] * 4,  # no walls: a flat panel
+            DIAG_SEGMENT_LENGTH_LAYER + str(k): [0.3, 0.2, 0.15, 0.1],  # (the run's tree depth)
+            DIAG_SEGMENT_UNREACHABLE_LAYER + str(k): [0.5, 0.3, 0.1, 0.0],  # a panel that changes
+        }
+        ms = [Metric(name, v, now, s) for name, vs in curves.items() for s, v in zip(STEPS, vs, strict=True)]
+        client.log_batch(rid, metrics=ms)
+        client.set_terminated(rid, "FINISHED")
+
+    out = tmp_path / "report"
+    assert main(["demo", "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
+    printed = capsys.readouterr().out
+    text = (out / "report.md").read_text()
+    summary = text.split("## Summary")[1].split("|")[0]
+    assert "One seed per configuration: a look at how the runs went, not a comparison" in summary
+    assert "IQM" not in summary and len(summary.split()) < 120  # not the comparison's 300-word paragraph
+    assert "final validation success" not in printed + text  # no seed-rule notes
+    assert "Probability of improvement" not in text
+    assert (
+        "diagnostics.png: panels left out (flat, no signal): sub-goals inside obstacles (every line at 0)"
+        in text
+    )
+    assert (out / "diagnostics.png").is_file()  # the segment-length panel still changes: drawn
+    assert (
+        "planners_paths.png: no 'success (collision-free path to the goal)' row: every method's curve is flat at 1"
+        in text
+    )
+    assert not (out / "planners_paths.png").exists()

@@ -146,7 +146,10 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
         restored = tiny_config(fast_learner, runners, collision_cost=collision_cost).build_algo()
         try:
             restored.restore_from_path(path)
-            want, got = algo.curriculum.planner.state_dict()["nets"], restored.curriculum.planner.state_dict()["nets"]
+            want, got = (
+                algo.curriculum.planner.state_dict()["nets"],
+                restored.curriculum.planner.state_dict()["nets"],
+            )
             for name in want:
                 torch.testing.assert_close(want[name], got[name])
             assert len(restored.curriculum.cost_model.dataset) == len(algo.curriculum.cost_model.dataset)
@@ -154,7 +157,10 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
             assert restored._rng.bit_generator.state == algo._rng.bit_generator.state
             assert restored.iteration == algo.iteration == 2
             assert restored.gradient_steps.get_state() == algo.gradient_steps.get_state()
-            assert restored.curriculum.phases.count == algo.curriculum.phases.count and restored.curriculum._warm_started
+            assert (
+                restored.curriculum.phases.count == algo.curriculum.phases.count
+                and restored.curriculum._warm_started
+            )
             assert restored.curriculum.collision_checks == algo.curriculum.collision_checks
             assert restored.curriculum.planner.std.tolist() == algo.curriculum.planner.std.tolist()
             # The task sampler continues where it stopped: both draw the same next mini-batch.

@@ -38,7 +38,9 @@ def _curriculum(seed=0, **over):
     env = make("maze-point", layout="u-maze").unwrapped
     rng = np.random.default_rng(seed)
     train = env.tasks("train")
-    return CoPilotCurriculum(env, _settings(**over), train, env.tasks("test")[0], lambda k: 0.1, rng, seed), rng
+    return CoPilotCurriculum(
+        env, _settings(**over), train, env.tasks("test")[0], lambda k: 0.1, rng, seed
+    ), rng
 
 
 def _subtasks(trees):

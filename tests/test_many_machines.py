@@ -127,7 +127,10 @@ def test_smoke_sweep_on_two_nodes_tracked_and_reported_through_a_server(mlflow_s
     )
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     print(f"two-node smoke sweep: {time.time() - started:.0f} s")
-    assert f"open {url}/#/experiments/" in out.stdout and "?workflowType=machine_learning" in out.stdout
+    # a server's view of the trials: nothing to start, the page to open
+    assert f"MLflow UI: open {url}/#/experiments/" in out.stdout
+    assert "/runs?viewStateShareKey=trials&compareRunsMode=TABLE&workflowType=machine_learning" in out.stdout
+    assert "Connected to Ray cluster" not in out.stdout + out.stderr  # (a notice: in the console log)
 
     nodes = set()
     for result_file in (tmp_path / "results" / "smoke" / "tune").rglob("result.json"):

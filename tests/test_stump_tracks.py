@@ -293,7 +293,9 @@ def test_copilot_and_sac_report_the_mastered_share_on_the_walker(ray_session):
             assert keys.result_value(result, keys.EVAL_MASTERED) == 0.0  # an untrained walker masters nothing
             assert keys.result_value(result, keys.EVAL_ENV_RETURN) < 0  # it falls: -100
             if cls is CoPilotConfig:
-                tree = algo.curriculum.planner.sample(algo.test_starts[:1], algo.test_goals[:1], deterministic=True)
+                tree = algo.curriculum.planner.sample(
+                    algo.test_starts[:1], algo.test_goals[:1], deterministic=True
+                )
                 assert tree.shape == (1, 5, 1)
         finally:
             algo.stop()

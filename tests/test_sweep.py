@@ -93,6 +93,49 @@ def test_cli_bad_spec_exits_2_naming_the_key_without_ray(tmp_path):
     assert "RAY_IMPORTED False" in proc.stdout
 
 
+def _storage_run(spec: Path, *args: str) -> subprocess.CompletedProcess:
+    """`python -m copilot_ray.sweep SPEC ARGS`, reporting whether Ray was imported."""
+    wrapper = (
+        "import runpy, sys\n"
+        f"sys.argv = ['copilot_ray.sweep', {str(spec)!r}, *{list(args)!r}]\n"
+        "try:\n    runpy.run_module('copilot_ray.sweep', run_name='__main__')\n"
+        "except SystemExit as e:\n    code = e.code\n"
+        "print('RAY_IMPORTED', 'ray' in sys.modules)\n"
+        "sys.exit(code)\n"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", wrapper], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+
+
+@pytest.mark.parametrize("check", [True, False], ids=["--check", "run"])
+@pytest.mark.parametrize("key", ["storage", "uri"])
+def test_a_storage_or_store_that_cannot_be_written_is_refused_before_ray(tmp_path, key, check):
+    """A file where the results' folder must go: one line naming the key and value, exit 2, no Ray,
+    nothing created, whether asked for the plan or the run."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("in the way")
+    data = yaml.safe_load(_smoke_copy(tmp_path).read_text())
+    bad = str(blocker / "results") if key == "storage" else f"sqlite:///{blocker}/mlflow.db"
+    data["tracking"][key] = bad
+    spec = tmp_path / "unwritable.yaml"
+    spec.write_text(yaml.safe_dump(data))
+    proc = _storage_run(spec, *(["--check"] if check else []))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.count("\n") == 1, proc.stderr
+    assert f"tracking.{key}: {bad!r} is invalid: {blocker} is a file" in proc.stderr
+    assert "RAY_IMPORTED False" in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml", "unwritable.yaml"]
+
+
+def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("in the way")
+    uri = f"sqlite:///{blocker}/sub/mlflow.db"
+    proc = _storage_run(_smoke_copy(tmp_path), "--check", "--tracking-uri", uri)
+    assert proc.returncode == 2 and f"--tracking-uri {uri!r} is invalid: {blocker} is a file" in proc.stderr
+
+
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
 def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
     from copilot_ray.sweep import main
@@ -286,6 +329,22 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
     assert main([str(path)]) == 0
     out = capsys.readouterr().out
     assert out.index("part 1 of 2: p_rrt") < out.index("part 2 of 2: p_sgt")
+    # Quiet: the first line says where the notices went; the closing commands run as printed (the
+    # report's with an --out of the test's own, the UI's asked for its help: it serves in
+    # tests/test_printed_commands.py).
+    lines = out.splitlines()
+    assert (
+        lines[0].startswith(f"sweep {path}: starting Ray")
+        and (tmp_path / "results" / "p_rrt" / "console.log").is_file()
+    )
+    report = [line.removeprefix("Report: ") for line in lines if line.startswith("Report: ")][-1]
+    done = subprocess.run(
+        ["bash", "-c", f"{report} --out {tmp_path / 'report'}"], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "report" / "report.md").is_file()
+    ui = [line.removeprefix("MLflow UI: ") for line in lines if line.startswith("MLflow UI: ")][-1]
+    assert subprocess.run(["bash", "-c", f"{ui} --help"], capture_output=True, timeout=120).returncode == 0
     # One RRT* reference per agent, stored by the RRT* part and divided by in the SGT-PG part.
     # (the test session's cache, set in conftest.py before Ray started: trial workers see it too)
     cache = Path(os.environ["COPILOT_RAY_CACHE"]) / "rrt_reference"

@@ -2,11 +2,14 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from copilot_ray import train
 from copilot_ray.algorithms.copilot.settings import SETTINGS
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_preset_flag_sets_the_readings_and_explicit_flags_override_it():
@@ -81,6 +84,15 @@ NEWCOMERS_BAD_FLAGS = [
     (["--planner-hidden", "[64,64"], "--planner-hidden: '[64,64' is invalid: not a value"),
     (["--layout", "nope"], "--layout 'nope' is invalid"),
     (["--env", "maze-pont"], "--env 'maze-pont' is invalid: unknown env id"),
+    # a store or checkpoint folder under a file: refused before Ray, not a FileNotFoundError after it
+    (
+        ["--tracking-uri", f"sqlite:///{ROOT}/pyproject.toml/mlflow.db"],
+        f"--tracking-uri 'sqlite:///{ROOT}/pyproject.toml/mlflow.db' is invalid: {ROOT}/pyproject.toml is a file",
+    ),
+    (
+        ["--checkpoint-dir", f"{ROOT}/pyproject.toml/run"],
+        f"--checkpoint-dir '{ROOT}/pyproject.toml/run' is invalid: {ROOT}/pyproject.toml is a file",
+    ),
 ]
 
 
@@ -108,6 +120,20 @@ def test_bad_flags_exit_2_in_one_line_before_ray_is_imported():
     ):
         assert (rc, ray_imported) == (2, False), (argv, err)
         assert message in err and "Traceback" not in err, (argv, err)
+
+
+def test_a_default_results_folder_that_cannot_be_made_is_refused(tmp_path, monkeypatch, capsys):
+    """`results` is a file here: the default store and checkpoint folder (results/train) are named."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "results").write_text("not a folder")
+    assert train.main(["--stop-iters", "1"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        f"error: --tracking-uri 'sqlite:///{tmp_path}/results/train/mlflow.db' (default) is invalid: "
+        f"{tmp_path}/results is a file, so no file can be made under it",
+        f"error: --checkpoint-dir 'results/train' (default) is invalid: {tmp_path}/results is a file, "
+        "so no folder can be made under it",
+    ]
 
 
 def test_every_problem_is_reported_at_once(capsys):
@@ -146,6 +172,11 @@ def test_train_with_no_tracking_flag_records_a_run_in_the_default_store(tmp_path
         env=env,
     )
     assert done.returncode == 0, done.stderr[-2000:]
+    # quiet: its own first line at once, Ray's and RLlib's notices only in the run's console log
+    assert done.stdout.splitlines()[0].startswith("train: training CO-PILOT K=1 b=1 on maze-point (empty)")
+    assert "new API stack" not in done.stdout + done.stderr and "gputil" not in done.stdout + done.stderr
+    (log,) = (tmp_path / "results" / "train").glob("*.console.log")
+    assert "new API stack" in log.read_text() and "gputil" in log.read_text()
     client = mlflow.MlflowClient(f"sqlite:///{tmp_path / 'results' / 'train' / 'mlflow.db'}")
     exp = client.get_experiment_by_name("copilot-train")
     runs = client.search_runs([exp.experiment_id])
@@ -155,3 +186,69 @@ def test_train_with_no_tracking_flag_records_a_run_in_the_default_store(tmp_path
         assert run.info.run_name in folders  # the checkpoint folder, named after the run
         assert run.data.params["checkpoint_dir"].endswith(run.info.run_name)
         assert run.data.tags["copilot.privileges"] == "collision_checks"
+
+
+# A tiny run that checks wiring: one repetition is 2 tasks x 3 sub-tasks x 5 steps = 30 env steps, and
+# SAC never updates (learning starts past the run's end).
+TINY = ["--layout", "empty", "--tree-depth", "1", "--task-batch-size", "2", "--tau-max", "5",
+        "--planner-warm-start", "0", "--eval-num-tasks", "5", "--cost-model-init-euclidean", "500",
+        "--num-steps-sampled-before-learning-starts", "10000"]  # fmt: skip
+
+
+@pytest.mark.ray
+def test_sigterm_stops_like_ctrl_c_and_resume_goes_on_in_the_same_run_to_a_repetition_budget(
+    ray_session, tmp_path, monkeypatch, capsys
+):
+    """SIGTERM after the first iteration: a checkpoint, the MLflow run KILLED, exit status 143 (Ray's own
+    SIGTERM handler, which exits, is not the one that runs). `--resume` continues that run from its
+    checkpoint with a budget of 90 env steps: an iteration is 2 repetitions of 30 here, and the run ends
+    at the repetition that reaches the budget (90), not at the end of its iteration (120)."""
+    import os
+    import signal
+
+    import mlflow
+
+    from copilot_ray import keys
+
+    monkeypatch.chdir(tmp_path)
+    shown = train.progress_line
+
+    def sigterm_after_the_first_iteration(result, started):
+        if result[keys.TRAINING_ITERATION] == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return shown(result, started)
+
+    monkeypatch.setattr(train, "progress_line", sigterm_after_the_first_iteration)
+    assert train.main([*TINY, "--repetitions", "2", "--stop-iters", "50"]) == train.EXIT_TERMINATED
+    out, err = capsys.readouterr()
+    lines = out.splitlines()
+    assert lines[0].startswith("train: training CO-PILOT K=1 b=2 on maze-point (empty), seed 0")
+    assert "evaluating on 5 validation and 5 test tasks" in out  # the heartbeat, inside the iteration
+    assert "new API stack" not in out + err  # RLlib's notices: in the log, not on the console
+    assert "terminated (SIGTERM): writing a checkpoint" in err
+    (folder,) = [p for p in (tmp_path / "results" / "train").iterdir() if p.is_dir()]
+    assert "MLflow run" in (folder.parent / f"{folder.name}.console.log").read_text()  # the whole console
+    resume = next(line for line in lines if line.startswith("continue it with: "))
+    assert resume.endswith(f"-m copilot_ray.train --resume {folder.relative_to(tmp_path)}")
+    client = mlflow.MlflowClient(f"sqlite:///{tmp_path / 'results' / 'train' / 'mlflow.db'}")
+    (run,) = client.search_runs([client.get_experiment_by_name("copilot-train").experiment_id])
+    assert run.info.status == "KILLED"
+
+    monkeypatch.setattr(train, "progress_line", shown)
+    assert train.main(["--resume", str(folder), "--stop-env-steps", "90"]) == 0
+    out = capsys.readouterr().out
+    assert f"resumed from {folder}: iteration 1, 60 env steps" in out
+    (again,) = client.search_runs([run.info.experiment_id])
+    assert again.info.run_id == run.info.run_id and again.info.status == "FINISHED"
+    history = client.get_metric_history(run.info.run_id, keys.TRAINING_ITERATION)
+    assert [(m.step, m.value) for m in history] == [(60, 1.0), (90, 2.0)]
+
+
+def test_resume_refuses_a_folder_without_a_run_and_flags_of_the_runs_own(tmp_path, capsys):
+    assert train.main(["--resume", str(tmp_path)]) == 2
+    assert f"--resume {str(tmp_path)!r} is invalid: {tmp_path / train.RUN_FILE} does not exist" in (
+        capsys.readouterr().err
+    )
+    (tmp_path / train.RUN_FILE).write_text("{}")
+    assert train.main(["--resume", str(tmp_path), "--tree-depth", "3"]) == 2
+    assert "--tree-depth is invalid with --resume" in capsys.readouterr().err

@@ -2,7 +2,7 @@
 it learns from the traversals. Ray-free: the agent (`algorithms/sac`'s GoalSAC) holds one, or none (SAC, HER,
 SoRB traverse [s0, g]). One iteration of the agent, with a curriculum:
 
-    metrics = curriculum.prepare(iteration, rng)           before the tasks are drawn (CO-PILOT: warm start)
+    metrics = curriculum.prepare(iteration, rng, heartbeat) before the tasks are drawn (CO-PILOT: warm start)
     idx     = rng.choice(train, curriculum.tasks_to_draw(n))  the planner's batch; the agent traverses n
     repeat b = curriculum.repetitions times:
         trees, metrics = curriculum.trees(starts, goals, n, rng)     the planner phase
@@ -51,7 +51,7 @@ class Curriculum(Protocol):
     repetitions: int
     planner: Any
 
-    def prepare(self, iteration: int, rng: np.random.Generator) -> dict[str, float]: ...
+    def prepare(self, iteration: int, rng: np.random.Generator, heartbeat=None) -> dict[str, float]: ...
 
     def tasks_to_draw(self, traversed: int) -> int: ...
 
@@ -135,9 +135,10 @@ class CoPilotCurriculum:
         self._tau_probe = (probe_starts, directions / np.linalg.norm(directions, axis=1, keepdims=True))
 
     # ------------------------------------------------------------------------------ an iteration
-    def prepare(self, iteration: int, rng: np.random.Generator) -> dict[str, float]:
-        """The warm start, on the first call (of a run: it is checkpointed)."""
-        return {} if self._warm_started else self._warm_start(rng)
+    def prepare(self, iteration: int, rng: np.random.Generator, heartbeat=None) -> dict[str, float]:
+        """The warm start, on the first call (of a run: it is checkpointed); `heartbeat`
+        (copilot_ray.heartbeat.Heartbeat, optional) says how far it got."""
+        return {} if self._warm_started else self._warm_start(rng, heartbeat)
 
     def tasks_to_draw(self, traversed: int) -> int:
         """The planner's PPO batch: `planner_task_batch_size` tasks, of which the agent traverses the
@@ -243,13 +244,18 @@ class CoPilotCurriculum:
             collision_lengths=getattr(self.env, "collision_lengths", None),
         )
 
-    def _warm_start(self, rng: np.random.Generator) -> dict[str, float]:
+    def _warm_start(self, rng: np.random.Generator, heartbeat=None) -> dict[str, float]:
         """`planner_warm_start` planner phases on the Euclidean + collision cost (alpha = 1): no env
         steps, so the agent's first sub-goals do not run through walls (SGT-PG's planner, trained alone)."""
         t0 = time.perf_counter()
         cost = self._segment_cost(1.0)
         n = min(WARM_START_TASKS, len(self.train_starts))
-        for _ in range(self.settings["planner_warm_start"]):
+        phases = self.settings["planner_warm_start"]
+        if heartbeat is not None:
+            heartbeat.say(f"planner warm start: {phases} planner phases on {n} tasks each (no env steps)")
+        for phase in range(phases):
+            if heartbeat is not None:
+                heartbeat.beat(lambda phase=phase: f"planner warm start: phase {phase + 1} of {phases}")
             idx = rng.choice(len(self.train_starts), size=n, replace=False)
             built = self.phases.run(
                 self.train_starts[idx], self.train_goals[idx], self.depth, cost, rng, deterministic=True

@@ -134,7 +134,7 @@ class RRTTreeCurriculum:
         self.depth, self.repetitions = check_depth(depth), int(repetitions)
         self.planner = RRTTrees(env, depth, time_limit_s, seed=seed)
 
-    def prepare(self, iteration: int, rng) -> dict[str, float]:
+    def prepare(self, iteration: int, rng, heartbeat=None) -> dict[str, float]:
         return {}
 
     def tasks_to_draw(self, traversed: int) -> int:

@@ -79,6 +79,7 @@ from copilot_ray.algorithms.sac.traversal_env import (
 )
 from copilot_ray.envs import make
 from copilot_ray.evaluation import AgentEvaluation
+from copilot_ray.heartbeat import Heartbeat
 from copilot_ray.planning.curriculum import Curriculum
 from copilot_ray.planning.health import check_finite, fill_nan, injected_fault
 from copilot_ray.planning.path_metrics import RRTReference
@@ -361,6 +362,7 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
         self._batch: np.ndarray | None = None
         self._batch_done = 0
         self._update_seconds, self._updates_done = 0.0, 0
+        self.heartbeat = Heartbeat()  # a line every few seconds inside an iteration (`train` prints it)
         self.agent_updater = self._make_agent_updater()
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
         # exact over the run instead of rounded per sampling round.
@@ -422,7 +424,7 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
         curriculum = self.curriculum
         self._check_learned("at the start of the iteration", drill=True)
         if curriculum is not None:
-            self._log(curriculum.prepare(self.iteration + 1, self._rng))
+            self._log(curriculum.prepare(self.iteration + 1, self._rng, self.heartbeat))
         self._subtasks_lost = 0
         self._update_seconds, self._updates_done = 0.0, 0  # this iteration's SAC updates (_learn)
         if self._batch is None:

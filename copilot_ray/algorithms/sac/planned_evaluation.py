@@ -78,6 +78,8 @@ class PlannedEvaluation:
         if plan is None:
             return
         env_steps = self._env_steps()
+        n = self.evaluation.num_tasks
+        self.heartbeat.say(f"evaluating on {n} validation and {n} test tasks at {env_steps:,} env steps")
         for split in EVAL_SPLITS:
             self._evaluate_split(split, plan, env_steps)
 

@@ -122,6 +122,13 @@ class RunnerTraversal:
             if episodes:
                 records.append(subtask_records(episodes))
                 self._learn(episodes)
+            self.heartbeat.beat(
+                lambda: (
+                    f"iteration {self.iteration + 1}: repetition {self._batch_done + 1} of "
+                    f"{cfg.repetitions}, {self._env_steps():,} env steps, {self._updates_done:,} SAC updates "
+                    "this iteration"
+                )
+            )
         if not records:
             raise RuntimeError("no sub-task of this repetition was traversed: every env runner failed")
         return concatenated(records)

@@ -1,0 +1,52 @@
+"""A run says what it is doing at least every INTERVAL_S inside an iteration, and no more often."""
+
+from __future__ import annotations
+
+import logging
+
+from copilot_ray.heartbeat import INTERVAL_S, LOGGER_NAME, Heartbeat
+
+
+def test_a_beat_speaks_once_the_interval_passed_and_say_always_speaks(caplog):
+    now = [0.0]
+    beat = Heartbeat(clock=lambda: now[0])
+    with caplog.at_level(logging.INFO, logger=LOGGER_NAME):
+        for t in range(0, 35):  # one beat a second for 35 s
+            now[0] = float(t)
+            beat.beat(lambda: f"at {now[0]:.0f}")
+        beat.say("evaluating")
+    assert [r.getMessage() for r in caplog.records] == ["at 10", "at 20", "at 30", "evaluating"]
+    assert INTERVAL_S <= 30
+
+
+def test_a_step_longer_than_the_interval_is_covered_by_the_watcher(caplog):
+    """One planner phase that outlasts the interval: the watcher says the latest message again, marked."""
+    now = [0.0]
+    beat = Heartbeat(clock=lambda: now[0], doing="building the algorithm...")
+    with caplog.at_level(logging.INFO, logger=LOGGER_NAME):
+        beat.overdue()  # nothing overdue yet
+        now[0] = 10.0
+        beat.overdue()
+        beat.beat(lambda: "planner warm start: phase 14 of 1000")  # noted, not due (just said)
+        now[0] = 25.0
+        beat.overdue()
+        now[0] = 40.0
+        beat.overdue()
+    assert [r.getMessage() for r in caplog.records] == [
+        "building the algorithm... (still)",
+        "planner warm start: phase 14 of 1000 (still)",
+        "planner warm start: phase 14 of 1000 (still)",
+    ]
+
+
+def test_watched_runs_the_watcher_only_while_the_block_runs(caplog):
+    import time
+
+    from copilot_ray.heartbeat import watched
+
+    beat = Heartbeat(interval_s=0.05, doing="waiting")
+    with caplog.at_level(logging.INFO, logger=LOGGER_NAME), watched(beat, period_s=0.01):
+        time.sleep(0.3)
+    said = len(caplog.records)
+    time.sleep(0.2)
+    assert said >= 2 and len(caplog.records) == said
