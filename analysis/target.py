@@ -26,7 +26,7 @@ from copilot_ray.keys import (
 
 from . import stats
 from .aggregate import ConfigSummary, common_budget, headline_metric, improvement_pairs, value_at
-from .figures import depth_of
+from .run_figures import depth_of
 from .tables import Table
 
 # (column, metric key; "{K}" is the run's finest tree layer). Evaluation figures first (on the report's

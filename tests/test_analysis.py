@@ -292,8 +292,8 @@ def test_diagnostics_draw_a_flat_methods_lines_only_where_they_mean_what_the_pan
     """HER's "plan" is the straight segment and its training "sub-task" the whole task: drawn in the
     sub-goal panels they would read as a planner's. A tree draws everywhere; SoRB (planned success
     differs from direct) draws its planned path; HER (planned = direct) only the critic and success."""
-    from analysis.figures import _DIAG_PANELS, PLAN, TREE, diagnostic_keys
     from analysis.load import Trial
+    from analysis.run_figures import _DIAG_PANELS, PLAN, TREE, diagnostic_keys
     from copilot_ray.keys import DIAG_SEGMENT_LENGTH_LAYER, PLANNED_COLLISION_FREE
 
     def trial(curves):
@@ -346,7 +346,7 @@ def test_tree_depth_zero_gets_a_note_not_a_failed_figure(store):
     ("depth", "layers"), [(5, [2, 3, 4]), (4, [2, 3, 4]), (3, [1, 2, 3]), (2, [1, 2]), (1, [1])]
 )
 def test_tree_figure_shows_the_papers_layers(depth, layers):
-    from analysis.figures import tree_figure_layers
+    from analysis.run_figures import tree_figure_layers
 
     assert tree_figure_layers(depth) == layers
 

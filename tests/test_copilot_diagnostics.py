@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from copilot_ray import keys
+from copilot_ray.algorithms.sac.traversal_diagnostics import traversal_diagnostics
+from copilot_ray.envs import make
 from copilot_ray.planning.plan_diagnostics import (
     plan_diagnostics,
     tau_hat_profile,
 )
-from copilot_ray.algorithms.sac.traversal_diagnostics import traversal_diagnostics
-from copilot_ray.envs import make
 
 
 def euclid(a, b):

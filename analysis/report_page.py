@@ -1,0 +1,320 @@
+"""The report's page: a short list of blocks (headings, text, tables, figures) rendered twice, as Markdown
+(report.md) and HTML (report.html, which the MLflow UI previews); and the blocks whose wording is the
+report's own: the provenance (commits, stores, spec, command), the summary's text, the probability of
+improvement and the target's verdict. `report.py` gathers the figures and tables and calls `document`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import html
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from copilot_ray.commands import python_module
+from copilot_ray.keys import GIT_COMMIT_TAG, SUCCESS_METRICS
+from copilot_ray.privileges import DESCRIPTIONS
+
+from . import stats, tables, target
+from .aggregate import ConfigSummary, Missing
+from .export import METRICS_CSV
+from .load import VALIDATION, Sweep, spec_artifacts
+
+
+def command_line(argv: list[str]) -> str:
+    """The command that produced the report, as one can paste it again."""
+    return python_module("analysis.report", *argv)
+
+
+def one_seed_each(configs: list[ConfigSummary]) -> bool:
+    """Every configuration has (at most) one seed: a demo or a first look, not a comparison; its report
+    leaves out what only a comparison needs (the long summary of the statistics, the seed rule's notes,
+    the probability of improvement)."""
+    return all(c.n_seeds <= 1 for c in configs)
+
+
+# The page is a short list of blocks rendered twice: Markdown (report.md) and HTML (report.html, which
+# the MLflow UI previews).
+
+
+def provenance(sweep: Sweep, argv: list[str], log_to: str | None) -> list[str]:
+    """Where the numbers come from: commits, stores, experiment, spec, and the command that made the report."""
+    commits = sorted({t.tags.get(GIT_COMMIT_TAG, "") for t in sweep.trials} - {""})
+    untagged = sum(1 for t in sweep.trials if not t.tags.get(GIT_COMMIT_TAG))
+    lines = [f"git commit{'s' if len(commits) > 1 else ''}: {', '.join(commits) or '(not tagged)'}"]
+    if len(commits) > 1:
+        lines.append(
+            f"WARNING: the runs come from {len(commits)} different commits, not from one: "
+            "the code may differ between the configurations compared"
+        )
+    if untagged:
+        lines.append(f"{untagged} of {len(sweep.trials)} runs carry no {GIT_COMMIT_TAG} tag")
+    stores = sorted({sweep.tracking_uri, *(t.tracking_uri for t in sweep.trials if t.tracking_uri)})
+    lines.append(f"tracking URI{'s' if len(stores) > 1 else ''}: {', '.join(stores)}")
+    joined = "".join(f" + experiment {name} (--also-experiment)" for name in sweep.joined_experiments)
+    lines.append(
+        f"experiment: {sweep.experiment} (id {sweep.experiment_id}){joined}; sweep: {sweep.sweep_name}"
+    )
+    lines += _spec_lines(sweep)
+    lines.append(f"command: {command_line(argv)}")
+    lines.append(_report_code())
+    lines.append(
+        f"generated {_dt.datetime.now().isoformat(timespec='seconds')}"
+        + (f"; logged to run {log_to} under report/" if log_to else "")
+    )
+    return lines
+
+
+def _report_code() -> str:
+    """Which code read the store: the runs' commit says how they ran, this one how they were summarised
+    (a later report may read the same store differently, e.g. final success at the budget)."""
+    root = Path(__file__).resolve().parents[1]
+
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    if not commit:
+        return "report code: not a git checkout (its commit is unknown)"
+    dirty = git("status", "--porcelain", "--", "analysis", "copilot_ray")
+    return f"report code: commit {commit[:12]}" + (
+        " with uncommitted changes to analysis/ or copilot_ray/" if dirty else ""
+    )
+
+
+def _spec_lines(sweep: Sweep) -> list[str]:
+    if not sweep.parents:
+        return [f"spec: no sweep (parent) run; sweep names from the runs' tags: {sweep.sweep_name}"]
+    out = []
+    for uri, run_id, name in sweep.parents:
+        files = spec_artifacts(uri, run_id)  # the resolved spec (what ran) first
+        if files:
+            out.append(f"spec: {', '.join(f'runs:/{run_id}/{f}' for f in files)} (sweep {name!r})")
+        else:
+            out.append(f"spec: sweep {name!r}; its sweep run {run_id} holds no spec artifact")
+    return out
+
+
+def improvement_blocks(configs, frame, several: bool, over: str = "best") -> list[tuple]:
+    """Under the headline table: P(CO-PILOT's default beats the best other method, or each other row)."""
+    if not several or not any(m in c.metrics for c in configs for m in SUCCESS_METRICS):
+        return []  # one method, or planners alone (no success of an agent to compare)
+    whom = (
+        "the best other method (highest final success)"
+        if over == "best"
+        else "each other configuration (its own variants, an ablation's rows, included)"
+    )
+    head = ("h2", f"Probability of improvement over {whom.split(' (')[0]}")
+    why = (
+        "P(X > Y) (Agarwal et al. 2021): the chance that a seed of CO-PILOT's default configuration "
+        "(algorithm copilot, no preset; a variant such as the privileged after_failure restart is a row of "
+        f"its own, its privileges beside it) scores higher than a seed of {whom}, "
+        "ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
+        f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
+        "seeds on each side. The last column says whether CO-PILOT's CI of final success lies wholly above "
+        "the other method's (a CI on both sides needs as many seeds)."
+    )
+    if frame.empty:
+        return [head, ("p", why), ("p", "No CO-PILOT default configuration or no other method with success.")]
+    return [head, ("p", why), ("table", tables.improvement_table(frame))]
+
+
+def target_blocks(configs: list[ConfigSummary], tasks: str, args) -> list[tuple]:
+    """The stated claim judged (with --target), then the diagnostics at the budget in numbers."""
+    blocks: list[tuple] = []
+    if args.target is not None:
+        blocks += [("h2", f"Target: final {tasks} success >= {args.target:g}"), ("p", TARGET_TEXT)]
+        blocks.append(("ul", target.verdict(configs, args.target, tasks)))
+    table = target.diagnostics_table(configs, reps=args.bootstrap_reps, seed=args.seed)
+    if table is not None:
+        blocks += [("h2", "Diagnostics at the budget"), ("p", DIAGNOSTICS_TEXT), ("table", table)]
+    return blocks
+
+
+TARGET_TEXT = (
+    "The claim, stated before the runs: CO-PILOT's default configuration reaches the target in final "
+    f"success, IQM over >= {stats.MIN_SEEDS_FOR_CI} seeds, and the lower end of its 95% CI lies above the "
+    "upper end of the best other method's (the other algorithm with the highest final success). Each part "
+    "is met, NOT met with the amount it falls short by, or cannot be judged on fewer seeds; the "
+    "diagnostics below say where a shortfall comes from."
+)
+DIAGNOSTICS_TEXT = (
+    "The diagnostics figure's curves in numbers, for the configurations that logged sub-goal tree "
+    "diagnostics: each seed's value at the env-step budget (linear between the rows on either side, as "
+    f"final success): IQM [95% CI] from {stats.MIN_SEEDS_FOR_CI} seeds on, else the mean (the seeds' "
+    "range, n). The first three are evaluations on the report's tasks: the share of plans without a "
+    "collision, of goals the agent reached along its plan with collisions allowed, and the agent's "
+    "success without a plan. The rest are the training traversals' (the iteration's sub-tasks; K is the "
+    "tree's finest layer): sub-task success, after a reached and after a missed sub-task (a low second "
+    "figure: one miss costs the rest of a traversal), and the new sub-goals placed inside obstacles and "
+    "the segments longer than one sub-task can cover (the planner asking for what the agent cannot do)."
+)
+
+
+def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str) -> str:
+    windows = []
+    for metric, short in tables.SHORT.items():
+        m = next((c.metrics[metric] for c in configs if metric in c.metrics), None)
+        if m is not None:
+            lo, hi = m.auc_window
+            windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
+    which = f"Validation tasks only ({tasks_why}). " if tasks == VALIDATION else "Test tasks only. "
+    if one_seed_each(configs):
+        return (
+            "One seed per configuration: a look at how the runs went, not a comparison (no spread, no "
+            f"confidence interval, no probability of improvement: a comparison runs {stats.MIN_SEEDS_FOR_CI} "
+            f"seeds or more, as sweeps/fair_maze.yaml does). {which}Final = the success at the env-step "
+            "budget, linear between the evaluations on either side; AUC = the area under the success "
+            "curve over the env steps " + (", ".join(windows) or "none") + ", divided by their length; "
+            "steps to a threshold = the first evaluation at or above it."
+        )
+    return (
+        which
+        + "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method "
+        "of a comparison), linear between its evaluations on either side; a seed whose evaluations end "
+        "before it (still running) or a sweep without one: its last evaluation; one first evaluated "
+        "after it: its first. Not simply the last evaluation: a trial stops at the first iteration end "
+        "past the budget, so long iterations would buy extra env steps. Rows that only repeat an earlier "
+        "evaluation are left out everywhere. AUC = area under each seed's success curve, linear between "
+        "evaluations, over one env-step window for every configuration (from the latest first evaluation "
+        "to the earliest last evaluation among the finished seeds, and at the budget at the latest: no "
+        "success is assumed before an evaluation or after a seed's last; a seed that does not cover it, "
+        "e.g. one still running, has "
+        "no AUC), divided by its length; windows: "
+        + (", ".join(windows) or "none")
+        + f". No best-over-evaluations figure. With >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM over seeds "
+        "(inter-quartile mean) and 95% CI = percentile bootstrap over seeds (one env per experiment, so "
+        "the stratified bootstrap resamples seeds within the configuration); with fewer: the mean and the "
+        "range over the seeds, no CI. Steps to a threshold = first evaluation at or above it, IQM (mean "
+        "with fewer than 5 seeds) over seeds counting a seed that never got there as infinitely late, so "
+        "'not reached' means that figure is infinite; (k/n) = seeds that reached it. Env steps: mean over "
+        "seeds at the last result. Privileges: from the runs' tags ('-': runs older than the tag): "
+        + "; ".join(f"{k} = {v}" for k, v in DESCRIPTIONS.items())
+        + "; collision checks, resets, map queries: cumulative counts at the last result, mean over seeds "
+        "('-': not logged). FAILED/KILLED runs are excluded; RUNNING runs count with what they have so far. "
+        "A configuration is one algorithm, config key, env and env config: seeds are pooled only within it."
+    )
+
+
+DETAILS_TEXT = (
+    "Details: one row per configuration and success metric it logged. success = what every method "
+    "reports (CO-PILOT and SoRB: the agent following its plan; SAC, HER, PPO: the agent alone); planned = "
+    "the agent following the planner's finest path; direct = the agent alone. A row named 'success = "
+    "planned' (or '= direct') stands for metrics that agree in every figure. Steps to a threshold and "
+    "wall time as above; final at = the env step the final success is read at (mean over seeds)."
+)
+
+
+def document(
+    sweep,
+    configs,
+    missing: Missing,
+    axes_shown,
+    figs,
+    tree_figs,
+    frame,
+    notes,
+    left_out,
+    provenance,
+    below,
+    tasks_why: str,
+):
+    statuses: dict[str, int] = {}
+    for t in sweep.trials:
+        statuses[t.status] = statuses.get(t.status, 0) + 1
+    seeds = "; ".join(f"{c.label}: {c.n_seeds}" for c in configs)
+    doc: list[tuple] = [("h1", f"Sweep report: {sweep.experiment}"), ("h2", "Provenance"), ("ul", provenance)]
+    doc.append(
+        (
+            "ul",
+            [
+                f"sweep: {sweep.sweep_name}; parent run: {sweep.parent_run_id or '(none)'}",
+                f"trials: {len(sweep.trials)} ({', '.join(f'{n} {s}' for s, n in sorted(statuses.items()))}); "
+                f"configurations: {len(configs)}; varying: {axes_shown}",
+                f"seeds with evaluations per configuration: {seeds}",
+                f"every run's metrics: {METRICS_CSV}",
+            ],
+        )
+    )
+    if sweep.other_parent_ids:
+        notes.append(
+            "Other sweep runs in this experiment (use --parent-run): " + ", ".join(sweep.other_parent_ids)
+        )
+    doc.append(("h2", "Missing or incomplete"))
+    doc.append(
+        ("ul", missing.lines() + notes)
+        if not missing.empty() or notes
+        else ("p", "Nothing missing: every trial finished with evaluations.")
+    )
+    if left_out:
+        doc.append(("h2", "Left out of the figures"))
+        doc.append(("ul", left_out))
+    doc.append(("h2", "Summary"))
+    doc.append(("p", summary_text(configs, sweep.tasks, tasks_why)))
+    doc.append(("table", tables.headline_table(frame)))
+    details = tables.details_table(frame)
+    if details.rows:
+        doc.append(("h3", "Details by success metric"))
+        doc.append(("p", DETAILS_TEXT))
+        doc.append(("table", details))
+    doc += below
+    for title, path, *caption in figs + tree_figs:
+        doc.append(("h2", title))
+        doc.append(("img", path.name, title))
+        if caption and caption[0]:
+            doc.append(("p", caption[0]))
+    return doc
+
+
+def to_markdown(doc) -> str:
+    out = []
+    for block in doc:
+        kind = block[0]
+        if kind in HEADINGS:
+            out.append(f"{'#' * HEADINGS[kind]} {block[1]}\n")
+        elif kind == "p":
+            out.append(block[1] + "\n")
+        elif kind == "ul":
+            out.append("\n".join(f"- {item}" for item in block[1]) + "\n")
+        elif kind == "table":
+            out.append(block[1].markdown())
+        elif kind == "img":
+            out.append(f"![{block[2]}]({block[1]})\n")
+    return "\n".join(out)
+
+
+HEADINGS = {"h1": 1, "h2": 2, "h3": 3}
+# Tables fit the page: small type, the full width, cells that wrap between words (a long word breaks only
+# where it would overflow).
+HTML_STYLE = (
+    "body{font-family:sans-serif;max-width:1200px;margin:auto;padding:0 12px;line-height:1.4}"
+    "table{border-collapse:collapse;font-size:12px;width:100%;table-layout:auto;margin:8px 0 16px}"
+    "td,th{border:1px solid #ccc;padding:3px 6px;vertical-align:top;overflow-wrap:break-word}"
+    "th{background:#f2f2f2;text-align:left;font-weight:600}"
+    "tr:nth-child(even) td{background:#fafafa}"
+    "p,li{font-size:14px}img{max-width:100%;height:auto}"
+)
+
+
+def to_html(doc, title: str) -> str:
+    body = []
+    for block in doc:
+        kind = block[0]
+        if kind in HEADINGS or kind == "p":
+            body.append(f"<{kind}>{html.escape(block[1])}</{kind}>")
+        elif kind == "ul":
+            body.append("<ul>" + "".join(f"<li>{html.escape(i)}</li>" for i in block[1]) + "</ul>")
+        elif kind == "table":
+            body.append(block[1].html())
+        elif kind == "img":
+            body.append(f'<img src="{html.escape(block[1])}" alt="{html.escape(block[2])}">')
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{HTML_STYLE}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
