@@ -77,7 +77,6 @@ objects).
 
 from copilot_ray.sweep_spec.errors import SpecError
 from copilot_ray.sweep_spec.models import (
-    ParamSearch,
     SweepSpec,
     build_algorithm_config,
     load_spec,
@@ -86,6 +85,7 @@ from copilot_ray.sweep_spec.models import (
     parse_spec,
 )
 from copilot_ray.sweep_spec.plan import default_point, format_plan
+from copilot_ray.sweep_spec.sections import ParamSearch
 from copilot_ray.sweep_spec.tune_translation import (
     optuna_define_by_run,
     to_tune_scheduler,

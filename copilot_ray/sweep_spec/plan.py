@@ -10,7 +10,8 @@ from copilot_ray.registry import get_algorithm
 from copilot_ray.sweep_spec.estimate import budget_overshoot, cpu_warning, trial_estimates, wall_time_line
 
 if TYPE_CHECKING:  # annotations only: models imports this module
-    from copilot_ray.sweep_spec.models import ParamSearch, SweepSpec
+    from copilot_ray.sweep_spec.models import SweepSpec
+    from copilot_ray.sweep_spec.sections import ParamSearch
 
 
 def format_plan(

@@ -9,7 +9,8 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from copilot_ray import keys
-from copilot_ray.sweep_spec.models import ParamSearch, SweepSpec
+from copilot_ray.sweep_spec.models import SweepSpec
+from copilot_ray.sweep_spec.sections import ParamSearch
 
 
 def tune_stop(spec: SweepSpec) -> dict[str, int]:
