@@ -33,14 +33,13 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import signal
 import sys
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -55,12 +54,8 @@ from copilot_ray.keys import (
     ENV_PARAM,
     ENV_STEPS,
     ENV_TAG,
-    EVAL_FRESH,
     EVAL_SUCCESS,
-    EVAL_SUCCESS_AUC,
-    PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
-    PATHS_PREFIX,
     RESOLVED_SPEC_ARTIFACT,
     SEARCHER_PARAM,
     SEARCHES,
@@ -68,10 +63,8 @@ from copilot_ray.keys import (
     SPEC_ARTIFACT,
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
-    TIME_TOTAL_S,
     TUNE_PATH_TAG,
     VARIANT_TAG,
-    result_value,
     validation_key,
 )
 from copilot_ray.mlflow_view import column
@@ -79,7 +72,15 @@ from copilot_ray.store import tracking_uri_problem, ui_hint, unwritable, unwrita
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
 from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
-from copilot_ray.trials.description import config_key, env_params, trial_flat
+from copilot_ray.sweep_summary import (
+    SweepOutcome,
+    TrialRow,
+    rows_from_grid,
+    summary_keys,
+    summary_metrics,
+    summary_table,
+)
+from copilot_ray.trials.description import config_key, env_params
 
 EXIT_INTERRUPTED = 130
 
@@ -131,175 +132,6 @@ def write_resolved_spec(spec, destination: Path, tracking_uri: str | None = None
     parse_spec(yaml.load(text, Loader=SpecLoader), str(destination))  # noqa: S506 - still valid?
     destination.write_text(text)
     return destination
-
-
-# ================================================================================================ summary
-@dataclass
-class TrialRow:
-    trial_id: str
-    config_key: str
-    seed: Any
-    status: str  # finished | error | unfinished
-    figures: dict[str, float]  # the last evaluated value of each of SUMMARY_METRICS (NaN: not logged)
-    env_steps: int
-    wall_s: float
-
-
-@dataclass
-class SweepOutcome:
-    status: str  # finished | errored | interrupted
-    exit_code: int
-    rows: list[TrialRow] = field(default_factory=list)
-    summary: str = ""
-    tracking_uri: str = ""
-    parent_run_id: str = ""
-    tune_paths: list[str] = field(default_factory=list)
-    wall_s: float = 0.0
-
-
-# The summary's columns, where any trial logged them: every agent's headline, CO-PILOT's pair (on the
-# VALIDATION tasks: what one may look at while choosing; the report shows the test tasks'), the
-# planners' (Fig. 4b/4c, test tasks: they have no validation figure; left out of a search's summary,
-# which must show nothing it could choose by on the test tasks: `summary_keys`).
-SUMMARY_METRICS = {
-    validation_key(EVAL_SUCCESS): "validation success",
-    validation_key(EVAL_SUCCESS_AUC): "validation AUC",
-    validation_key(SUCCESS_PLANNED): "validation planned",
-    validation_key(SUCCESS_DIRECT): "validation direct",
-    PATH_SUCCESS: "path success",
-    PATH_LENGTH_VS_RRT: "length / RRT*",
-}
-
-
-def _last_row(df, column: str) -> float:
-    if df is None or column not in df.columns or not len(df):
-        return float("nan")
-    return float(df[column].iloc[-1])
-
-
-def _last_valid(df, column: str) -> float:
-    if df is None or column not in df.columns:
-        return float("nan")
-    values = df[column].dropna()
-    return float(values.iloc[-1]) if len(values) else float("nan")
-
-
-def rows_from_grid(grid) -> list[TrialRow]:
-    """One row per Tune trial of a ResultGrid (Result.config is RLlib's full config: use the trials)."""
-    analysis = grid._experiment_analysis  # noqa: SLF001 - the trials with their flat Tune configs
-    rows = []
-    for trial in sorted(analysis.trials, key=lambda t: t.trial_id):
-        flat = trial_flat(trial.config or {})
-        m = trial.last_result or {}
-        df = analysis.trial_dataframes.get(trial.trial_id)
-        if df is not None and EVAL_FRESH in df.columns:
-            df = df[df[EVAL_FRESH] == 1.0]  # the evaluations themselves
-        # After Ctrl-C, Tune's cleanup marks stopped trials TERMINATED too: finished means a final result.
-        if trial.status == "ERROR":
-            status = "error"
-        else:
-            status = "finished" if trial.status == "TERMINATED" and m.get("done") else "unfinished"
-        rows.append(
-            TrialRow(
-                trial_id=trial.trial_id,
-                config_key=config_key(flat),
-                seed=flat.get(SEED_PARAM),
-                status=status,
-                # success: the last evaluation's; a path figure: the last result's (NaN where it was
-                # undefined then, e.g. a length ratio with no successful path, not an older value)
-                figures={
-                    key: (_last_row(df, key) if key.startswith(PATHS_PREFIX) else _last_valid(df, key))
-                    for key in SUMMARY_METRICS
-                },
-                env_steps=int(result_value(m, ENV_STEPS, 0) or 0),
-                wall_s=float(m.get(TIME_TOTAL_S, 0.0) or 0.0),
-            )
-        )
-    return rows
-
-
-def summary_keys(searched: bool) -> list[str]:
-    """SUMMARY_METRICS' keys a sweep shows: a search (Optuna) shows no test-task figure."""
-    return [k for k in SUMMARY_METRICS if not (searched and k.startswith(PATHS_PREFIX))]
-
-
-def summary_metrics(rows: Sequence[TrialRow], searched: bool = False) -> dict[str, float]:
-    """The parent run's metrics: per configuration, the mean over its seeds of each summary figure
-    (`summary/<configuration>/<figure>`), and the best configuration's of each (`summary/best/...`)."""
-    groups: dict[str, list[TrialRow]] = {}
-    for row in rows:
-        groups.setdefault(row.config_key, []).append(row)
-    out: dict[str, float] = {}
-    for key in summary_keys(searched):
-        label = SUMMARY_METRICS[key]
-        name = label.replace(" / ", "_per_").replace(" ", "_").replace("*", "")
-        means = {}
-        for config, group in groups.items():
-            values = [v for r in group if not math.isnan(v := r.figures.get(key, math.nan))]
-            if values:
-                means[config] = sum(values) / len(values)
-                out[f"summary/{_metric_name(config)}/{name}"] = means[config]
-        if means and key != PATH_LENGTH_VS_RRT:  # (a shorter path is better: no "best" of a ratio)
-            out[f"summary/best/{name}"] = max(means.values())
-    return out
-
-
-def _metric_name(text: str) -> str:
-    """`text` in the characters MLflow allows in a metric name."""
-    return "".join(c if c.isalnum() or c in "_-. :/" else "_" for c in text)[:200]
-
-
-MIN_SEEDS_FOR_SPREAD = 5  # below it a spread says little: the range, as the report shows it
-
-
-def _over_seeds(values: Sequence[float]) -> str:
-    """The mean over seeds and, with fewer than 5 seeds, their range; with 5 or more, ± the sample std."""
-    vals = [v for v in values if not math.isnan(v)]
-    if not vals:
-        return "-"
-    mean = sum(vals) / len(vals)
-    if len(vals) == 1:
-        return f"{mean:.2f}"
-    if len(vals) < MIN_SEEDS_FOR_SPREAD:
-        return f"{mean:.2f} [{min(vals):.2f}, {max(vals):.2f}]"
-    std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (len(vals) - 1))
-    return f"{mean:.2f} ± {std:.2f}"
-
-
-def summary_table(rows: Sequence[TrialRow], searched: bool = False) -> str:
-    """A markdown table per configuration: seeds, the mean over seeds of the final success with their range
-    (fewer than 5 seeds) or ± their sample std (`searched`: a search's, without test-task figures)."""
-    groups: dict[str, list[TrialRow]] = {}
-    for row in rows:
-        groups.setdefault(row.config_key, []).append(row)
-    shown = [
-        key
-        for key in summary_keys(searched)
-        if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
-    ] or [validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT)]
-    header = ["configuration", "seeds", *(SUMMARY_METRICS[key] for key in shown)]
-    header += ["env steps", "wall s/trial", "status"]
-    lines = [header]
-    for key, group in groups.items():
-        statuses = sorted({r.status for r in group})
-        lines.append(
-            [
-                key,
-                ",".join(str(r.seed) for r in group),
-                *(_over_seeds([r.figures.get(key, math.nan) for r in group]) for key in shown),
-                f"{sum(r.env_steps for r in group) / len(group):,.0f}",
-                f"{sum(r.wall_s for r in group) / len(group):.0f}",
-                "/".join(statuses),
-            ]
-        )
-    widths = [max(len(str(line[c])) for line in lines) for c in range(len(header))]
-
-    def fmt(cells):
-        return "| " + " | ".join(str(c).ljust(w) for c, w in zip(cells, widths, strict=True)) + " |"
-
-    out = [fmt(lines[0]), "|" + "|".join("-" * (w + 2) for w in widths) + "|"]
-    out += [fmt(line) for line in lines[1:]]
-    return "\n".join(out)
 
 
 # ================================================================================================ running

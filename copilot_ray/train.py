@@ -415,8 +415,7 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
     """Runs (or, with `saved`, resumes) the run until its budget, Ctrl-C or SIGTERM: the exit status."""
     import ray
 
-    from copilot_ray.privileges import tag_value
-    from copilot_ray.tracking import MlflowRun, git_commit, metrics_from_result, params_for_mlflow
+    from copilot_ray.tracking import metrics_from_result
 
     name = saved["name"] if saved else run_name(args, config)
     checkpoint_dir = Path(args.checkpoint_dir or RESULTS / name).absolute()
@@ -437,33 +436,7 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
                 include_dashboard=False,
                 log_to_driver=False,
             )
-    run = None
-    if tracking_uri and saved:
-        run = MlflowRun.reopen(tracking_uri, saved["run_id"])
-        print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}, resumed", flush=True)
-    elif tracking_uri:
-        RESULTS.mkdir(parents=True, exist_ok=True)
-        run = MlflowRun(
-            tracking_uri,
-            args.experiment,
-            run_name=name,
-            tags={
-                keys.ALGORITHM_TAG: ALGORITHM,
-                keys.ENV_TAG: args.env,
-                keys.K_TAG: str(config.tree_depth),
-                keys.B_TAG: str(config.repetitions),
-                keys.ALPHA_SCHEDULE_TAG: str(setting_values(args).get("alpha_schedule", "paper_per_task")),
-                keys.PRESET_TAG: config.preset or "default",
-                keys.PRIVILEGES_TAG: tag_value(get_algorithm(ALGORITHM).privileges(config.setting_values())),
-                keys.SEED_TAG: str(args.seed),
-                keys.GIT_COMMIT_TAG: git_commit(),
-            },
-        )
-        how = ("argv", "resume", "verbose")  # how it was started, not what it is
-        run_args = {k: v for k, v in vars(args).items() if not k.startswith("setting:") and k not in how}
-        settings = {**config.setting_values(), "preset": config.preset or "default"}
-        run.log_params(params_for_mlflow({**run_args, **settings, "checkpoint_dir": str(checkpoint_dir)}))
-        print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}", flush=True)
+    run = _mlflow_run(args, config, name, tracking_uri, saved, checkpoint_dir)
     status, code = "FINISHED", 0
     algo = None
     main_thread = threading.current_thread() is threading.main_thread()
@@ -525,6 +498,43 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return code
+
+
+def _mlflow_run(args: argparse.Namespace, config, name: str, tracking_uri, saved, checkpoint_dir: Path):
+    """The run's MLflow run: reopened when resuming, else a new one with the run's tags and params; None
+    without tracking."""
+    from copilot_ray.privileges import tag_value
+    from copilot_ray.tracking import MlflowRun, git_commit, params_for_mlflow
+
+    if not tracking_uri:
+        return None
+    if saved:
+        run = MlflowRun.reopen(tracking_uri, saved["run_id"])
+        print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}, resumed", flush=True)
+        return run
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    run = MlflowRun(
+        tracking_uri,
+        args.experiment,
+        run_name=name,
+        tags={
+            keys.ALGORITHM_TAG: ALGORITHM,
+            keys.ENV_TAG: args.env,
+            keys.K_TAG: str(config.tree_depth),
+            keys.B_TAG: str(config.repetitions),
+            keys.ALPHA_SCHEDULE_TAG: str(setting_values(args).get("alpha_schedule", "paper_per_task")),
+            keys.PRESET_TAG: config.preset or "default",
+            keys.PRIVILEGES_TAG: tag_value(get_algorithm(ALGORITHM).privileges(config.setting_values())),
+            keys.SEED_TAG: str(args.seed),
+            keys.GIT_COMMIT_TAG: git_commit(),
+        },
+    )
+    how = ("argv", "resume", "verbose")  # how it was started, not what it is
+    run_args = {k: v for k, v in vars(args).items() if not k.startswith("setting:") and k not in how}
+    settings = {**config.setting_values(), "preset": config.preset or "default"}
+    run.log_params(params_for_mlflow({**run_args, **settings, "checkpoint_dir": str(checkpoint_dir)}))
+    print(f"MLflow run {name} ({run.run_id}) in {tracking_uri}", flush=True)
+    return run
 
 
 def ticking(what: str):

@@ -367,7 +367,7 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
 
 def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
     from copilot_ray.keys import PATH_LENGTH_VS_RRT, PATH_SUCCESS, SUCCESS_DIRECT
-    from copilot_ray.sweep import TrialRow, summary_metrics, summary_table
+    from copilot_ray.sweep_summary import TrialRow, summary_metrics, summary_table
 
     nan = float("nan")
 
