@@ -125,6 +125,9 @@ class GoalSACConfig(SACConfig):
             setattr(self, s.key, s.default)
         # n_sampled_goal 0: plain SAC on the flat buffer (no relabelling, no goal bookkeeping).
         self.her: dict[str, Any] = {"n_sampled_goal": 0, "goal_selection": "future"}
+        # How the fast learner runs its updates, not what it learns: `use_fast_learner`'s keyword
+        # arguments (fused_update, cuda_graph, compile_update), applied by validate().
+        self.fast_learner_options: dict[str, Any] = {}
         self._apply({key: s.default for key, s in self.SETTINGS.items() if self._is_value(s)}, defaults=True)
 
     # ------------------------------------------------------------------ settings by name
@@ -229,7 +232,9 @@ class GoalSACConfig(SACConfig):
             # One torch thread per CPU this process holds: more threads than cores make OpenMP spin
             # against other trials and runners (measured 10-20x slower SAC updates on 2 busy cores).
             threads = max(1, int(self.num_cpus_for_main_process or 1))
-            use_fast_learner(self, updates_per_env_step=self.utd_ratio(), torch_threads=threads)
+            use_fast_learner(
+                self, updates_per_env_step=self.utd_ratio(), torch_threads=threads, **self._learner_options()
+            )
         register_traversal_env()
         super().validate()
 
@@ -272,6 +277,18 @@ class GoalSACConfig(SACConfig):
 
     def _combination_problems(self, values: Mapping[str, Any]):
         return agent_settings.combination_problems(values)
+
+    def _learner_options(self) -> dict[str, Any]:
+        """`fast_learner_options`, each key one `use_fast_learner` takes (a ValueError names one it
+        does not)."""
+        known = ("fused_update", "cuda_graph", "compile_update")
+        for key, value in self.fast_learner_options.items():
+            if key not in known:
+                raise ValueError(
+                    f"{type(self).__name__}: fast_learner_options[{key!r}]={value!r} is invalid: known keys are "
+                    f"{list(known)}"
+                )
+        return dict(self.fast_learner_options)
 
     # ------------------------------------------------------------------ derived
     def traversal_rules(self) -> TraversalRules:
