@@ -9,7 +9,8 @@ Pieces:
   * `sac_losses` / `bellman_target`: SAC's losses, shared by both update paths.
   * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
   * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there.
-  * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled.
+  * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled;
+    `DeviceHindsightBuffer`: the same on the learner's device, relabelled inside the fused step.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
   * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
   * `use_fast_learner(config)`: switch a SACConfig to all of the above.
@@ -24,6 +25,7 @@ from copilot_ray.algorithms.gc_sac.catalog import (
     count_parameters,
 )
 from copilot_ray.algorithms.gc_sac.config import use_fast_learner, uses_fast_learner
+from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer, TorchRewardFn
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.fused_step import FusedSACStep
 from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout, HindsightReplayBuffer
@@ -42,9 +44,11 @@ __all__ = [
     "GC_SAC_KEY",
     "NONFINITE_SKIPPED_KEY",
     "SB3_MODEL_CONFIG",
+    "TorchRewardFn",
     "TRAIN_COLUMNS",
     "ConcatObsActionMLPEncoder",
     "ConcatObsActionMLPEncoderConfig",
+    "DeviceHindsightBuffer",
     "DeviceTransitionBuffer",
     "FlatTransitionBuffer",
     "FusedSACStep",

@@ -131,15 +131,9 @@ class FusedLearnerUpdater:
     restore into the other."""
 
     def __init__(self, config, learner_group, buffer=None):
-        if not learner_group.is_local:
-            raise ValueError(
-                f"num_learners={config.num_learners!r} is invalid with learner_config_dict['gc_sac']"
-                "['fused_update']=True: the fused update samples its replay on the learner in this "
-                "process; use num_learners=0 or fused_update=False"
-            )
         self.config = config
         self.learner_group = learner_group
-        self.learner = learner_group._learner
+        self.learner = local_learner(config, learner_group)
         if buffer is None:
             buffer = DeviceTransitionBuffer(replay_capacity(config), device=self.learner.device)
         self.buffer = buffer
@@ -168,6 +162,17 @@ class FusedLearnerUpdater:
         self.buffer.set_state(state["buffer"])
         if "cuda_rng" in state and self.learner.device.type == "cuda":
             torch.cuda.set_rng_state(state["cuda_rng"], self.learner.device)
+
+
+def local_learner(config, learner_group):
+    """The learner of a local learner group: the fused update hands it the replay in this process."""
+    if not learner_group.is_local:
+        raise ValueError(
+            f"num_learners={config.num_learners!r} is invalid with learner_config_dict['gc_sac']"
+            "['fused_update']=True: the fused update samples its replay on the learner in this "
+            "process; use num_learners=0 or fused_update=False"
+        )
+    return learner_group._learner
 
 
 def fused_update(config) -> bool:

@@ -56,6 +56,7 @@ from ray.tune.registry import register_env
 
 from copilot_ray import keys
 from copilot_ray.algorithms.gc_sac import (
+    DeviceHindsightBuffer,
     GoalLayout,
     GradientStepSchedule,
     HindsightReplayBuffer,
@@ -63,7 +64,15 @@ from copilot_ray.algorithms.gc_sac import (
     uses_fast_learner,
 )
 from copilot_ray.algorithms.sac import settings as agent_settings
-from copilot_ray.algorithms.sac.agent_updates import FastLearnerUpdater, make_agent_updater, replay_capacity
+from copilot_ray.algorithms.sac.agent_updates import (
+    FastLearnerUpdater,
+    FusedLearnerUpdater,
+    fused_update,
+    local_learner,
+    make_agent_updater,
+    replay_capacity,
+)
+from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward, relabelled_reward
 from copilot_ray.algorithms.sac.traversal_diagnostics import traversal_diagnostics
 from copilot_ray.algorithms.sac.traversal_env import (
     RULE_KEYS,
@@ -371,16 +380,21 @@ class GoalSAC(SAC):
 
     def _make_agent_updater(self):
         """What turns sampled episodes into SAC gradient steps (agent_updates.py): with hindsight
-        relabelling, the fast learner fed by HER's buffer."""
+        relabelling, the fast learner fed by HER's buffer (on the learner's device, relabelled inside
+        the fused step, unless `fused_update=False`)."""
         cfg = self.config
         if not cfg.uses_hindsight_buffer():
             return make_agent_updater(self)
+        her = {"n_sampled_goal": cfg.her["n_sampled_goal"], "goal_selection": cfg.her["goal_selection"]}
+        if fused_update(cfg):
+            device = local_learner(cfg, self.learner_group).device
+            reward = DeviceRelabelledReward(self.goal_env.unwrapped, self.rules, device)
+            buffer = DeviceHindsightBuffer(
+                replay_capacity(cfg), self.goal_layout(), reward, **her, device=device
+            )
+            return FusedLearnerUpdater(cfg, self.learner_group, buffer)
         buffer = HindsightReplayBuffer(
-            replay_capacity(cfg),
-            self.goal_layout(),
-            self.relabelled_reward,
-            n_sampled_goal=cfg.her["n_sampled_goal"],
-            goal_selection=cfg.her["goal_selection"],
+            replay_capacity(cfg), self.goal_layout(), self.relabelled_reward, **her
         )
         return FastLearnerUpdater(cfg, self.learner_group, buffer)
 
@@ -398,9 +412,7 @@ class GoalSAC(SAC):
     ) -> tuple[np.ndarray, np.ndarray]:
         """(rewards, terminateds) of transitions given new goals: the goal env's reward and
         termination under the traversal rules the env runners apply (one sub-task = one task here)."""
-        env = self.goal_env.unwrapped
-        reached = env.compute_terminated(next_achieved, goals, None)
-        return self.rules.reward(env.compute_reward(next_achieved, goals, None), reached, collisions, layer=0)
+        return relabelled_reward(self.goal_env.unwrapped, self.rules, next_achieved, goals, collisions)
 
     # --------------------------------------------------------------------------- training step
     @override(DQN)
