@@ -32,7 +32,9 @@ one more CPU trial on the path before the fused update (`fused_update=False`). T
 (the algorithm starting, CO-PILOT's planner warm start) is left out of the rates.
 
 Prints, per trial kind: env steps/s per trial and in aggregate, SAC updates/s, the shares of wall time
-per phase (the algorithm's own `copilot/time/*` timers; "other" is the rest: Ray and result building),
+per phase and what each costs per env step in ms (the algorithm's own `copilot/time/*` timers: "agent"
+is the traversal less its SAC updates, i.e. env steps, the policy's forward passes, the replay's adds
+and the weight sync; "other" is the rest: Ray and result building),
 trials per hour at `--budget` env steps, and the learner's device as the trial saw it. What this leaves
 out against `benchmarks/throughput.py`: Tune's and MLflow's per-iteration costs (under 1 % there), and
 it needs neither installed beyond Ray's own Tune imports.
@@ -348,7 +350,13 @@ def summary_lines(by_trial: dict[tuple[str, int], list[dict]], devices: dict, bu
             f"first iteration {statistics.mean(r['first_iteration_s'] for r in rows):.0f} s"
             + (f"; {len(short)} trial(s) without 2 iterations, counted at the mean" if short else "")
         )
-        lines.append("   shares: " + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items()))
+        ms = 1000.0 / statistics.mean(r["env_steps_per_s"] for r in rows)  # wall time per env step
+        lines.append(
+            "   shares: "
+            + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items())
+            + f"; per env step {ms:.2f} ms: "
+            + ", ".join(f"{p.removesuffix('_s')} {v * ms:.2f}" for p, v in shares.items())
+        )
     return lines
 
 

@@ -27,10 +27,11 @@ Usage (from the repository root):
 
 Prints updates/s per system and repeat (the systems timed in turns, so load drift on a shared machine
 hits them alike), medians and paired ratios, then the end-to-end section: one CO-PILOT trial per path
-(four-rooms, K = 5, one update per env step, evaluation off) built side by side in this process and
-trained in alternating iterations after one warm-up iteration each, with env steps/s per iteration and
-the paired median ratio fused/batches. The last line is `ratio_vs_sb3=<x>` (the fused path; nan
-without SB3).
+(four-rooms, K = 5, one update per env step, evaluation off; `--e2e-paths`: "before" = the batch path
+and RLlib's env runner, "after" = the fused update and the lean traversal loop, `fused_only` and
+`lean_only` in between) built side by side in this process and trained in alternating iterations after
+one warm-up iteration each, with env steps/s per iteration and the paired median ratios against the
+first path. The last line is `ratio_vs_sb3=<x>` (the fused path; nan without SB3).
 """
 
 from __future__ import annotations
@@ -265,11 +266,23 @@ def build_sb3(env: gym.Env, raw):
     return run, model
 
 
-def copilot_end_to_end(iterations: int, tasks: int, depth: int, torch_threads: int) -> dict[str, list[float]]:
+# A lone trial's paths: (fast_learner_options["fused_update"], lean_traversal). "before" is the commit
+# before the fused update and the lean loop; "after" this checkout's default; the other two split the gain.
+E2E_PATHS = {
+    "before": (False, False),
+    "fused_only": (True, False),
+    "lean_only": (False, True),
+    "after": (True, True),
+}
+
+
+def copilot_end_to_end(
+    paths: list[str], iterations: int, tasks: int, depth: int, torch_threads: int
+) -> dict[str, list[float]]:
     """Env steps/s per iteration of a lone CO-PILOT trial (maze-point four-rooms, K = `depth`, b = 1,
-    `tasks` tasks per iteration, one SAC update per env step, evaluation off) on the batch path and the
-    fused path: both built in this process, one warm-up iteration each, then `iterations` measured
-    iterations of each in turns (never at the same time: each is a lone trial while it runs)."""
+    `tasks` tasks per iteration, one SAC update per env step, evaluation off) per path of `E2E_PATHS`:
+    each built in this process, one warm-up iteration each, then `iterations` measured iterations of
+    each in turns (never at the same time: each is a lone trial while it runs)."""
     import ray
 
     from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
@@ -278,7 +291,8 @@ def copilot_end_to_end(iterations: int, tasks: int, depth: int, torch_threads: i
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     algos = {}
     try:
-        for name, fused in (("batches", False), ("fused", True)):
+        for name in paths:
+            fused, lean = E2E_PATHS[name]
             config = (
                 CoPilotConfig()
                 .environment("maze-point", env_config={"layout": "four-rooms"})
@@ -295,6 +309,7 @@ def copilot_end_to_end(iterations: int, tasks: int, depth: int, torch_threads: i
                 )
             )
             config.fast_learner_options = {"fused_update": fused}
+            config.lean_traversal = lean
             algos[name] = config.build_algo()
         rates: dict[str, list[float]] = {name: [] for name in algos}
         for i in range(iterations + 1):
@@ -328,6 +343,13 @@ def main(argv: list[str] | None = None) -> float:
     p.add_argument("--skip-sb3", action="store_true")
     p.add_argument("--skip-end-to-end", action="store_true", help="skip the CO-PILOT loop measurement")
     p.add_argument("--e2e-iterations", type=int, default=3, help="measured CO-PILOT iterations per path")
+    p.add_argument(
+        "--e2e-paths",
+        nargs="+",
+        choices=list(E2E_PATHS),
+        default=["before", "after"],
+        help="which lone trials to alternate (default: before after)",
+    )
     p.add_argument("--e2e-tasks", type=int, default=1, help="tasks per CO-PILOT iteration (b = 1)")
     p.add_argument("--e2e-depth", type=int, default=5, help="K of the CO-PILOT trial")
     args = p.parse_args(argv)
@@ -383,13 +405,21 @@ def main(argv: list[str] | None = None) -> float:
                 f"fused/{other}: paired median={paired:.2f}  ratio of medians={med['fused'] / med[other]:.2f}"
             )
     if not args.skip_end_to_end:
-        e2e = copilot_end_to_end(args.e2e_iterations, args.e2e_tasks, args.e2e_depth, args.torch_threads)
-        paired = statistics.median(f / b for f, b in zip(e2e["fused"], e2e["batches"], strict=True))
+        e2e = copilot_end_to_end(
+            args.e2e_paths, args.e2e_iterations, args.e2e_tasks, args.e2e_depth, args.torch_threads
+        )
+        base = args.e2e_paths[0]
+        paired = {
+            name: statistics.median(x / b for x, b in zip(rates_, e2e[base], strict=True))
+            for name, rates_ in e2e.items()
+            if name != base
+        }
         print(
             f"CO-PILOT end to end (four-rooms, K={args.e2e_depth}, {args.e2e_tasks} task(s) per iteration, "
             f"1 update per env step), median env steps/s: "
             + ", ".join(f"{k}={statistics.median(v):.1f}" for k, v in e2e.items())
-            + f"; fused/batches paired median={paired:.2f}"
+            + "; paired medians: "
+            + ", ".join(f"{name}/{base}={r:.2f}" for name, r in paired.items())
         )
     ratio_sb3 = (
         statistics.median(o / x for o, x in zip(rates["fused"], rates["sb3"], strict=True))

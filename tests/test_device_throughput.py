@@ -80,6 +80,7 @@ def test_a_cut_off_run_is_summarised_from_its_log(tmp_path, capsys):
         "200 in aggregate" in gpu and "2.00 trials/hour" in gpu and "1 trial(s) without 2 iterations" in gpu
     )
     assert "agent_updates 60%" in shares
+    assert "per env step 10.00 ms: agent 2.00, agent_updates 6.00" in shares  # 20 s for 2000 env steps
     assert cpu == "cpu baseline: 1 trial(s), learner on cuda:0: no rate (no trial finished 2 iterations)"
 
 

@@ -80,6 +80,7 @@ from copilot_ray.algorithms.sac.traversal_env import (
     TraversalRules,
     make_traversal_env,
 )
+from copilot_ray.algorithms.sac.traversal_runner import TraversalEnvRunner
 from copilot_ray.envs import make
 from copilot_ray.evaluation import (
     EVAL_SPLITS,
@@ -137,6 +138,8 @@ class GoalSACConfig(SACConfig):
         # How the fast learner runs its updates, not what it learns: `use_fast_learner`'s keyword
         # arguments (fused_update, cuda_graph, compile_update), applied by validate().
         self.fast_learner_options: dict[str, Any] = {}
+        # Sample the traversal with TraversalEnvRunner's lean loop (False: RLlib's own env runner).
+        self.lean_traversal = True
         self._apply({key: s.default for key, s in self.SETTINGS.items() if self._is_value(s)}, defaults=True)
 
     # ------------------------------------------------------------------ settings by name
@@ -244,6 +247,10 @@ class GoalSACConfig(SACConfig):
             use_fast_learner(
                 self, updates_per_env_step=self.utd_ratio(), torch_threads=threads, **self._learner_options()
             )
+        if self.lean_traversal and self.env_runner_cls is None:
+            self.env_runners(env_runner_cls=TraversalEnvRunner)
+        elif not self.lean_traversal and self.env_runner_cls is TraversalEnvRunner:
+            self.env_runner_cls = None
         register_traversal_env()
         super().validate()
 
@@ -274,6 +281,8 @@ class GoalSACConfig(SACConfig):
                 f"{name}: fast_learner=False is invalid with hindsight relabelling: the relabelling buffer "
                 "feeds the fast learner"
             )
+        if not isinstance(self.lean_traversal, bool):
+            raise ValueError(f"{name}: lean_traversal={self.lean_traversal!r} is invalid: must be True or False")
         if self.num_envs_per_env_runner != 1:
             raise ValueError(
                 f"{name}: num_envs_per_env_runner={self.num_envs_per_env_runner!r} is invalid: one sub-task "
