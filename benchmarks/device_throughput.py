@@ -20,7 +20,9 @@ batch 256, random four-rooms-sized transitions: obs 4, action 2) in this process
 the fused update), "fused eager" (`update_from_replay`: the step and its replay sampling on the device,
 no host sync), and on a GPU "fused captured" (one CUDA graph replay per step) and "fused compiled +
 captured" (torch.compile'd first). Each row warms up (capture, compilation: its seconds printed), then
-runs calls of 64 steps for the given seconds; a row that fails prints its error and the rest go on.
+runs calls of 64 steps for the given seconds; a row that fails prints its error and the rest go on. On
+a GPU two more lines say whether the captured and the compiled + captured update agree with the eager
+one over 8 steps from the same parameters, replay and seed.
 
 Each trial is a Ray actor holding `--cpus-per-trial` CPUs (torch's threads follow them) and
 `--gpus-per-trial` of a GPU (0: the CPU; fractions share one card, as Tune's trials would), that builds
@@ -160,18 +162,57 @@ def update_rows(seconds: float, threads: int) -> list[str]:
     return lines
 
 
-def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
-    import numpy as np
+def agreement_rows(threads: int) -> list[str]:
+    """On a GPU: the captured (and compiled + captured) fused update against the eager one, from the same
+    parameters, replay and seed, over 8 steps (3 eager warm-up calls, the capture, 4 replays): the largest
+    parameter difference, which float noise keeps far below 1e-3."""
     import torch
+
+    if not torch.cuda.is_available():
+        return []
+    lines = []
+    for path in ("fused captured", "fused compiled + captured"):
+        try:
+            diff = _largest_difference("fused eager", path, threads)
+            verdict = "agrees" if diff < 1e-3 else "DISAGREES"
+            line = f"{path} against fused eager on the GPU, 8 steps: {verdict} (largest parameter difference {diff:.2e})"
+        except Exception as exc:
+            line = f"{path} against fused eager on the GPU: failed: {type(exc).__name__}: {str(exc).splitlines()[0]}"
+        lines.append(line)
+        print(line, flush=True)
+    return lines
+
+
+def _largest_difference(reference: str, path: str, threads: int) -> float:
+    import torch
+    import torch._inductor.config
+
+    # Compiled random ops draw their own numbers unless told to call eager's: same noise, same result.
+    torch._inductor.config.fallback_random = True
+    params = {}
+    state = None
+    for name in (reference, path):
+        learner_group, replay = _update_setup("cuda", name, threads)
+        learner = learner_group._learner
+        if state is None:
+            state = learner_group.get_state()
+        else:
+            learner_group.set_state(state)
+        torch.manual_seed(0)
+        learner.update_from_replay(replay, 8, UPDATE_BATCH, {})
+        module = next(iter(learner.module._rl_modules.values()))
+        params[name] = [p.detach().clone() for p in module.state_dict().values()]
+    return max(float((a - b).abs().max()) for a, b in zip(params[reference], params[path], strict=True))
+
+
+def _update_setup(device: str, path: str, threads: int):
+    """A learner group of the trial's learner on `device` for `path`, and its replay filled with random
+    four-rooms-sized transitions (a numpy buffer for "batches", else one on the learner's device)."""
+    import numpy as np
     from gymnasium import spaces
     from ray.rllib.algorithms.sac import SACConfig
 
-    from copilot_ray.algorithms.gc_sac import (
-        DeviceTransitionBuffer,
-        FlatTransitionBuffer,
-        update_from_buffer,
-        use_fast_learner,
-    )
+    from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, FlatTransitionBuffer, use_fast_learner
 
     config = use_fast_learner(
         SACConfig()
@@ -187,7 +228,6 @@ def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
         compile_update="compiled" in path,
     )
     learner_group = config.build_learner_group()
-    learner = learner_group._learner
     rng = np.random.default_rng(0)
     n = 100_000
     obs = rng.uniform(0, 1, (n, 4)).astype(np.float32)
@@ -199,14 +239,27 @@ def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
         "terminateds": rng.random(n) < 0.05,
     }
     if path == "batches":
-        buffer = FlatTransitionBuffer(n)
-        buffer.add(columns)
+        replay = FlatTransitionBuffer(n)
+    else:
+        replay = DeviceTransitionBuffer(n, device=learner_group._learner.device)
+    replay.add(columns)
+    return learner_group, replay
+
+
+def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
+    import numpy as np
+    import torch
+
+    from copilot_ray.algorithms.gc_sac import update_from_buffer
+
+    learner_group, replay = _update_setup(device, path, threads)
+    learner = learner_group._learner
+    rng = np.random.default_rng(0)
+    if path == "batches":
 
         def call() -> None:
-            update_from_buffer(learner_group, buffer, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, rng, n)
+            update_from_buffer(learner_group, replay, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, rng, len(replay))
     else:
-        replay = DeviceTransitionBuffer(n, device=learner.device)
-        replay.add(columns)
 
         def call() -> None:
             learner.update_from_replay(replay, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, {})
@@ -403,6 +456,7 @@ def main(argv=None) -> int:
     try:
         if args.updates_seconds > 0:
             update_rows(args.updates_seconds, args.cpus_per_trial)
+            agreement_rows(args.cpus_per_trial)
             print(f"({time.perf_counter() - started:.0f} s so far)", flush=True)
         kinds = []
         if args.gpus_per_trial > 0 and not has_gpu:

@@ -26,7 +26,8 @@ Usage (from the repository root):
         --updates 256 --stock-updates 16 --repeats 7
 
 Prints updates/s per system and repeat (the systems timed in turns, so load drift on a shared machine
-hits them alike), medians and paired ratios, then the end-to-end section: one CO-PILOT trial per path
+hits them alike), medians and paired ratios; the traversal's sampling per env step with RLlib's env
+runner and with the lean `TraversalEnvRunner` (`--sampling-passes`); then the end-to-end section: one CO-PILOT trial per path
 (four-rooms, K = 5, one update per env step, evaluation off; `--e2e-paths`: "before" = the batch path
 and RLlib's env runner, "after" = the fused update and the lean traversal loop, `fused_only` and
 `lean_only` in between) built side by side in this process and trained in alternating iterations after
@@ -39,6 +40,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
 from collections.abc import Callable
 
@@ -47,6 +49,9 @@ os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from throughput import PHASES, phase_shares  # noqa: E402  (the trial's phases, as the throughput benchmarks)
 
 BATCH_SIZE = 256
 HIDDEN = (256, 256)
@@ -266,6 +271,48 @@ def build_sb3(env: gym.Env, raw):
     return run, model
 
 
+def traversal_sampling(passes: int, depth: int, torch_threads: int) -> dict[str, list[float]]:
+    """ms per env step of sampling a traversal (maze-point four-rooms, 2 training tasks, K = `depth`,
+    random interior sub-goals, tau_max 25, 8 sub-tasks per `sample` call, as GoalSAC asks) with RLlib's
+    `SingleAgentEnvRunner` and with `TraversalEnvRunner`, the same weights, in turns, `passes` times."""
+    from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
+
+    from copilot_ray import envs
+    from copilot_ray.algorithms.sac.algorithm import GoalSACConfig
+    from copilot_ray.algorithms.sac.traversal_runner import TraversalEnvRunner
+
+    config = (
+        GoalSACConfig()
+        .environment("maze-point", env_config={"layout": "four-rooms"})
+        .debugging(seed=5)
+        .agent(tau_max=25)
+    )
+    config.validate()
+    torch.set_num_threads(torch_threads)
+    starts, goals = envs.make("maze-point", layout="four-rooms").unwrapped.tasks("train")
+    rng = np.random.default_rng(0)
+    inner = rng.uniform(0.1, 0.9, (2, 2**depth - 1, 2))
+    trees = np.concatenate([starts[:2, None], inner, goals[:2, None]], axis=1).astype(np.float32)
+    runners = {"rllib": SingleAgentEnvRunner(config=config), "lean": TraversalEnvRunner(config=config)}
+    runners["lean"].set_state(runners["rllib"].get_state())
+    ms: dict[str, list[float]] = {name: [] for name in runners}
+    for i in range(passes):
+        for name, runner in runners.items():
+            env = runner.env.unwrapped
+            env.call("load_plan", trees, depth, np.arange(2))
+            steps, t0 = 0, time.perf_counter()
+            while env.call("remaining")[0]:
+                steps += sum(len(e) for e in runner.sample(num_episodes=8, explore=True))
+            ms[name].append(1000 * (time.perf_counter() - t0) / steps)
+            print(
+                f"  traversal sampling, pass {i}: {name} {ms[name][-1]:.2f} ms per env step ({steps})",
+                flush=True,
+            )
+    for runner in runners.values():
+        runner.stop()
+    return ms
+
+
 # A lone trial's paths: (fast_learner_options["fused_update"], lean_traversal). "before" is the commit
 # before the fused update and the lean loop; "after" this checkout's default; the other two split the gain.
 E2E_PATHS = {
@@ -278,15 +325,17 @@ E2E_PATHS = {
 
 def copilot_end_to_end(
     paths: list[str], iterations: int, tasks: int, depth: int, torch_threads: int
-) -> dict[str, list[float]]:
+) -> tuple[dict[str, list[float]], dict[str, dict[str, float]]]:
     """Env steps/s per iteration of a lone CO-PILOT trial (maze-point four-rooms, K = `depth`, b = 1,
     `tasks` tasks per iteration, one SAC update per env step, evaluation off) per path of `E2E_PATHS`:
     each built in this process, one warm-up iteration each, then `iterations` measured iterations of
-    each in turns (never at the same time: each is a lone trial while it runs)."""
+    each in turns (never at the same time: each is a lone trial while it runs). Also returns, per path,
+    each phase's wall time per env step over the measured iterations (ms; `throughput.phase_shares`'s
+    phases: the traversal less its SAC updates, the updates, the planner, the cost model, the rest)."""
     import ray
 
     from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig
-    from copilot_ray.keys import ENV_STEPS, metric_path, result_value
+    from copilot_ray.keys import ENV_STEPS, TIME_PREFIX, metric_path, result_value
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     algos = {}
@@ -312,16 +361,26 @@ def copilot_end_to_end(
             config.lean_traversal = lean
             algos[name] = config.build_algo()
         rates: dict[str, list[float]] = {name: [] for name in algos}
+        spent = {name: {p: 0.0 for p in (*PHASES, "wall", "env_steps")} for name in algos}
         for i in range(iterations + 1):
             for name, algo in algos.items():
                 before = algo.metrics.peek(metric_path(ENV_STEPS), default=0)
                 t0 = time.perf_counter()
                 result = algo.train()
-                rate = (result_value(result, ENV_STEPS) - before) / (time.perf_counter() - t0)
+                wall = time.perf_counter() - t0
+                steps = result_value(result, ENV_STEPS) - before
                 if i > 0:  # the first: the planner's warm start, learning_starts, lazy building
-                    rates[name].append(rate)
-                    print(f"  end to end, iteration {i}: {name} {rate:.1f} env steps/s", flush=True)
-        return rates
+                    rates[name].append(steps / wall)
+                    for p in PHASES:
+                        spent[name][p] += float(result_value(result, TIME_PREFIX + p) or 0.0)
+                    spent[name]["wall"] += wall
+                    spent[name]["env_steps"] += steps
+                    print(f"  end to end, iteration {i}: {name} {steps / wall:.1f} env steps/s", flush=True)
+        per_step = {}
+        for name, t in spent.items():
+            ms = 1000.0 * t["wall"] / max(t["env_steps"], 1.0)
+            per_step[name] = {p: share * ms for p, share in phase_shares(t, t["wall"]).items()}
+        return rates, per_step
     finally:
         for algo in algos.values():
             algo.stop()
@@ -342,6 +401,9 @@ def main(argv: list[str] | None = None) -> float:
     p.add_argument("--skip-stock", action="store_true")
     p.add_argument("--skip-sb3", action="store_true")
     p.add_argument("--skip-end-to-end", action="store_true", help="skip the CO-PILOT loop measurement")
+    p.add_argument(
+        "--sampling-passes", type=int, default=2, help="traversal sampling passes per env runner (0: skip)"
+    )
     p.add_argument("--e2e-iterations", type=int, default=3, help="measured CO-PILOT iterations per path")
     p.add_argument(
         "--e2e-paths",
@@ -404,8 +466,16 @@ def main(argv: list[str] | None = None) -> float:
             print(
                 f"fused/{other}: paired median={paired:.2f}  ratio of medians={med['fused'] / med[other]:.2f}"
             )
+    if args.sampling_passes > 0:
+        ms = traversal_sampling(args.sampling_passes, args.e2e_depth, args.torch_threads)
+        paired = statistics.median(r / x for r, x in zip(ms["rllib"], ms["lean"], strict=True))
+        print(
+            f"traversal sampling (four-rooms, K={args.e2e_depth}, 2 tasks), median ms per env step: "
+            + ", ".join(f"{k}={statistics.median(v):.2f}" for k, v in ms.items())
+            + f"; rllib/lean paired median={paired:.2f}"
+        )
     if not args.skip_end_to_end:
-        e2e = copilot_end_to_end(
+        e2e, per_step = copilot_end_to_end(
             args.e2e_paths, args.e2e_iterations, args.e2e_tasks, args.e2e_depth, args.torch_threads
         )
         base = args.e2e_paths[0]
@@ -421,6 +491,11 @@ def main(argv: list[str] | None = None) -> float:
             + "; paired medians: "
             + ", ".join(f"{name}/{base}={r:.2f}" for name, r in paired.items())
         )
+        for name, costs in per_step.items():
+            print(
+                f"  {name}: {sum(costs.values()):.2f} ms per env step: "
+                + ", ".join(f"{p.removesuffix('_s')} {ms:.2f}" for p, ms in costs.items())
+            )
     ratio_sb3 = (
         statistics.median(o / x for o, x in zip(rates["fused"], rates["sb3"], strict=True))
         if "sb3" in med
