@@ -5,7 +5,7 @@ alone on each device and path.
 
 is the one-command GPU check (at most 8 minutes on a 16-core one-GPU machine, about 6): the update alone
 (`--updates-seconds` 8 per row), then a lone CO-PILOT trial with its learner on the GPU beside its CPU
-twin and a CPU trial on the path before the fused update (`--seconds` 120, `--warm-start` 20). On a
+twin and a CPU trial on the paths before this checkout's (`--seconds` 120, `--warm-start` 20). On a
 machine without a GPU it runs the CPU rows and says, one line each, which GPU rows it skipped (on two
 cores: `--suite --cpus-per-trial 1`, the two CPU trials side by side).
 
@@ -30,7 +30,8 @@ the algorithm from the registry at its defaults on maze-point `--layout` with
 `resources.gpus_per_trial`'s learner placement, and trains until `--seconds` have passed and it has done
 at least 3 iterations. `--cpu-baseline` adds one trial on `--cpus-per-trial` CPUs and no GPU, run beside
 the others, so a GPU's multiple is measured on the same machine at the same moment; `--batches-baseline`
-one more CPU trial on the path before the fused update (`fused_update=False`). The first iteration
+one more CPU trial on the paths before the fused update and the lean traversal loop ("cpu before":
+`fused_update=False`, `lean_traversal=False`: RLlib's batches and env runner). The first iteration
 (the algorithm starting, CO-PILOT's planner warm start) is left out of the rates.
 
 Prints, per trial kind: env steps/s per trial and in aggregate, SAC updates/s, the shares of wall time
@@ -60,7 +61,7 @@ from throughput import PHASES, phase_shares  # noqa: E402  (the same phases and 
 
 
 def _config(
-    algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float, fused=True
+    algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float, current=True
 ):
     from copilot_ray.registry import RunContext, get_algorithm
 
@@ -77,16 +78,18 @@ def _config(
         if warm_start is not None:
             values["planner_warm_start"] = warm_start
     config = get_algorithm(algorithm).build_config(values, run)
-    if not fused:
+    if not current:
+        # The paths before the fused update and the lean loop: RLlib's batches and env runner.
         config.fast_learner_options = {"fused_update": False}
+        config.lean_traversal = False
     return config
 
 
 class Trial:
     """One algorithm in one actor: builds it, trains it for a while, returns per-iteration records."""
 
-    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, fused=True):
-        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus, fused).build_algo()
+    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current=True):
+        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus, current).build_algo()
         self.label = {"kind": kind, "trial": seed}
         self.log = log
 
@@ -316,7 +319,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument(
         "--batches-baseline",
         action="store_true",
-        help="one more CPU trial on the path before the fused update (fused_update=False), beside them",
+        help="one more CPU trial on the paths before the fused update and the lean traversal loop, beside them",
     )
     p.add_argument(
         "--updates-seconds", type=float, default=0.0, help="time the update alone, per row (0: not at all)"
@@ -466,9 +469,9 @@ def main(argv=None) -> int:
         if args.cpu_baseline:
             kinds.append(("cpu baseline", 0.0, 1, True))
         if args.batches_baseline:
-            kinds.append(("cpu batches path", 0.0, 1, False))
+            kinds.append(("cpu before", 0.0, 1, False))
         actors = []
-        for kind, kind_gpus, n, fused in kinds:
+        for kind, kind_gpus, n, current in kinds:
             remote = ray.remote(num_cpus=args.cpus_per_trial, num_gpus=kind_gpus)(Trial)
             for i in range(n):
                 actor = remote.remote(
@@ -481,7 +484,7 @@ def main(argv=None) -> int:
                     kind_gpus,
                     kind,
                     args.log and os.path.abspath(args.log),
-                    fused,
+                    current,
                 )
                 actors.append(((kind, i), actor))
         if not actors:

@@ -2,9 +2,10 @@
 # The GPU check in one go, on a lent GPU machine (its image: Python 3.12 with torch and numpy, no
 # network): installs the wheels `scripts/gather_device_wheels.sh` put in device_wheels/ into /tmp/site,
 # then runs `benchmarks/device_throughput.py --suite` (the update alone per device and path, a lone
-# CO-PILOT trial with its learner on the GPU beside its CPU twin and a CPU trial on the path before the
-# fused update; about 6 minutes), writing its output, with the machine, commit and command, to
-# OUT_DIR/device_check.txt and every trial iteration to OUT_DIR/trials.jsonl.
+# CO-PILOT trial with its learner on the GPU beside its CPU twin and a CPU trial on the paths before
+# the fused update and the lean traversal loop; about 6 minutes), writing its output, with the
+# machine, commit and command, to OUT_DIR/device_check.txt and every trial iteration to
+# OUT_DIR/trials.jsonl.
 #
 #   bash scripts/device_check.sh [OUT_DIR] [extra device_throughput.py flags]   (default OUT_DIR: $OUT or .)
 #
