@@ -282,7 +282,9 @@ class GoalSACConfig(SACConfig):
                 "feeds the fast learner"
             )
         if not isinstance(self.lean_traversal, bool):
-            raise ValueError(f"{name}: lean_traversal={self.lean_traversal!r} is invalid: must be True or False")
+            raise ValueError(
+                f"{name}: lean_traversal={self.lean_traversal!r} is invalid: must be True or False"
+            )
         if self.num_envs_per_env_runner != 1:
             raise ValueError(
                 f"{name}: num_envs_per_env_runner={self.num_envs_per_env_runner!r} is invalid: one sub-task "
