@@ -212,3 +212,20 @@ def test_an_empty_replay_is_refused():
     learner = _learner_group()._learner
     with pytest.raises(ValueError, match="the replay is empty"):
         learner.update_from_replay(DeviceTransitionBuffer(8, device=learner.device), 1, 4)
+
+
+def test_an_agents_learner_options_are_checked_by_name():
+    from copilot_ray.algorithms.sac.algorithm import GoalSACConfig
+
+    config = GoalSACConfig().environment("maze-point")
+    config.fast_learner_options = {"fused": False}
+    with pytest.raises(ValueError, match=r"fast_learner_options\['fused'\]=False is invalid: known keys"):
+        config.validate()
+    config = GoalSACConfig().environment("maze-point")
+    config.fast_learner_options = {"fused_update": 0}
+    with pytest.raises(ValueError, match=r"\['fused_update'\] must be True or False, got 0"):
+        config.validate()
+    config = GoalSACConfig().environment("maze-point")
+    config.fast_learner_options = {"fused_update": False}
+    config.validate()
+    assert gc_sac_settings(config)["fused_update"] is False
