@@ -1,20 +1,43 @@
-"""Env steps/s of trials on a CPU or a GPU share, side by side, without Tune or MLflow.
+"""Env steps/s of trials on a CPU or a GPU share, side by side, without Tune or MLflow; and the SAC update
+alone on each device and path.
+
+    PYTHONPATH=. python benchmarks/device_throughput.py --suite [--log FILE.jsonl]
+
+is the one-command GPU check (at most 8 minutes on a 16-core one-GPU machine, about 6): the update alone
+(`--updates-seconds` 8 per row), then a lone CO-PILOT trial with its learner on the GPU beside its CPU
+twin and a CPU trial on the paths before this checkout's (`--seconds` 120, `--warm-start` 20). On a
+machine without a GPU it runs the CPU rows and says, one line each, which GPU rows it skipped (on two
+cores: `--suite --cpus-per-trial 1`, the two CPU trials side by side).
 
     PYTHONPATH=. python benchmarks/device_throughput.py [--algorithm copilot] [--trials 1]
-        [--gpus-per-trial 1] [--cpus-per-trial 2] [--cpu-baseline] [--seconds 180] [--eval-every 3200]
-        [--log FILE.jsonl]
+        [--gpus-per-trial 1] [--cpus-per-trial 2] [--cpu-baseline] [--batches-baseline] [--seconds 180]
+        [--eval-every 3200] [--updates-seconds 0] [--log FILE.jsonl]
     PYTHONPATH=. python benchmarks/device_throughput.py --summarise FILE.jsonl
+
+The update alone (`--updates-seconds` > 0): SAC gradient steps of the trial's learner (256x256 networks,
+batch 256, random four-rooms-sized transitions: obs 4, action 2) in this process, per device and path:
+"batches" (RLlib's `update(batch=...)` from a numpy buffer, the finite check on the host: the path before
+the fused update), "fused eager" (`update_from_replay`: the step and its replay sampling on the device,
+no host sync), and on a GPU "fused captured" (one CUDA graph replay per step) and "fused compiled +
+captured" (torch.compile'd first). Each row warms up (capture, compilation: its seconds printed), then
+runs calls of 64 steps for the given seconds; a row that fails prints its error and the rest go on. On
+a GPU two more lines say whether the captured and the compiled + captured update agree with the eager
+one over 8 steps from the same parameters, replay and seed.
 
 Each trial is a Ray actor holding `--cpus-per-trial` CPUs (torch's threads follow them) and
 `--gpus-per-trial` of a GPU (0: the CPU; fractions share one card, as Tune's trials would), that builds
 the algorithm from the registry at its defaults on maze-point `--layout` with
 `resources.gpus_per_trial`'s learner placement, and trains until `--seconds` have passed and it has done
 at least 3 iterations. `--cpu-baseline` adds one trial on `--cpus-per-trial` CPUs and no GPU, run beside
-the others, so a GPU's multiple is measured on the same machine at the same moment. The first iteration
+the others, so a GPU's multiple is measured on the same machine at the same moment; `--batches-baseline`
+one more CPU trial on the paths before the fused update and the lean traversal loop ("cpu before":
+`fused_update=False`, `lean_traversal=False`: RLlib's batches and env runner). The first iteration
 (the algorithm starting, CO-PILOT's planner warm start) is left out of the rates.
 
 Prints, per trial kind: env steps/s per trial and in aggregate, SAC updates/s, the shares of wall time
-per phase (the algorithm's own `copilot/time/*` timers; "other" is the rest: Ray and result building),
+per phase and what each costs per env step in ms (the algorithm's own `copilot/time/*` timers: "agent"
+is the traversal less its SAC updates, i.e. env steps, the policy's forward passes, the replay's adds
+and the weight sync; "other" is the rest: Ray and result building),
 trials per hour at `--budget` env steps, and the learner's device as the trial saw it. What this leaves
 out against `benchmarks/throughput.py`: Tune's and MLflow's per-iteration costs (under 1 % there), and
 it needs neither installed beyond Ray's own Tune imports.
@@ -37,7 +60,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from throughput import PHASES, phase_shares  # noqa: E402  (the same phases and shares as the Tune benchmark)
 
 
-def _config(algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float):
+def _config(
+    algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float, current=True
+):
     from copilot_ray.registry import RunContext, get_algorithm
 
     run = RunContext(
@@ -52,14 +77,19 @@ def _config(algorithm: str, layout: str, eval_every: int, warm_start, seed: int,
         values["eval_tree_tasks"] = 0  # no tree snapshots written to disk per evaluation
         if warm_start is not None:
             values["planner_warm_start"] = warm_start
-    return get_algorithm(algorithm).build_config(values, run)
+    config = get_algorithm(algorithm).build_config(values, run)
+    if not current:
+        # The paths before the fused update and the lean loop: RLlib's batches and env runner.
+        config.fast_learner_options = {"fused_update": False}
+        config.lean_traversal = False
+    return config
 
 
 class Trial:
     """One algorithm in one actor: builds it, trains it for a while, returns per-iteration records."""
 
-    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log):
-        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus).build_algo()
+    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current=True):
+        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus, current).build_algo()
         self.label = {"kind": kind, "trial": seed}
         self.log = log
 
@@ -109,6 +139,175 @@ def rates(records: list[dict]) -> dict | None:
     }
 
 
+UPDATE_BATCH = 256
+UPDATE_STEPS_PER_CALL = 64
+
+
+def update_rows(seconds: float, threads: int) -> list[str]:
+    """The SAC update alone, per device and path (module docstring): one printed line per row."""
+    import torch
+
+    rows = [("cpu", "batches"), ("cpu", "fused eager")]
+    lines = []
+    if torch.cuda.is_available():
+        rows += [("cuda", "batches"), ("cuda", "fused eager"), ("cuda", "fused captured")]
+        rows += [("cuda", "fused compiled + captured")]
+    else:
+        lines.append("update alone on the GPU: skipped, torch sees no CUDA device on this machine")
+        print(lines[-1], flush=True)
+    for device, path in rows:
+        try:
+            line = _update_row(device, path, seconds, threads)
+        except Exception as exc:  # one failing row (e.g. a compiler missing) must not lose the others
+            line = f"update alone, {device}, {path}: failed: {type(exc).__name__}: {str(exc).splitlines()[0]}"
+        lines.append(line)
+        print(line, flush=True)
+    return lines
+
+
+def agreement_rows(threads: int) -> list[str]:
+    """On a GPU: the captured (and compiled + captured) fused update against the eager one, from the same
+    parameters, replay and seed, over 8 steps (3 eager warm-up calls, the capture, 4 replays): the largest
+    parameter difference, which float noise keeps far below 1e-3."""
+    import torch
+
+    if not torch.cuda.is_available():
+        return []
+    lines = []
+    for path in ("fused captured", "fused compiled + captured"):
+        try:
+            diff = _largest_difference("fused eager", path, threads)
+            verdict = "agrees" if diff < 1e-3 else "DISAGREES"
+            line = f"{path} against fused eager on the GPU, 8 steps: {verdict} (largest parameter difference {diff:.2e})"
+        except Exception as exc:
+            line = f"{path} against fused eager on the GPU: failed: {type(exc).__name__}: {str(exc).splitlines()[0]}"
+        lines.append(line)
+        print(line, flush=True)
+    return lines
+
+
+def _largest_difference(reference: str, path: str, threads: int) -> float:
+    import torch
+    import torch._inductor.config
+
+    # Compiled random ops draw their own numbers unless told to call eager's: same noise, same result.
+    torch._inductor.config.fallback_random = True
+    params = {}
+    state = None
+    for name in (reference, path):
+        learner_group, replay = _update_setup("cuda", name, threads)
+        learner = learner_group._learner
+        if state is None:
+            state = learner_group.get_state()
+        else:
+            learner_group.set_state(state)
+        torch.manual_seed(0)
+        learner.update_from_replay(replay, 8, UPDATE_BATCH, {})
+        module = next(iter(learner.module._rl_modules.values()))
+        params[name] = [p.detach().clone() for p in module.state_dict().values()]
+    return max(float((a - b).abs().max()) for a, b in zip(params[reference], params[path], strict=True))
+
+
+def _update_setup(device: str, path: str, threads: int):
+    """A learner group of the trial's learner on `device` for `path`, and its replay filled with random
+    four-rooms-sized transitions (a numpy buffer for "batches", else one on the learner's device)."""
+    import numpy as np
+    from gymnasium import spaces
+    from ray.rllib.algorithms.sac import SACConfig
+
+    from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, FlatTransitionBuffer, use_fast_learner
+
+    config = use_fast_learner(
+        SACConfig()
+        .environment(
+            observation_space=spaces.Box(0.0, 1.0, (4,), np.float32),
+            action_space=spaces.Box(-1.0, 1.0, (2,), np.float32),
+        )
+        .learners(num_gpus_per_learner=1 if device == "cuda" else 0)
+        .debugging(seed=0),
+        torch_threads=threads,
+        fused_update=path != "batches",
+        cuda_graph="captured" in path,
+        compile_update="compiled" in path,
+    )
+    learner_group = config.build_learner_group()
+    rng = np.random.default_rng(0)
+    n = 100_000
+    obs = rng.uniform(0, 1, (n, 4)).astype(np.float32)
+    columns = {
+        "obs": obs,
+        "new_obs": np.clip(obs + rng.normal(0, 0.02, obs.shape), 0, 1).astype(np.float32),
+        "actions": rng.uniform(-1, 1, (n, 2)).astype(np.float32),
+        "rewards": -(rng.random(n) > 0.05).astype(np.float32),
+        "terminateds": rng.random(n) < 0.05,
+    }
+    if path == "batches":
+        replay = FlatTransitionBuffer(n)
+    else:
+        replay = DeviceTransitionBuffer(n, device=learner_group._learner.device)
+    replay.add(columns)
+    return learner_group, replay
+
+
+def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
+    import numpy as np
+    import torch
+
+    from copilot_ray.algorithms.gc_sac import update_from_buffer
+
+    learner_group, replay = _update_setup(device, path, threads)
+    learner = learner_group._learner
+    rng = np.random.default_rng(0)
+    if path == "batches":
+
+        def call() -> None:
+            update_from_buffer(learner_group, replay, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, rng, len(replay))
+    else:
+
+        def call() -> None:
+            learner.update_from_replay(replay, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, {})
+
+    def synchronised() -> float:
+        if learner.device.type == "cuda":
+            torch.cuda.synchronize(learner.device)
+        return time.perf_counter()
+
+    t0 = synchronised()
+    for _ in range(2):  # warm-up: RLlib's lazy state, the capture, the compilation
+        call()
+    warm = synchronised() - t0
+    steps, t0 = 0, synchronised()
+    while synchronised() - t0 < seconds:
+        call()
+        steps += UPDATE_STEPS_PER_CALL
+    rate = steps / (synchronised() - t0)
+    name = (
+        torch.cuda.get_device_name(learner.device) if learner.device.type == "cuda" else f"{threads} threads"
+    )
+    return (
+        f"update alone, {device} ({name}), {path}: {rate:.0f} updates/s ({1000 / rate:.2f} ms each; "
+        f"{steps} steps in {seconds:.0f} s, warm-up {warm:.1f} s)"
+    )
+
+
+def _cuda_available() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
+
+
+# What --suite sets (unless the command line sets it too).
+SUITE = {
+    "updates_seconds": 8.0,
+    "trials": 1,
+    "gpus_per_trial": 1.0,
+    "cpu_baseline": True,
+    "batches_baseline": True,
+    "seconds": 120.0,
+    "warm_start": 20,
+}
+
+
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--algorithm", default="copilot", help="a registered RLlib algorithm (default copilot)")
@@ -117,6 +316,20 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--gpus-per-trial", type=float, default=0.0, help="0: the CPU (default 0)")
     p.add_argument("--cpus-per-trial", type=int, default=2)
     p.add_argument("--cpu-baseline", action="store_true", help="one more trial on the CPU, beside them")
+    p.add_argument(
+        "--batches-baseline",
+        action="store_true",
+        help="one more CPU trial on the paths before the fused update and the lean traversal loop, beside them",
+    )
+    p.add_argument(
+        "--updates-seconds", type=float, default=0.0, help="time the update alone, per row (0: not at all)"
+    )
+    p.add_argument(
+        "--suite",
+        action="store_true",
+        help="the one-command GPU check: --updates-seconds 8 --trials 1 --gpus-per-trial 1 --cpu-baseline "
+        "--batches-baseline --seconds 120 --warm-start 20 (flags given after it still count)",
+    )
     p.add_argument("--seconds", type=float, default=180.0, help="train each trial at least this long")
     p.add_argument("--eval-every", type=int, default=3200, help="env steps between evaluations")
     p.add_argument(
@@ -132,6 +345,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--summarise", default=None, metavar="FILE", help="print the summary of a --log file; run nothing"
     )
     args = p.parse_args(argv)
+    if args.suite:
+        given = set(argv if argv is not None else sys.argv[1:])
+        for flag, value in SUITE.items():
+            if f"--{flag.replace('_', '-')}" not in given:
+                setattr(args, flag, value)
     if args.summarise is not None and not os.path.isfile(args.summarise):
         print(f"error: --summarise {args.summarise!r} is invalid: no such file", file=sys.stderr)
         raise SystemExit(2)
@@ -142,12 +360,15 @@ def parse_args(argv=None) -> argparse.Namespace:
             ("gpus_per_trial", args.gpus_per_trial, args.gpus_per_trial >= 0, "a number >= 0"),
             ("cpus_per_trial", args.cpus_per_trial, args.cpus_per_trial >= 1, "an integer >= 1"),
             ("seconds", args.seconds, args.seconds > 0, "a number > 0"),
+            ("updates_seconds", args.updates_seconds, args.updates_seconds >= 0, "a number >= 0"),
             ("eval_every", args.eval_every, args.eval_every >= 1, "an integer >= 1"),
             ("budget", args.budget, args.budget >= 1, "an integer >= 1"),
         )
         if not ok
     ]
-    cpus = args.cpus_per_trial * (args.trials + int(args.cpu_baseline))
+    # GPU trials only count where they run (without a GPU they are skipped, saying so).
+    trials = args.trials if args.gpus_per_trial == 0 or _cuda_available() else 0
+    cpus = args.cpus_per_trial * (trials + int(args.cpu_baseline) + int(args.batches_baseline))
     if args.cpus_per_trial >= 1 and cpus > (os.cpu_count() or 1):
         bad.append(
             ("--cpus-per-trial", args.cpus_per_trial, f"trials x CPUs ({cpus}) over {os.cpu_count()} cores")
@@ -185,7 +406,13 @@ def summary_lines(by_trial: dict[tuple[str, int], list[dict]], devices: dict, bu
             f"first iteration {statistics.mean(r['first_iteration_s'] for r in rows):.0f} s"
             + (f"; {len(short)} trial(s) without 2 iterations, counted at the mean" if short else "")
         )
-        lines.append("   shares: " + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items()))
+        ms = 1000.0 / statistics.mean(r["env_steps_per_s"] for r in rows)  # wall time per env step
+        lines.append(
+            "   shares: "
+            + ", ".join(f"{p.removesuffix('_s')} {v:.0%}" for p, v in shares.items())
+            + f"; per env step {ms:.2f} ms: "
+            + ", ".join(f"{p.removesuffix('_s')} {v * ms:.2f}" for p, v in shares.items())
+        )
     return lines
 
 
@@ -212,18 +439,40 @@ def main(argv=None) -> int:
         return 0
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     import ray
+    import torch
 
-    gpus_needed = 1 if args.gpus_per_trial > 0 else 0
+    started = time.perf_counter()
+    has_gpu = torch.cuda.is_available()
+    print(
+        f"machine: {os.cpu_count()} CPU cores, "
+        + (f"GPU {torch.cuda.get_device_name(0)}" if has_gpu else "no GPU visible to torch")
+        + f"; torch {torch.__version__}, ray {ray.__version__}",
+        flush=True,
+    )
+    gpus = args.gpus_per_trial if has_gpu else 0.0
     ray.init(
-        num_cpus=os.cpu_count(), num_gpus=gpus_needed or None, include_dashboard=False, log_to_driver=False
+        num_cpus=os.cpu_count(),
+        num_gpus=1 if gpus > 0 else None,
+        include_dashboard=False,
+        log_to_driver=False,
     )
     try:
-        kinds = [("gpu" if args.gpus_per_trial > 0 else "cpu", args.gpus_per_trial, args.trials)]
+        if args.updates_seconds > 0:
+            update_rows(args.updates_seconds, args.cpus_per_trial)
+            agreement_rows(args.cpus_per_trial)
+            print(f"({time.perf_counter() - started:.0f} s so far)", flush=True)
+        kinds = []
+        if args.gpus_per_trial > 0 and not has_gpu:
+            print(f"gpu trial(s): skipped, torch sees no CUDA device on this machine ({args.trials} asked)")
+        else:
+            kinds.append(("gpu" if gpus > 0 else "cpu", gpus, args.trials, True))
         if args.cpu_baseline:
-            kinds.append(("cpu baseline", 0.0, 1))
+            kinds.append(("cpu baseline", 0.0, 1, True))
+        if args.batches_baseline:
+            kinds.append(("cpu before", 0.0, 1, False))
         actors = []
-        for kind, gpus, n in kinds:
-            remote = ray.remote(num_cpus=args.cpus_per_trial, num_gpus=gpus)(Trial)
+        for kind, kind_gpus, n, current in kinds:
+            remote = ray.remote(num_cpus=args.cpus_per_trial, num_gpus=kind_gpus)(Trial)
             for i in range(n):
                 actor = remote.remote(
                     args.algorithm,
@@ -232,11 +481,14 @@ def main(argv=None) -> int:
                     args.warm_start,
                     i,
                     args.cpus_per_trial,
-                    gpus,
+                    kind_gpus,
                     kind,
                     args.log and os.path.abspath(args.log),
+                    current,
                 )
                 actors.append(((kind, i), actor))
+        if not actors:
+            return 0
         devices = ray.get([a.device.remote() for _, a in actors])
         t0 = time.perf_counter()
         records = ray.get([a.train_for.remote(args.seconds) for _, a in actors])
@@ -245,7 +497,8 @@ def main(argv=None) -> int:
         ray.shutdown()
     print(
         f"{args.algorithm} on maze-point {args.layout}, evaluation every {args.eval_every} env steps "
-        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial; {wall:.0f} s"
+        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial; {wall:.0f} s of training, "
+        f"{time.perf_counter() - started:.0f} s in all"
     )
     by_trial = {key: r for (key, _), r in zip(actors, records, strict=True)}
     seen = {key: d for (key, _), d in zip(actors, devices, strict=True)}

@@ -278,8 +278,12 @@ def main() -> None:
         + (f"store {args.from_store}" if args.from_store else f"maze-point {args.layout}")
         + f"; trials/hour at {args.budget:,} env steps"
     )
-    head = ("algorithm", "N", "CPUs/trial", "env steps/s", "aggregate", "updates/s", "trials/h")
-    print("  ".join(f"{h:>11}" for h in head) + "  shares: " + " ".join(f"{p}" for p in (*PHASES, "other")))
+    head = ("algorithm", "N", "CPUs/trial", "env steps/s", "aggregate", "updates/s", "trials/h", "ms/step")
+    print(
+        "  ".join(f"{h:>11}" for h in head)
+        + "  shares (ms per env step): "
+        + " ".join(f"{p}" for p in (*PHASES, "other"))
+    )
     for r in rows:
         cells = (
             r["algorithm"],
@@ -289,8 +293,13 @@ def main() -> None:
             f"{r['aggregate_env_steps_per_s']:.0f}",
             f"{r['sac_updates_per_s']:.0f}",
             f"{r['trials_per_hour']:.2f}",
+            f"{1000 / r['env_steps_per_s']:.2f}",
         )
-        shares = " ".join(f"{100 * r['shares'][p]:.0f}%" for p in (*PHASES, "other"))
+        # Each phase's share of the wall time and its cost per env step (ms).
+        ms = 1000 / r["env_steps_per_s"]
+        shares = " ".join(
+            f"{100 * r['shares'][p]:.0f}% ({r['shares'][p] * ms:.2f})" for p in (*PHASES, "other")
+        )
         print("  ".join(f"{c!s:>11}" for c in cells) + "  " + shares)
     if args.write:
         data = json.loads(THROUGHPUT_FILE.read_text())

@@ -1,5 +1,6 @@
 """benchmarks/device_throughput.py: its rates leave the first iteration out and split the wall time by
-phase; bad flags exit 2 naming the flag and value before Ray starts."""
+phase; bad flags exit 2 naming the flag and value before Ray starts; --suite is the GPU check in one
+command, and without a GPU it skips the GPU trial (and its cores)."""
 
 from __future__ import annotations
 
@@ -79,6 +80,7 @@ def test_a_cut_off_run_is_summarised_from_its_log(tmp_path, capsys):
         "200 in aggregate" in gpu and "2.00 trials/hour" in gpu and "1 trial(s) without 2 iterations" in gpu
     )
     assert "agent_updates 60%" in shares
+    assert "per env step 10.00 ms: agent 2.00, agent_updates 6.00" in shares  # 20 s for 2000 env steps
     assert cpu == "cpu baseline: 1 trial(s), learner on cuda:0: no rate (no trial finished 2 iterations)"
 
 
@@ -86,3 +88,25 @@ def test_summarise_of_a_missing_file_exits_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as done:
         device_throughput.parse_args(["--summarise", str(tmp_path / "none.jsonl")])
     assert done.value.code == 2 and "--summarise" in capsys.readouterr().err
+
+
+def test_suite_sets_its_flags_unless_the_command_line_does(monkeypatch):
+    monkeypatch.setattr(device_throughput, "_cuda_available", lambda: True)
+    monkeypatch.setattr(device_throughput.os, "cpu_count", lambda: 16)
+    args = device_throughput.parse_args(["--suite", "--seconds", "60"])
+    assert args.seconds == 60.0  # given: kept
+    assert (args.updates_seconds, args.trials, args.gpus_per_trial, args.warm_start) == (8.0, 1, 1.0, 20)
+    assert args.cpu_baseline and args.batches_baseline
+    plain = device_throughput.parse_args([])
+    assert plain.updates_seconds == 0.0 and not plain.batches_baseline and plain.gpus_per_trial == 0.0
+
+
+def test_without_a_gpu_the_skipped_gpu_trial_takes_no_cores(monkeypatch, capsys):
+    monkeypatch.setattr(device_throughput.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(device_throughput, "_cuda_available", lambda: False)
+    args = device_throughput.parse_args(["--suite", "--cpus-per-trial", "1"])  # the two CPU trials fit
+    assert args.gpus_per_trial == 1.0
+    monkeypatch.setattr(device_throughput, "_cuda_available", lambda: True)
+    with pytest.raises(SystemExit) as done:  # with a GPU its trial needs a third core
+        device_throughput.parse_args(["--suite", "--cpus-per-trial", "1"])
+    assert done.value.code == 2 and "trials x CPUs (3) over 2 cores" in capsys.readouterr().err

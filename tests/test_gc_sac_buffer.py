@@ -1,12 +1,14 @@
-"""FlatTransitionBuffer: ring wrap-around, terminal flags, episode conversion, state round trip."""
+"""FlatTransitionBuffer and its device twin DeviceTransitionBuffer: ring wrap-around, terminal flags,
+episode conversion, sampling, state round trip (each restores the other's state)."""
 
 import pickle
 
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 
-from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer
+from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, FlatTransitionBuffer
 
 OBS_SPACE = gym.spaces.Box(-10, 10, (3,), np.float32)
 ACT_SPACE = gym.spaces.Box(-1, 1, (2,), np.float32)
@@ -118,4 +120,65 @@ def test_state_round_trip_after_wrap():
         buf.sample(5, np.random.default_rng(1))["rewards"],
     )
     empty = FlatTransitionBuffer.from_state(FlatTransitionBuffer(3).get_state())
+    assert len(empty) == 0
+
+
+def test_the_device_buffer_keeps_the_same_rows_as_the_flat_one():
+    flat, device = FlatTransitionBuffer(capacity=7), DeviceTransitionBuffer(capacity=7)
+    o = [np.full(3, k, np.float32) for k in range(12)]
+    for buf in (flat, device):
+        buf.add(_rows(0, 5))
+        buf.add(_rows(5, 5))  # wraps
+        buf.add_episodes([_episode(o[0:4], terminated=True)])
+    assert len(device) == len(flat) == 7 and device.num_added == flat.num_added == 13
+    for key, rows in flat.transitions().items():
+        np.testing.assert_array_equal(device.transitions()[key], rows, err_msg=key)
+    device.add(_rows(100, 12))  # more than capacity at once: the newest 7
+    np.testing.assert_array_equal(device.transitions()["rewards"], np.arange(105, 112))
+    with pytest.raises(ValueError, match="action size 3 != buffer action_dim 2"):
+        device.add({**_rows(0, 2), "actions": np.zeros((2, 3))})
+
+
+def test_device_sampling_draws_aligned_rows_of_the_filled_part_only():
+    buf = DeviceTransitionBuffer(capacity=1000)
+    buf.add(_rows(0, 3))  # 3 of 1000 rows filled: a draw past them would read zeros
+    torch.manual_seed(0)
+    s = buf.sample(4000)
+    assert s["obs"].shape == (4000, 3) and s["obs"].dtype == torch.float32
+    assert s["terminateds"].dtype == torch.bool and set(s) == {
+        "obs",
+        "new_obs",
+        "actions",
+        "rewards",
+        "terminateds",
+    }
+    assert sorted(set(s["rewards"].tolist())) == [0.0, 1.0, 2.0]  # every filled row, nothing else
+    torch.testing.assert_close(s["obs"][:, 0], s["rewards"])  # rows stay aligned
+    torch.testing.assert_close(s["new_obs"][:, 1], s["rewards"] + 0.5)
+    assert torch.equal(s["terminateds"], (s["rewards"].long() % 3) == 0)
+    counts = torch.bincount(s["rewards"].long()).tolist()
+    assert min(counts) > 1200  # uniform: about 1333 each
+    buf.add(_rows(3, 997))  # full: every row can come up, the last one too
+    assert buf.sample(20_000)["rewards"].max().item() == 999.0
+
+
+def test_device_and_flat_states_restore_into_each_other():
+    flat = FlatTransitionBuffer(capacity=7)
+    flat.add(_rows(0, 5))
+    flat.add(_rows(5, 5))
+    device = DeviceTransitionBuffer(capacity=1)
+    device.set_state(pickle.loads(pickle.dumps(flat.get_state())))
+    version = device.storage_version
+    assert len(device) == 7 and device.num_added == 10 and device.capacity == 7
+    for key, rows in flat.transitions().items():
+        np.testing.assert_array_equal(device.transitions()[key], rows)
+    flat.add(_rows(100, 2))
+    device.add(_rows(100, 2))  # the same rows overwritten: the write pointer came along
+    np.testing.assert_array_equal(device.transitions()["rewards"], flat.transitions()["rewards"])
+    assert device.storage_version == version  # adding never moves the storage a graph reads
+    back = FlatTransitionBuffer.from_state(device.get_state())
+    for key, rows in flat.get_state()["data"].items():
+        np.testing.assert_array_equal(back.get_state()["data"][key], rows)
+    empty = DeviceTransitionBuffer(3)
+    empty.set_state(FlatTransitionBuffer(3).get_state())
     assert len(empty) == 0

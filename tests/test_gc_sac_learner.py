@@ -11,7 +11,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.distribution.torch.torch_distribution import TorchSquashedGaussian
 from ray.rllib.utils.metrics import ALL_MODULES
 
-import copilot_ray.algorithms.gc_sac.learner as gc_learner
+import copilot_ray.algorithms.gc_sac.losses as gc_losses
 from copilot_ray.algorithms.gc_sac import (
     NONFINITE_SKIPPED_KEY,
     FlatTransitionBuffer,
@@ -105,13 +105,13 @@ def test_critic_target_matches_hand_computed_bellman_target(monkeypatch):
 
     monkeypatch.setattr(TorchSquashedGaussian, "sample_and_logp", fixed_sample_and_logp)
     captured = {}
-    real_target = gc_learner.bellman_target
+    real_target = gc_losses.bellman_target
 
     def recording_target(*args, **kwargs):
         captured["y"] = real_target(*args, **kwargs)
         return captured["y"]
 
-    monkeypatch.setattr(gc_learner, "bellman_target", recording_target)
+    monkeypatch.setattr(gc_losses, "bellman_target", recording_target)
 
     fwd = learner.module.forward_train({DEFAULT_MODULE_ID: batch})
     learner.compute_losses(fwd_out=fwd, batch={DEFAULT_MODULE_ID: batch})

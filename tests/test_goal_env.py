@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from copilot_ray import envs
-from copilot_ray.envs.goal_env import GoalEnv, SparseGoalReward, contract_problems
+from copilot_ray.envs.goal_env import GoalEnv, GoalMetric, SparseGoalReward, contract_problems
 
 
 @pytest.mark.parametrize("env_id", envs.env_ids())
@@ -35,6 +35,15 @@ def test_a_reward_that_disagrees_with_termination_is_reported():
     env = envs.make("maze-point", layout="empty").unwrapped
     env.compute_reward = lambda achieved, desired, info=None: np.zeros(np.shape(achieved)[:-1]) + 0.0
     assert any("compute_reward" in p for p in contract_problems(env))
+
+
+def test_a_goal_metric_that_disagrees_with_goal_distance_is_reported(monkeypatch):
+    """HER's device-side reward computes distances from `goal_metric`: a stick whose metric forgets the
+    angle's weight and wrap is caught by the contract check."""
+    env = envs.make("maze-rigid").unwrapped
+    assert env.goal_metric.angle_dims == (2,) and contract_problems(env) == []
+    monkeypatch.setattr(type(env), "goal_metric", GoalMetric((1.0, 1.0, 1.0)))
+    assert "goal_metric.distance disagrees with goal_distance on validation tasks" in contract_problems(env)
 
 
 class _Line(SparseGoalReward):

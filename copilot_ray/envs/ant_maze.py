@@ -36,7 +36,7 @@ import numpy as np
 from gymnasium import spaces
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
-from copilot_ray.envs.goal_env import SparseGoalReward
+from copilot_ray.envs.goal_env import GoalMetric, SparseGoalReward
 from copilot_ray.envs.maze.agents import PointMass
 from copilot_ray.envs.maze.geometry import Obstacles, merge_cells
 from copilot_ray.envs.maze.tasks import SPLITS, sample_task_pairs, split_rng
@@ -186,6 +186,8 @@ class GoalAntMazeEnv(SparseGoalReward, gym.Env):
     @property
     def nominal_step_distance(self) -> float:
         return NOMINAL_STEP_DISTANCE
+
+    goal_metric = GoalMetric((1.0, 1.0))  # goal_distance as data: plain Euclidean in the plane
 
     def goal_distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """[N, 2], [N, 2] -> [N] (or [2], [2] -> scalar): distance in the maze plane."""

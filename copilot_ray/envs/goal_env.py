@@ -7,12 +7,30 @@ env through `contract_problems`, so a new env that misses a piece fails there, n
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from gymnasium import spaces
 
 OBSERVATION_KEYS = ("observation", "achieved_goal", "desired_goal")
+
+
+@dataclass(frozen=True)
+class GoalMetric:
+    """`goal_distance` as data, for code that computes it elsewhere (HER's relabelled rewards on the
+    learner's device): sqrt(sum_i (w_i * d_i)^2), d = b - a with the dims in `angle_dims` wrapped to
+    [-pi, pi). `contract_problems` holds it equal to the env's own `goal_distance`."""
+
+    weights: tuple[float, ...]
+    angle_dims: tuple[int, ...] = ()
+
+    def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """[N, d], [N, d] -> [N] (or [d], [d] -> scalar), in float64."""
+        d = np.asarray(b, np.float64) - np.asarray(a, np.float64)
+        for i in self.angle_dims:
+            d[..., i] = (d[..., i] + np.pi) % (2 * np.pi) - np.pi
+        return np.sqrt(((np.asarray(self.weights) * d) ** 2).sum(-1))
 
 
 @runtime_checkable
@@ -39,6 +57,10 @@ class GoalEnv(Protocol):
         """Furthest the agent moves in goal space in one step (turns step counts into distances)."""
 
     def goal_distance(self, a: np.ndarray, b: np.ndarray) -> Any: ...
+
+    @property
+    def goal_metric(self) -> GoalMetric:
+        """`goal_distance` as data (its weights and wrapped angle dims)."""
 
     def segments_collide(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """bool [N]: whether the straight motion a -> b touches an obstacle (a collision check each)."""
@@ -125,6 +147,9 @@ def contract_problems(env: Any) -> list[str]:
         problems.append(f"compute_reward on [2, goal_dim] gave {batched!r}, not [goal_reward, 0]")
     if not isinstance(env.compute_reward(goals[0], goals[0], None), float):
         problems.append("compute_reward on one [goal_dim] row does not give a float")
+    pairs = (starts[:20], goals[:20]), (goals[:20], np.roll(goals[:20], 1, axis=0))
+    if not all(np.allclose(env.goal_metric.distance(a, b), env.goal_distance(a, b)) for a, b in pairs):
+        problems.append("goal_metric.distance disagrees with goal_distance on validation tasks")
     if np.shape(env.segments_collide(both, both[::-1])) != (2,):
         problems.append("segments_collide on [2, goal_dim] does not give [2]")
     if not env.is_free(starts[0]):

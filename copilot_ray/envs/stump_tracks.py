@@ -65,7 +65,7 @@ from gymnasium.envs.box2d import bipedal_walker as bw
 from gymnasium.utils import EzPickle
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
-from copilot_ray.envs.goal_env import SparseGoalReward
+from copilot_ray.envs.goal_env import GoalMetric, SparseGoalReward
 from copilot_ray.envs.goal_observation import flat_observation
 from copilot_ray.envs.task_sets import SPLIT_STREAMS, check_task_set
 
@@ -278,6 +278,8 @@ class GoalStumpTracksEnv(SparseGoalReward, bw.BipedalWalker):
     def nominal_step_distance(self) -> float:
         """Hull x per step of a good walker: turns distances into step counts."""
         return NOMINAL_STEP_DISTANCE
+
+    goal_metric = GoalMetric((1.0,))  # goal_distance as data: |x_a - x_b|
 
     def goal_distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """[N, 1], [N, 1] -> [N] (or [1], [1] -> scalar): |x_a - x_b|."""

@@ -3,9 +3,14 @@
 Pieces:
   * `GCSACCatalog` / `GCSACTorchRLModule`: SB3-shaped actor and twin critics (critic = MLP on
     concat(obs, action)).
-  * `GCSACTorchLearner`: one backward pass, per-gradient-step target updates, NaN guard.
+  * `GCSACTorchLearner`: one backward pass, per-gradient-step target updates, NaN guard; its fused
+    update (`FusedSACStep`: the whole step on the device, no host sync, a CUDA graph on a GPU) samples
+    a replay buffer that lives on the learner's device.
+  * `sac_losses` / `bellman_target`: SAC's losses, shared by both update paths.
   * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
-  * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled.
+  * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there.
+  * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled;
+    `DeviceHindsightBuffer`: the same on the learner's device, relabelled inside the fused step.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
   * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
   * `use_fast_learner(config)`: switch a SACConfig to all of the above.
@@ -20,14 +25,17 @@ from copilot_ray.algorithms.gc_sac.catalog import (
     count_parameters,
 )
 from copilot_ray.algorithms.gc_sac.config import use_fast_learner, uses_fast_learner
+from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer, TorchRewardFn
+from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
+from copilot_ray.algorithms.gc_sac.fused_step import FusedSACStep
 from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout, HindsightReplayBuffer
 from copilot_ray.algorithms.gc_sac.learner import (
     GC_SAC_KEY,
     NONFINITE_SKIPPED_KEY,
     GCSACTorchLearner,
-    bellman_target,
     gc_sac_settings,
 )
+from copilot_ray.algorithms.gc_sac.losses import bellman_target, sac_losses
 from copilot_ray.algorithms.gc_sac.replay_buffer import COLUMNS, TRAIN_COLUMNS, FlatTransitionBuffer
 from copilot_ray.algorithms.gc_sac.updater import GradientStepSchedule, make_train_batch, update_from_buffer
 
@@ -36,10 +44,14 @@ __all__ = [
     "GC_SAC_KEY",
     "NONFINITE_SKIPPED_KEY",
     "SB3_MODEL_CONFIG",
+    "TorchRewardFn",
     "TRAIN_COLUMNS",
     "ConcatObsActionMLPEncoder",
     "ConcatObsActionMLPEncoderConfig",
+    "DeviceHindsightBuffer",
+    "DeviceTransitionBuffer",
     "FlatTransitionBuffer",
+    "FusedSACStep",
     "GCSACCatalog",
     "GCSACTorchLearner",
     "GCSACTorchRLModule",
@@ -49,6 +61,7 @@ __all__ = [
     "bellman_target",
     "count_parameters",
     "gc_sac_settings",
+    "sac_losses",
     "uses_fast_learner",
     "make_train_batch",
     "update_from_buffer",

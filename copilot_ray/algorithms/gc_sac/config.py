@@ -21,6 +21,9 @@ def use_fast_learner(
     torch_threads: int | None = 2,
     updates_per_env_step: float = 1.0,
     critic_loss: str = "huber",
+    fused_update: bool = True,
+    cuda_graph: bool = True,
+    compile_update: bool = False,
 ) -> SACConfig:
     """Configures `config` (in place, and returns it) for the fast GC-SAC module and learner.
 
@@ -33,7 +36,8 @@ def use_fast_learner(
         `config.tau`, fused NaN guard);
       * `torch_skip_nan_gradients=True` (RLlib's per-parameter NaN checks off; the learner guards
         NaNs itself);
-      * `learner_config_dict["gc_sac"] = {torch_threads, updates_per_env_step, critic_loss}`.
+      * `learner_config_dict["gc_sac"] = {torch_threads, updates_per_env_step, critic_loss,
+        fused_update, cuda_graph, compile_update}`.
 
     Args:
         config: Any SACConfig (e.g. CO-PILOT's config subclass). Not calling this keeps RLlib's stock
@@ -47,6 +51,11 @@ def use_fast_learner(
             asks `GradientStepSchedule(ratio).on_env_steps(n)` how many steps to run; the learner
             itself does not use it.
         critic_loss: "huber" (RLlib's SAC default) or "mse" (SB3's 0.5 * squared error).
+        fused_update: train through `GCSACTorchLearner.update_from_replay` (the whole step on the
+            learner's device, the replay sampled there, no host sync inside; GoalSAC's default), or,
+            False, through RLlib's `update(batch=...)` fed from a numpy buffer (the path before it).
+        cuda_graph: on a CUDA learner, capture the fused step in one CUDA graph and replay it.
+        compile_update: `torch.compile` the fused step (before the capture on a GPU).
     """
     if not isinstance(config, SACConfig):
         raise TypeError(f"use_fast_learner needs a SACConfig (or subclass), got {type(config).__name__}")
@@ -78,6 +87,9 @@ def use_fast_learner(
         "torch_threads": torch_threads,
         "updates_per_env_step": float(updates_per_env_step),
         "critic_loss": critic_loss,
+        "fused_update": fused_update,
+        "cuda_graph": cuda_graph,
+        "compile_update": compile_update,
     }
     config.learners(learner_class=GCSACTorchLearner, learner_config_dict=learner_config_dict)
     config.framework(torch_skip_nan_gradients=True)

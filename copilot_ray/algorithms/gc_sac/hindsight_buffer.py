@@ -61,7 +61,7 @@ class GoalLayout:
         return flat_observation(observation, goal, achieved if self.with_delta else None)
 
 
-_STORED = {  # column -> (width: "obs" | "goal" | "action" | None for scalars, dtype)
+STORED_COLUMNS = {  # column -> (width: "obs" | "goal" | "action" | None for scalars, dtype)
     "observation": ("obs", np.float32),
     "next_observation": ("obs", np.float32),
     "achieved": ("goal", np.float32),
@@ -126,8 +126,17 @@ class HindsightReplayBuffer:
         self._action_dim = action_dim
         self._data = {
             name: np.zeros((self.capacity,) if w is None else (self.capacity, widths[w]), dtype)
-            for name, (w, dtype) in _STORED.items()
+            for name, (w, dtype) in STORED_COLUMNS.items()
         }
+
+    def _write_rows(self, rows: np.ndarray, cols: Mapping[str, np.ndarray]) -> None:
+        """Stores `cols` (column -> values, one per row) at storage rows `rows`."""
+        for name, values in cols.items():
+            self._data[name][rows] = values
+
+    def _filled(self) -> dict[str, np.ndarray]:
+        """Copies of the filled rows, storage order."""
+        return {k: v[: self._size].copy() for k, v in self._data.items()}
 
     def __len__(self) -> int:
         return self._size
@@ -180,9 +189,7 @@ class HindsightReplayBuffer:
             "episode_length": np.full(t, t, np.int64),
             "step": np.arange(t),
         }
-        rows = (self._ptr + np.arange(t)) % self.capacity
-        for name, values in cols.items():
-            self._data[name][rows] = values
+        self._write_rows((self._ptr + np.arange(t)) % self.capacity, cols)
         self._ptr = (self._ptr + t) % self.capacity
         self._size = min(self._size + t, self.capacity)
         self._num_added += t
@@ -262,7 +269,10 @@ class HindsightReplayBuffer:
         if self._size == 0:
             raise ValueError("cannot sample states from an empty HindsightReplayBuffer")
         rows = rng.choice(self._size, size=min(int(n), self._size), replace=False)
-        return self._data["observation"][rows].copy(), self._data["achieved"][rows].copy()
+        return self._rows_as_numpy("observation", rows), self._rows_as_numpy("achieved", rows)
+
+    def _rows_as_numpy(self, name: str, rows: np.ndarray) -> np.ndarray:
+        return self._data[name][rows].copy()
 
     # ------------------------------------------------------------------------------------- state
     def get_state(self) -> dict[str, Any]:
@@ -270,7 +280,7 @@ class HindsightReplayBuffer:
         layout are the algorithm's, rebuilt from its config)."""
         filled = None
         if self._data is not None and self._size:
-            filled = {k: v[: self._size].copy() for k, v in self._data.items()}
+            filled = self._filled()
         return {
             "capacity": self.capacity,
             "n_sampled_goal": self.n_sampled_goal,
@@ -291,6 +301,5 @@ class HindsightReplayBuffer:
             self._allocate(int(state["action_dim"]))
         if state.get("data"):
             size = int(state["size"])
-            for k, v in state["data"].items():
-                self._data[k][:size] = v
+            self._write_rows(np.arange(size), {k: np.asarray(v)[:size] for k, v in state["data"].items()})
             self._size, self._ptr = size, int(state["ptr"])

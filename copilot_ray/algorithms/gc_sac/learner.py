@@ -1,29 +1,39 @@
-"""A fast SAC torch Learner: one backward pass, per-gradient-step target updates, a cheap NaN guard.
+"""A fast SAC torch Learner: one backward pass, per-gradient-step target updates, a device-side NaN guard,
+and a fused update that samples its replay on the learner's device.
 
 It is still an RLlib `Learner` (a subclass of `SACTorchLearner`): `LearnerGroup.update(batch=...)` or
 `update(episodes=...)`, local or remote learners, checkpoints (`get_state`/`set_state`) and weight
 sync to env runners all work as for the stock learner. What differs from `SACTorchLearner`:
 
-* The actor, critic(s) and temperature losses are summed and back-propagated once (the stock learner
-  calls `backward(retain_graph=True)` once per optimizer). Gradients are identical: each loss only
-  reaches its own parameters (the actor loss sees the critics with `requires_grad=False`, targets and
-  `alpha` in the actor/critic losses are detached).
+* The actor, critic(s) and temperature losses (`losses.sac_losses`) are summed and back-propagated once
+  (the stock learner calls `backward(retain_graph=True)` once per optimizer). Gradients are identical:
+  each loss only reaches its own parameters.
 * Target networks are Polyak-updated after *every gradient step* (every minibatch) with `config.tau`,
-  like SB3, instead of once per `update()` call. A call with N minibatches therefore moves the targets
-  N times. `target_network_update_freq` is ignored (it counts env steps, which do not advance within
-  one call). LR schedules still step once per call (they are keyed on sampled env steps, which is
-  right).
+  like SB3, instead of once per `update()` call. `target_network_update_freq` is ignored (it counts env
+  steps, which do not advance within one call). LR schedules still step once per call.
 * NaN guard: one fused finite-check over all gradients per step; a non-finite step is skipped (no
   optimizer step, no target update) and counted in the `num_nonfinite_steps_skipped` metric. Use with
   `torch_skip_nan_gradients=True`, which turns off RLlib's per-parameter checks.
-* The critic and twin critic share one Adam optimizer ("qf"); Adam runs fused where torch allows.
+* The critic and twin critic share one Adam optimizer ("qf"); Adam runs fused (one kernel per step).
 * log(alpha) is part of the learner state (stock RLlib 2.60 drops it from checkpoints).
 * Loss: `weights` and `n_step` columns are optional (ones when absent), so a flat replay batch needs
   only obs, new_obs, actions, rewards, terminateds. The critic loss is RLlib's Huber loss by default
   or SB3's 0.5 * MSE with `learner_config_dict["gc_sac"]["critic_loss"] = "mse"`.
 
+Two update paths, the same step:
+
+* `update(batch=...)` (RLlib's): per minibatch `_uncompiled_update`, the finite check read on the host
+  (the path before the fused update; `fused_update=False` trains through it).
+* `update_from_replay(replay, num_steps, batch_size, timesteps)` (the fused one, `fused_update=True`):
+  `num_steps` calls of `fused_step.FusedSACStep`, each sampling its batch from `replay` (a buffer on
+  this learner's device) inside the step and guarding non-finite gradients on the device. On CUDA the
+  step is captured once into a CUDA graph and replayed (`cuda_graph`), optionally compiled first
+  (`compile_update`); on a CPU it runs eagerly (or compiled). The loss statistics of the last step and
+  the skip counter are read back once per call, and logged under the same keys as RLlib's path.
+
 Knobs live in `config.learner_config_dict["gc_sac"]` (see `config.use_fast_learner`):
-`critic_loss` ("huber" | "mse"), `torch_threads` (int or None).
+`critic_loss` ("huber" | "mse"), `torch_threads` (int or None), `fused_update`, `cuda_graph` and
+`compile_update` (bools).
 """
 
 from __future__ import annotations
@@ -33,59 +43,51 @@ from typing import Any
 import gymnasium as gym
 import torch
 from ray.rllib.algorithms.dqn.dqn_learner import DQNLearner
-from ray.rllib.algorithms.sac.sac_learner import (
-    LOGPS_KEY,
-    QF_LOSS_KEY,
-    QF_MAX_KEY,
-    QF_MEAN_KEY,
-    QF_MIN_KEY,
-    QF_PREDS,
-    QF_TWIN_LOSS_KEY,
-    QF_TWIN_PREDS,
-    TD_ERROR_MEAN_KEY,
-    SACLearner,
-)
+from ray.rllib.algorithms.sac.sac_learner import SACLearner
 from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
-from ray.rllib.core import COMPONENT_OPTIMIZER
-from ray.rllib.core.columns import Columns
-from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, Learner
+from ray.rllib.core import COMPONENT_OPTIMIZER, DEFAULT_MODULE_ID
+from ray.rllib.core.learner.learner import Learner
 from ray.rllib.core.learner.torch.torch_learner import TorchLearner
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.annotations import override
-from ray.rllib.utils.metrics import ALL_MODULES, NUM_TARGET_UPDATES
+from ray.rllib.utils.metrics import (
+    ALL_MODULES,
+    MODULE_TRAIN_BATCH_SIZE_MEAN,
+    NUM_ENV_STEPS_TRAINED,
+    NUM_ENV_STEPS_TRAINED_LIFETIME,
+    NUM_MODULE_STEPS_TRAINED,
+    NUM_MODULE_STEPS_TRAINED_LIFETIME,
+    NUM_TARGET_UPDATES,
+    WEIGHTS_SEQ_NO,
+)
 
+from copilot_ray.algorithms.gc_sac.fused_step import FINITE, TOTAL_LOSS, FusedSACStep
+from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
+from copilot_ray.algorithms.gc_sac.losses import CRITIC_LOSSES, sac_losses
 from copilot_ray.torch_checks import all_finite
 
 GC_SAC_KEY = "gc_sac"
 NONFINITE_SKIPPED_KEY = "num_nonfinite_steps_skipped"
 LOG_ALPHA_STATE_KEY = "gc_sac_log_alpha"
+BOOLEAN_KNOBS = ("fused_update", "cuda_graph", "compile_update")
 
 
 def gc_sac_settings(config) -> dict[str, Any]:
-    """The `learner_config_dict["gc_sac"]` settings of an AlgorithmConfig, with defaults."""
+    """The `learner_config_dict["gc_sac"]` settings of an AlgorithmConfig, with defaults, checked."""
     d = dict((getattr(config, "learner_config_dict", None) or {}).get(GC_SAC_KEY, {}))
     d.setdefault("critic_loss", "huber")
     d.setdefault("torch_threads", None)
-    if d["critic_loss"] not in ("huber", "mse"):
+    d.setdefault("fused_update", True)
+    d.setdefault("cuda_graph", True)
+    d.setdefault("compile_update", False)
+    if d["critic_loss"] not in CRITIC_LOSSES:
         raise ValueError(
             f"learner_config_dict['gc_sac']['critic_loss'] must be 'huber' or 'mse', got {d['critic_loss']!r}"
         )
+    for key in BOOLEAN_KNOBS:
+        if not isinstance(d[key], bool):
+            raise ValueError(f"learner_config_dict['gc_sac'][{key!r}] must be True or False, got {d[key]!r}")
     return d
-
-
-def bellman_target(
-    rewards: torch.Tensor,
-    terminateds: torch.Tensor,
-    q_target_next: torch.Tensor,
-    logp_next: torch.Tensor,
-    alpha: torch.Tensor,
-    gamma: float,
-    n_step: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """y = r + gamma^n * (1 - terminated) * (min_i Q'_i(s', a') - alpha * log pi(a'|s')), detached."""
-    discount = gamma if n_step is None else gamma ** n_step.float()
-    v_next = q_target_next - alpha.detach() * logp_next
-    return (rewards.float() + discount * (1.0 - terminateds.float()) * v_next).detach()
 
 
 class GCSACTorchLearner(SACTorchLearner):
@@ -99,7 +101,15 @@ class GCSACTorchLearner(SACTorchLearner):
             torch.set_num_threads(int(settings["torch_threads"]))
         self._gc_settings = settings
         self._gc_target_pairs: dict[str, tuple[list[torch.Tensor], list[torch.Tensor]]] = {}
+        self._fused_steps: dict[str, FusedSACStep] = {}
+        self._replay_runs: dict[str, tuple[tuple, Any]] = {}
+        self._skipped_read: dict[str, int] = {}
         super().build()
+
+    @property
+    def device(self) -> torch.device:
+        """Where this learner's module, optimizer state and (fused path) replay live."""
+        return torch.device(self._device)
 
     # ------------------------------------------------------------------ optimizers
     @override(SACTorchLearner)
@@ -110,9 +120,10 @@ class GCSACTorchLearner(SACTorchLearner):
             return super().configure_optimizers_for_module(module_id, config)
 
         def adam(params):
-            # Fused Adam (one kernel per step for all params) where torch supports it on this device.
+            # Fused Adam: one kernel per step for all params, and the only Adam that skips a step on a
+            # device-side flag (the fused update's NaN guard). capturable: steppable inside a CUDA graph.
             try:
-                return torch.optim.Adam(params, eps=1e-7, fused=True)
+                return torch.optim.Adam(params, eps=1e-7, fused=True, capturable=self.device.type == "cuda")
             except (RuntimeError, ValueError):
                 return torch.optim.Adam(params, eps=1e-7, foreach=True)
 
@@ -132,66 +143,24 @@ class GCSACTorchLearner(SACTorchLearner):
                 params=params,
                 lr_or_lr_schedule=lr,
             )
+        self._forget_fused(module_id)
 
     # ------------------------------------------------------------------ loss
     @override(SACTorchLearner)
     def _compute_loss_for_module_continuous(self, *, module_id, config, batch, fwd_out):
-        alpha = torch.exp(self.curr_log_alpha[module_id])
-        q1 = fwd_out[QF_PREDS]
-        target = bellman_target(
-            batch[Columns.REWARDS],
-            batch[Columns.TERMINATEDS],
-            fwd_out["q_target_next"],
-            fwd_out["logp_next_resampled"],
-            alpha,
-            config.gamma,
-            batch.get("n_step"),
+        total, stats = sac_losses(
+            fwd_out,
+            batch,
+            self.curr_log_alpha[module_id],
+            self.target_entropy[module_id],
+            gamma=config.gamma,
+            critic_loss=self._gc_settings["critic_loss"],
+            twin_q=config.twin_q,
         )
-        weights = batch.get("weights")
+        self.metrics.log_dict(stats, key=module_id, window=1)
+        return total
 
-        def critic_loss_fn(q):
-            if self._gc_settings["critic_loss"] == "mse":
-                per_item = 0.5 * (q - target) ** 2
-            else:
-                per_item = torch.nn.functional.huber_loss(q, target, reduction="none", delta=1.0)
-            return torch.mean(per_item if weights is None else weights * per_item)
-
-        critic_loss = critic_loss_fn(q1)
-        total_critic = critic_loss
-        td_error = torch.abs(q1 - target)
-        if config.twin_q:
-            q2 = fwd_out[QF_TWIN_PREDS]
-            critic_twin_loss = critic_loss_fn(q2)
-            total_critic = critic_loss + critic_twin_loss
-            td_error = 0.5 * (td_error + torch.abs(q2 - target))
-
-        logp = fwd_out["logp_resampled"]
-        actor_loss = torch.mean(alpha.detach() * logp - fwd_out["q_curr"])
-        alpha_loss = -torch.mean(
-            self.curr_log_alpha[module_id] * (logp.detach() + self.target_entropy[module_id])
-        )
-
-        with torch.no_grad():
-            q_curr = fwd_out["q_curr"]
-            stats = {
-                POLICY_LOSS_KEY: actor_loss,
-                QF_LOSS_KEY: critic_loss,
-                "alpha_loss": alpha_loss,
-                "alpha_value": alpha[0],
-                "log_alpha_value": self.curr_log_alpha[module_id][0],
-                "target_entropy": self.target_entropy[module_id],
-                LOGPS_KEY: torch.mean(logp),
-                QF_MEAN_KEY: torch.mean(q_curr),
-                QF_MAX_KEY: torch.max(q_curr),
-                QF_MIN_KEY: torch.min(q_curr),
-                TD_ERROR_MEAN_KEY: torch.mean(td_error),
-            }
-            if config.twin_q:
-                stats[QF_TWIN_LOSS_KEY] = critic_twin_loss
-        self.metrics.log_dict({k: v.detach() for k, v in stats.items()}, key=module_id, window=1)
-        return actor_loss + total_critic + alpha_loss
-
-    # ------------------------------------------------------------------ update step
+    # ------------------------------------------------------------------ RLlib's update path
     @override(SACTorchLearner)
     def compute_gradients(self, loss_per_module, **kwargs):
         """One backward pass over the summed losses (TorchLearner's default), not one per optimizer."""
@@ -235,23 +204,138 @@ class GCSACTorchLearner(SACTorchLearner):
             torch._foreach_lerp_(target, main, float(self.config.get_config_for_module(module_id).tau))
             self.metrics.log_value((module_id, NUM_TARGET_UPDATES), 1, reduce="lifetime_sum")
 
+    # ------------------------------------------------------------------ the fused update path
+    def fused_step(self, module_id: str = DEFAULT_MODULE_ID) -> FusedSACStep:
+        """The module's `FusedSACStep` over this learner's parameters and optimizers (built once; built
+        again after anything that replaces optimizer state or modules)."""
+        step = self._fused_steps.get(module_id)
+        if step is None:
+            config = self.config.get_config_for_module(module_id)
+            if config.grad_clip is not None:
+                raise ValueError(
+                    f"grad_clip={config.grad_clip!r} is invalid with learner_config_dict['gc_sac']"
+                    "['fused_update']=True (the fused step does not clip); use grad_clip=None or "
+                    "fused_update=False"
+                )
+            step = FusedSACStep(
+                self.module[module_id].unwrapped(),
+                self.curr_log_alpha[module_id],
+                [optimizer for _, optimizer in self.get_optimizers_for_module(module_id)],
+                self.target_entropy[module_id],
+                gamma=config.gamma,
+                tau=config.tau,
+                critic_loss=self._gc_settings["critic_loss"],
+                twin_q=config.twin_q,
+            )
+            self._fused_steps[module_id] = step
+            self._skipped_read[module_id] = 0
+        return step
+
+    def _replay_run(self, module_id: str, replay: Any, batch_size: int):
+        """The zero-argument step for `replay`, compiled and/or captured per the knobs; rebuilt when the
+        replay's storage, the batch size or a learning rate changed (a graph holds all three fixed)."""
+        lrs = tuple(float(self._get_optimizer_lr(o)) for _, o in self.get_optimizers_for_module(module_id))
+        key = (id(replay), replay.storage_version, int(batch_size), lrs)
+        cached = self._replay_runs.get(module_id)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        run = self.fused_step(module_id).sampled_step(replay, int(batch_size))
+        if self._gc_settings["compile_update"]:
+            run = torch.compile(run)
+        if self.device.type == "cuda" and self._gc_settings["cuda_graph"]:
+            run = CapturedCall(run)
+        self._replay_runs[module_id] = (key, run)
+        return run
+
+    def update_from_replay(
+        self,
+        replay: Any,
+        num_steps: int,
+        batch_size: int,
+        timesteps: dict[str, Any] | None = None,
+        *,
+        module_id: str = DEFAULT_MODULE_ID,
+    ) -> dict[str, Any]:
+        """`num_steps` fused SAC steps on batches of `batch_size` sampled from `replay` on this
+        learner's device (see the module docstring). Logs what `Learner.update` logs (the last step's
+        losses, steps trained, target updates, learning rates, `num_nonfinite_steps_skipped`) and returns
+        `self.metrics.reduce()`, as `update` does. `replay` must hold at least one transition."""
+        self._check_is_built()
+        if len(replay) == 0:
+            raise ValueError("update_from_replay: the replay is empty; add transitions first")
+        if replay.device != self.device:
+            raise ValueError(
+                f"update_from_replay: the replay is on {replay.device}, the learner on {self.device}"
+            )
+        timesteps = timesteps or {}
+        self.before_gradient_based_update(timesteps=timesteps)
+        self._weights_seq_no += 1
+        run = self._replay_run(module_id, replay, batch_size)
+        stats = {}
+        for _ in range(int(num_steps)):
+            stats = run()
+        self._log_fused_results(module_id, stats, int(num_steps), int(batch_size))
+        self.after_gradient_based_update(timesteps=timesteps)
+        return self.metrics.reduce()
+
+    def _log_fused_results(
+        self, module_id: str, stats: dict[str, torch.Tensor], steps: int, batch: int
+    ) -> None:
+        """One device-to-host read of the last step's statistics and the skip counter, logged as
+        RLlib's path logs them."""
+        if steps == 0:
+            return
+        names = [k for k in stats if k != FINITE]
+        step = self._fused_steps[module_id]
+        values = torch.stack([stats[k].float() for k in names] + [step.skipped.float()]).cpu().tolist()
+        skipped_total = int(values.pop())
+        skipped = skipped_total - self._skipped_read[module_id]
+        self._skipped_read[module_id] = skipped_total
+        loss = values[names.index(TOTAL_LOSS)]
+        self.metrics.log_dict(
+            {k: v for k, v in zip(names, values, strict=True) if k != TOTAL_LOSS}, key=module_id, window=1
+        )
+        self.metrics.log_value((module_id, self.TOTAL_LOSS_KEY), loss, window=1)
+        self.metrics.log_value((module_id, NUM_TARGET_UPDATES), steps - skipped, reduce="lifetime_sum")
+        if skipped:
+            self.metrics.log_value((ALL_MODULES, NONFINITE_SKIPPED_KEY), skipped, reduce="lifetime_sum")
+        trained = steps * batch
+        self.metrics.log_value((module_id, WEIGHTS_SEQ_NO), self._weights_seq_no, window=1)
+        self.metrics.log_value((module_id, MODULE_TRAIN_BATCH_SIZE_MEAN), batch, reduce="mean")
+        for key in (module_id, ALL_MODULES):
+            self.metrics.log_value((key, NUM_MODULE_STEPS_TRAINED), trained, reduce="sum")
+            self.metrics.log_value((key, NUM_MODULE_STEPS_TRAINED_LIFETIME), trained, reduce="lifetime_sum")
+        self.metrics.log_value((ALL_MODULES, NUM_ENV_STEPS_TRAINED), trained, reduce="sum")
+        self.metrics.log_value((ALL_MODULES, NUM_ENV_STEPS_TRAINED_LIFETIME), trained, reduce="lifetime_sum")
+
+    def _forget_fused(self, module_id: str | None = None) -> None:
+        """Drops fused steps and their graphs (all, or one module's): their tensors may be stale."""
+        for cache in (self._fused_steps, self._replay_runs):
+            if module_id is None:
+                cache.clear()
+            else:
+                cache.pop(module_id, None)
+
+    # ------------------------------------------------------------------ bookkeeping
     @override(DQNLearner)
     def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         """TorchLearner's lr-schedule stepping and logging, without DQNLearner's target update."""
         # Skip DQNLearner's once-per-call target update (targets move per gradient step above).
         TorchLearner.after_gradient_based_update(self, timesteps=timesteps)
 
-    # Module set changes invalidate cached target-parameter lists.
+    # Module set changes invalidate cached target-parameter lists and fused steps.
     @override(SACLearner)
     def add_module(self, **kwargs):
-        """SACLearner's `add_module`, dropping the cached target-parameter lists."""
+        """SACLearner's `add_module`, dropping the cached target-parameter lists and fused steps."""
         self._gc_target_pairs.clear()
+        self._forget_fused()
         return super().add_module(**kwargs)
 
     @override(SACLearner)
     def remove_module(self, module_id, **kwargs):
-        """SACLearner's `remove_module`, dropping the cached target-parameter lists."""
+        """SACLearner's `remove_module`, dropping the cached target-parameter lists and fused steps."""
         self._gc_target_pairs.clear()
+        self._forget_fused()
         return super().remove_module(module_id, **kwargs)
 
     # RLlib 2.60's SACLearner keeps log(alpha) outside the RLModule and leaves it out of its state,
@@ -275,3 +359,15 @@ class GCSACTorchLearner(SACTorchLearner):
                 if mid in self.curr_log_alpha:
                     self.curr_log_alpha[mid].copy_(torch.as_tensor(value))
         self._gc_target_pairs.clear()
+        self._forget_fused()
+
+    @override(TorchLearner)
+    def _set_optimizer_state(self, state) -> None:
+        """TorchLearner's, then each Adam made steppable inside a CUDA graph again on a GPU (a
+        checkpoint written on a CPU says capturable=False)."""
+        super()._set_optimizer_state(state)
+        for optimizer in self._named_optimizers.values():
+            for group in optimizer.param_groups:
+                if group.get("fused"):
+                    group["capturable"] = self.device.type == "cuda"
+        self._forget_fused()

@@ -56,6 +56,7 @@ from ray.tune.registry import register_env
 
 from copilot_ray import keys
 from copilot_ray.algorithms.gc_sac import (
+    DeviceHindsightBuffer,
     GoalLayout,
     GradientStepSchedule,
     HindsightReplayBuffer,
@@ -63,8 +64,16 @@ from copilot_ray.algorithms.gc_sac import (
     uses_fast_learner,
 )
 from copilot_ray.algorithms.sac import settings as agent_settings
-from copilot_ray.algorithms.sac.agent_updates import FastLearnerUpdater, make_agent_updater, replay_capacity
+from copilot_ray.algorithms.sac.agent_updates import (
+    FastLearnerUpdater,
+    FusedLearnerUpdater,
+    fused_update,
+    local_learner,
+    make_agent_updater,
+    replay_capacity,
+)
 from copilot_ray.algorithms.sac.planned_evaluation import PlannedEvaluation
+from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward, relabelled_reward
 from copilot_ray.algorithms.sac.runner_traversal import RunnerTraversal
 from copilot_ray.algorithms.sac.traversal_channel import (
     Subtasks,
@@ -77,6 +86,7 @@ from copilot_ray.algorithms.sac.traversal_env import (
     TraversalRules,
     make_traversal_env,
 )
+from copilot_ray.algorithms.sac.traversal_runner import TraversalEnvRunner
 from copilot_ray.envs import make
 from copilot_ray.evaluation import AgentEvaluation
 from copilot_ray.heartbeat import Heartbeat
@@ -127,6 +137,11 @@ class GoalSACConfig(SACConfig):
         self.train_episode_steps = agent_settings.SETTINGS["train_episode_steps"].default
         # n_sampled_goal 0: plain SAC on the flat buffer (no relabelling, no goal bookkeeping).
         self.her: dict[str, Any] = {"n_sampled_goal": 0, "goal_selection": "future"}
+        # How the fast learner runs its updates, not what it learns: `use_fast_learner`'s keyword
+        # arguments (fused_update, cuda_graph, compile_update), applied by validate().
+        self.fast_learner_options: dict[str, Any] = {}
+        # Sample the traversal with TraversalEnvRunner's lean loop (False: RLlib's own env runner).
+        self.lean_traversal = True
         self._apply({key: s.default for key, s in self.SETTINGS.items() if self._is_value(s)}, defaults=True)
 
     # ------------------------------------------------------------------ settings by name
@@ -231,7 +246,13 @@ class GoalSACConfig(SACConfig):
             # One torch thread per CPU this process holds: more threads than cores make OpenMP spin
             # against other trials and runners (measured 10-20x slower SAC updates on 2 busy cores).
             threads = max(1, int(self.num_cpus_for_main_process or 1))
-            use_fast_learner(self, updates_per_env_step=self.utd_ratio(), torch_threads=threads)
+            use_fast_learner(
+                self, updates_per_env_step=self.utd_ratio(), torch_threads=threads, **self._learner_options()
+            )
+        if self.lean_traversal and self.env_runner_cls is None:
+            self.env_runners(env_runner_cls=TraversalEnvRunner)
+        elif not self.lean_traversal and self.env_runner_cls is TraversalEnvRunner:
+            self.env_runner_cls = None
         register_traversal_env()
         super().validate()
 
@@ -262,6 +283,10 @@ class GoalSACConfig(SACConfig):
                 f"{name}: fast_learner=False is invalid with hindsight relabelling: the relabelling buffer "
                 "feeds the fast learner"
             )
+        if not isinstance(self.lean_traversal, bool):
+            raise ValueError(
+                f"{name}: lean_traversal={self.lean_traversal!r} is invalid: must be True or False"
+            )
         if self.num_envs_per_env_runner != 1:
             raise ValueError(
                 f"{name}: num_envs_per_env_runner={self.num_envs_per_env_runner!r} is invalid: one sub-task "
@@ -274,6 +299,18 @@ class GoalSACConfig(SACConfig):
 
     def _combination_problems(self, values: Mapping[str, Any]):
         return agent_settings.combination_problems(values)
+
+    def _learner_options(self) -> dict[str, Any]:
+        """`fast_learner_options`, each key one `use_fast_learner` takes (a ValueError names one it
+        does not)."""
+        known = ("fused_update", "cuda_graph", "compile_update")
+        for key, value in self.fast_learner_options.items():
+            if key not in known:
+                raise ValueError(
+                    f"{type(self).__name__}: fast_learner_options[{key!r}]={value!r} is invalid: known keys are "
+                    f"{list(known)}"
+                )
+        return dict(self.fast_learner_options)
 
     # ------------------------------------------------------------------ derived
     def traversal_rules(self) -> TraversalRules:
@@ -381,16 +418,21 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
 
     def _make_agent_updater(self):
         """What turns sampled episodes into SAC gradient steps (agent_updates.py): with hindsight
-        relabelling, the fast learner fed by HER's buffer."""
+        relabelling, the fast learner fed by HER's buffer (on the learner's device, relabelled inside
+        the fused step, unless `fused_update=False`)."""
         cfg = self.config
         if not cfg.uses_hindsight_buffer():
             return make_agent_updater(self)
+        her = {"n_sampled_goal": cfg.her["n_sampled_goal"], "goal_selection": cfg.her["goal_selection"]}
+        if fused_update(cfg):
+            device = local_learner(cfg, self.learner_group).device
+            reward = DeviceRelabelledReward(self.goal_env.unwrapped, self.rules, device)
+            buffer = DeviceHindsightBuffer(
+                replay_capacity(cfg), self.goal_layout(), reward, **her, device=device
+            )
+            return FusedLearnerUpdater(cfg, self.learner_group, buffer)
         buffer = HindsightReplayBuffer(
-            replay_capacity(cfg),
-            self.goal_layout(),
-            self.relabelled_reward,
-            n_sampled_goal=cfg.her["n_sampled_goal"],
-            goal_selection=cfg.her["goal_selection"],
+            replay_capacity(cfg), self.goal_layout(), self.relabelled_reward, **her
         )
         return FastLearnerUpdater(cfg, self.learner_group, buffer)
 
@@ -408,9 +450,7 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
     ) -> tuple[np.ndarray, np.ndarray]:
         """(rewards, terminateds) of transitions given new goals: the goal env's reward and
         termination under the traversal rules the env runners apply (one sub-task = one task here)."""
-        env = self.goal_env.unwrapped
-        reached = env.compute_terminated(next_achieved, goals, None)
-        return self.rules.reward(env.compute_reward(next_achieved, goals, None), reached, collisions, layer=0)
+        return relabelled_reward(self.goal_env.unwrapped, self.rules, next_achieved, goals, collisions)
 
     # --------------------------------------------------------------------------- training step
     @override(DQN)

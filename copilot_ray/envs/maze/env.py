@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from copilot_ray.envs.env_config import bad_value, is_integer, is_number, merged_config
-from copilot_ray.envs.goal_env import SparseGoalReward
+from copilot_ray.envs.goal_env import GoalMetric, SparseGoalReward
 from copilot_ray.envs.task_sets import TASK_SETS, check_task_set, check_test_set, draw_task_sets
 
 from .agents import AgentGeometry, PointMass
@@ -137,6 +137,12 @@ class GoalMazeEnv(SparseGoalReward, gym.Env):
     def goal_distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """[N, d], [N, d] -> [N] (or [d], [d] -> scalar)."""
         return self.agent_geometry.distance(a, b)
+
+    @property
+    def goal_metric(self) -> GoalMetric:
+        """The agent's configuration distance as data: its weights and wrapped angles."""
+        geometry = self.agent_geometry
+        return GoalMetric(tuple(float(w) for w in geometry.distance_weights), tuple(geometry.angle_dims))
 
     def segments_collide(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """[N, d], [N, d] -> bool [N]: the straight motion touches an obstacle or leaves the square."""
