@@ -1,7 +1,7 @@
 """A setting of an algorithm, declared once: key, type, default, rule and a one-line doc.
 
 An algorithm's module lists its settings (`copilot_ray.algorithms.copilot.settings.SETTINGS`); the
-config's validation, the sweep spec's keys and ranges, the command line and the README's settings table
+config's validation, the sweep spec's keys and ranges, the command line and the settings page's tables (docs/settings.md)
 are all read off that list, so a rule cannot disagree between them.
 
 No Ray, numpy or torch here: sweep specs are validated against settings before anything starts.

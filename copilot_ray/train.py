@@ -135,7 +135,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="show Ray's, RLlib's and MLflow's notices on the console (default: only in "
         "<checkpoint folder>.console.log)",
     )
-    settings = p.add_argument_group("CO-PILOT settings (default: the setting's own; see the README's table)")
+    settings = p.add_argument_group("CO-PILOT settings (default: the setting's own; see docs/settings.md)")
     for s in get_algorithm(ALGORITHM).settings.values():
         if s.on_cli:
             default = "null" if s.default is None else s.default

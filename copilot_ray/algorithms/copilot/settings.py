@@ -2,8 +2,8 @@
 
 Everything else is generated from `SETTINGS`: CoPilotConfig's defaults and its validation, the keys and
 ranges a sweep spec accepts (`config`, `search`, `variants`), `python -m copilot_ray.train`'s
-command line, `benchmarks/maze_learning.py --set`, and the README's two settings tables
-(`python -m copilot_ray.algorithms.copilot.settings` prints them; a test fails when the README's copy
+command line, `benchmarks/maze_learning.py --set`, and docs/settings.md's two settings tables
+(`python -m copilot_ray.algorithms.copilot.settings` prints them; a test fails when the page's copy
 is stale).
 
 A setting's `key` is its name everywhere. Dotted keys live in a nested dict of the config
@@ -82,7 +82,7 @@ TRAVERSAL_TREES = ("sampled", "mean")
 EVAL_ACTIONS = keys.EVAL_ACTIONS
 
 # ------------------------------------------------------------------------------------- the table
-# Grouped by concern; the order is the order of the README table and of `train --help`.
+# Grouped by concern; the order is the order of the settings page's table and of `train --help`.
 _TREE = [
     _int(
         "tree_depth",
@@ -549,7 +549,7 @@ def combination_problems(values: Mapping[str, Any]) -> list[tuple[tuple[str, ...
     return out
 
 
-# ------------------------------------------------------------------------------------ README tables
+# ----------------------------------------------------------------------- the settings page's tables
 def _paper_value(setting: Setting) -> str:
     paper = PRESETS["paper_literal"]
     if setting.target == "planner":
@@ -558,7 +558,8 @@ def _paper_value(setting: Setting) -> str:
 
 
 def readings_table() -> str:
-    """The README's "Readings of the paper" table: the settings with a measured reason for their default."""
+    """The "Readings of the paper" table (docs/settings.md): the settings with a measured reason for their
+    default."""
     rows = [
         "| setting | `paper_literal` | default | why the default (K = 5; single-seed probes on four-rooms, see "
         "below, which read the test tasks before validation sets existed; after_failure's, planner_warm_start's, "
@@ -574,7 +575,7 @@ def readings_table() -> str:
 
 
 def settings_table() -> str:
-    """The README's table of every setting, by concern."""
+    """The table of every setting, by concern (docs/settings.md)."""
     rows = ["| setting | default | allowed | what |", "|---|---|---|---|"]
     for group, settings in GROUPS.items():
         rows.append(f"| **{group}** | | | |")
@@ -585,7 +586,7 @@ def settings_table() -> str:
     return "\n".join(rows)
 
 
-_GENERATED = "(generated: python -m copilot_ray.algorithms.copilot.settings --write README.md)"
+_GENERATED = "(generated: python -m copilot_ray.algorithms.copilot.settings --write docs/settings.md)"
 README_TABLES = {
     f"<!-- readings-table:begin {_GENERATED} -->": ("<!-- readings-table:end -->", readings_table),
     f"<!-- settings-table:begin {_GENERATED} -->": ("<!-- settings-table:end -->", settings_table),
@@ -593,7 +594,8 @@ README_TABLES = {
 
 
 def render_readme(text: str) -> str:
-    """`text` (the README) with both generated tables replaced by the current ones."""
+    """`text` (a page holding the tables' markers: docs/settings.md) with both generated tables replaced by
+    the current ones."""
     for begin, (end, table) in README_TABLES.items():
         text = replace_between(text, begin, end, table())
     return text
@@ -604,10 +606,10 @@ if __name__ == "__main__":
     from pathlib import Path
 
     parser = argparse.ArgumentParser(
-        description="Print CO-PILOT's settings tables, or write them into a README."
+        description="Print CO-PILOT's settings tables, or write them into a page (docs/settings.md)."
     )
     parser.add_argument(
-        "--write", metavar="README", help="replace the tables between the markers in this file"
+        "--write", metavar="PAGE", help="replace the tables between the markers in this file"
     )
     args = parser.parse_args()
     if args.write:
