@@ -3,9 +3,10 @@
 # network): installs the wheels `scripts/gather_device_wheels.sh` put in device_wheels/ into /tmp/site,
 # then runs `benchmarks/device_throughput.py --suite` (the update alone per device and path, a lone
 # CO-PILOT trial with its learner on the GPU beside its CPU twin and a CPU trial on the paths before
-# the fused update and the lean traversal loop; about 6 minutes), writing its output, with the
-# machine, commit and command, to OUT_DIR/device_check.txt and every trial iteration to
-# OUT_DIR/trials.jsonl.
+# the fused update and the lean traversal loop; about 6 minutes), then `benchmarks/stacked_update.py`
+# (N = 1, 4, 16, 64 seeds stacked in one update, eager and captured; under a minute), writing its
+# output, with the machine, commit and command, to OUT_DIR/device_check.txt and every trial iteration
+# to OUT_DIR/trials.jsonl.
 #
 #   bash scripts/device_check.sh [OUT_DIR] [extra device_throughput.py flags]   (default OUT_DIR: $OUT or .)
 #
@@ -32,3 +33,6 @@ command=(benchmarks/device_throughput.py --suite --log "$out/trials.jsonl" "$@")
   echo "# PYTHONPATH=.:/tmp/site $python_bin ${command[*]}"
 } >"$out/device_check.txt"
 PYTHONPATH=.:/tmp/site RAY_AUTH_MODE=disabled "$python_bin" -u "${command[@]}" 2>&1 | tee -a "$out/device_check.txt"
+stacked=(benchmarks/stacked_update.py --seeds 1 4 16 64 --seconds 3)
+echo "# PYTHONPATH=.:/tmp/site $python_bin ${stacked[*]}" >>"$out/device_check.txt"
+PYTHONPATH=.:/tmp/site RAY_AUTH_MODE=disabled "$python_bin" -u "${stacked[@]}" 2>&1 | tee -a "$out/device_check.txt"

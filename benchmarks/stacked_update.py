@@ -1,0 +1,140 @@
+"""SAC updates/s with N seeds stacked in one update (`seed_stack.StackedSACStep`) against one seed's
+fused step, at this project's sizes (actor and twin critics [256, 256], batch 256, obs 4, action 2).
+
+    PYTHONPATH=. python benchmarks/stacked_update.py [--seeds 1 2 4] [--seconds 5] [--threads 2] [--device cpu]
+
+Rows, per device: "one seed, fused" (`FusedSACStep`, the path a trial takes today: its updates/s is its
+seed-updates/s), then for each N "N stacked" (one `StackedSACStep` for N seeds); on a GPU each also
+"captured" (one CUDA graph per update, `graph_capture.CapturedCall`). Each row warms up for 3 calls,
+then runs for `--seconds`; it prints updates/s of the stack and seed-updates/s (N x that). Each seed
+samples its batch from its own replay inside the step (random transitions, one [N, capacity, ...]
+tensor per column on the device; a uniform gather per seed, no host sync).
+
+On a CPU compare "N stacked" at `--threads` T against T one-seed trials side by side, each on one
+thread (`--threads 1` for the one-seed row): that is what stacking replaces on a two-core machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+import torch
+from ray.rllib.algorithms.sac import SACConfig
+from ray.rllib.core import DEFAULT_MODULE_ID
+
+from copilot_ray.algorithms.gc_sac import use_fast_learner
+from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
+from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
+
+OBS, ACT, BATCH, CAPACITY = 4, 2, 256, 100_000
+
+
+def _learner(device: str):
+    space = gym.spaces.Box(0.0, 1.0, (OBS,), np.float32)
+    cfg = SACConfig().environment(
+        observation_space=space, action_space=gym.spaces.Box(-1.0, 1.0, (ACT,), np.float32)
+    )
+    cfg.learners(num_gpus_per_learner=1 if device == "cuda" else 0)
+    return (
+        use_fast_learner(cfg.debugging(seed=0), hidden=(256, 256), torch_threads=None)
+        .build_learner_group()
+        ._learner
+    )
+
+
+def _replay(num_seeds: int, device: torch.device) -> dict[str, torch.Tensor]:
+    g = torch.Generator(device="cpu").manual_seed(0)
+    obs = torch.rand(num_seeds, CAPACITY, OBS, generator=g)
+    return {
+        "obs": obs.to(device),
+        "new_obs": (obs + 0.01 * torch.randn(obs.shape, generator=g)).clamp(0, 1).to(device),
+        "actions": (2 * torch.rand(num_seeds, CAPACITY, ACT, generator=g) - 1).to(device),
+        "rewards": torch.full((num_seeds, CAPACITY), -1.0).to(device),
+        "terminateds": (torch.rand(num_seeds, CAPACITY, generator=g) < 0.05).to(device),
+    }
+
+
+def _sample(replay: dict[str, torch.Tensor], seed_axis: bool) -> dict[str, torch.Tensor]:
+    num_seeds = replay["obs"].shape[0]
+    rows = torch.randint(0, CAPACITY, (num_seeds, BATCH), device=replay["obs"].device)
+    out = {}
+    for key, column in replay.items():
+        index = rows.view(num_seeds, BATCH, *([1] * (column.dim() - 2))).expand(-1, -1, *column.shape[2:])
+        out[key] = torch.gather(column, 1, index)
+    return out if seed_axis else {k: v[0] for k, v in out.items()}
+
+
+def _rate(fn, seconds: float, device: torch.device) -> float:
+    for _ in range(3):
+        fn()
+    sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
+    sync()
+    start, calls = time.perf_counter(), 0
+    while time.perf_counter() - start < seconds:
+        fn()
+        calls += 1
+    sync()
+    return calls / (time.perf_counter() - start)
+
+
+def _row(name: str, seeds: int, fn, seconds: float, device: torch.device) -> None:
+    try:
+        rate = _rate(fn, seconds, device)
+    except Exception as error:  # a row that fails says why; the others still run
+        print(f"{name:<28} failed: {type(error).__name__}: {error}", flush=True)
+        return
+    print(f"{name:<28} {rate:10.1f} updates/s  {rate * seeds:10.1f} seed-updates/s", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 4], help="stack sizes N")
+    parser.add_argument("--seconds", type=float, default=5.0, help="timed seconds per row")
+    parser.add_argument("--threads", type=int, default=2, help="torch threads (CPU rows)")
+    parser.add_argument(
+        "--device", choices=("cpu", "cuda"), default="cuda" if torch.cuda.is_available() else "cpu"
+    )
+    args = parser.parse_args()
+    if min(args.seeds) < 1:
+        parser.error(f"--seeds: every N must be >= 1, got {args.seeds}")
+    torch.set_num_threads(args.threads)
+    device = torch.device(args.device)
+    learner = _learner(args.device)
+    module = learner.module[DEFAULT_MODULE_ID].unwrapped()
+    log_alpha = learner.curr_log_alpha[DEFAULT_MODULE_ID]
+    config = learner.config.get_config_for_module(DEFAULT_MODULE_ID)
+    lrs = {"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr}
+    print(
+        f"# device {device} ({torch.cuda.get_device_name() if device.type == 'cuda' else f'{args.threads} threads'}), "
+        f"torch {torch.__version__}, batch {BATCH}, networks [256, 256]",
+        flush=True,
+    )
+
+    one = _replay(1, device)
+    fused = learner.fused_step()
+    _row("one seed, fused", 1, lambda: fused.step(_sample(one, seed_axis=False)), args.seconds, device)
+    for n in args.seeds:
+        replay = _replay(n, device)
+        agents = StackedSAC.from_modules([module] * n, [log_alpha] * n)  # same start: speed is what counts
+        step = StackedSACStep(
+            agents,
+            lrs,
+            learner.target_entropy[DEFAULT_MODULE_ID],
+            gamma=config.gamma,
+            tau=config.tau,
+            critic_loss="huber",
+        )
+
+        def run(step=step, replay=replay):
+            return step.step(_sample(replay, seed_axis=True))
+
+        _row(f"{n} stacked", n, run, args.seconds, device)
+        if device.type == "cuda":
+            _row(f"{n} stacked, captured", n, CapturedCall(run), args.seconds, device)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,207 @@
+"""Seeds stacked in one update (`seed_stack.StackedSACStep`) against each seed's own fused step.
+
+A stack of seeds {0, 1, 2} must give every seed the update its one-seed `FusedSACStep` gives it for the
+same batch and the same noise stream: losses, new parameters, target critics and log alpha, over
+several steps (Adam's moments and the targets carry over). A seed whose gradient is not finite must
+stay where it was while the others step. All on the CPU.
+"""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from ray.rllib.algorithms.sac import SACConfig
+from ray.rllib.core import DEFAULT_MODULE_ID
+
+from copilot_ray.algorithms.gc_sac import use_fast_learner
+from copilot_ray.algorithms.gc_sac.fused_step import FINITE
+from copilot_ray.algorithms.gc_sac.seed_stack import (
+    NETWORKS,
+    StackedSAC,
+    StackedSACStep,
+    _linear_layers,
+    stack_batches,
+)
+
+OBS_SPACE = gym.spaces.Box(0.0, 1.0, (4,), np.float32)
+ACT_SPACE = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+SEEDS = (0, 1, 2)
+
+
+def _learner(seed):
+    cfg = SACConfig().environment(observation_space=OBS_SPACE, action_space=ACT_SPACE).debugging(seed=seed)
+    cfg.training(tau=0.05, actor_lr=3e-4, critic_lr=1e-3, alpha_lr=2e-3)  # distinct rates: a mix-up shows
+    return use_fast_learner(cfg, hidden=(32, 32), torch_threads=1).build_learner_group()._learner
+
+
+def _batch(seed, n=64, reward=-1.0):
+    rng = np.random.default_rng(100 + seed)
+    obs = rng.uniform(0, 1, (n, 4)).astype(np.float32)
+    cols = {
+        "obs": obs,
+        "new_obs": np.clip(obs + rng.normal(0, 0.02, obs.shape), 0, 1).astype(np.float32),
+        "actions": rng.uniform(-1, 1, (n, 2)).astype(np.float32),
+        "rewards": np.full(n, reward, np.float32),
+        "terminateds": rng.random(n) < 0.2,
+    }
+    return {k: torch.as_tensor(v) for k, v in cols.items()}
+
+
+def _stack_of(learners):
+    modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in learners]
+    agents = StackedSAC.from_modules(
+        modules, [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in learners]
+    )
+    config = learners[0].config.get_config_for_module(DEFAULT_MODULE_ID)
+    lrs = {"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr}
+    generators = [torch.Generator() for _ in learners]
+    step = StackedSACStep(
+        agents,
+        lrs,
+        learners[0].target_entropy[DEFAULT_MODULE_ID],
+        gamma=config.gamma,
+        tau=config.tau,
+        critic_loss="huber",
+        generators=generators,
+    )
+    return step, generators
+
+
+def _assert_seed_matches(stacked, learner, i):
+    module = learner.module[DEFAULT_MODULE_ID].unwrapped()
+    for name, encoder, head in NETWORKS:
+        layers = _linear_layers(getattr(module, encoder), getattr(module, head))
+        for k, (layer, (weight, bias)) in enumerate(zip(layers, stacked.agents.nets[name], strict=True)):
+            torch.testing.assert_close(
+                weight[i], layer.weight, rtol=1e-5, atol=1e-6, msg=f"{name}[{k}] seed {i}"
+            )
+            torch.testing.assert_close(
+                bias[i], layer.bias, rtol=1e-5, atol=1e-6, msg=f"{name}[{k}] bias seed {i}"
+            )
+    torch.testing.assert_close(
+        stacked.agents.log_alpha[i], learner.curr_log_alpha[DEFAULT_MODULE_ID], rtol=1e-6, atol=1e-7
+    )
+
+
+def _run(learners, batches, steps=3):
+    """`steps` one-seed fused steps per learner and the same steps stacked; the stacked step."""
+    stacked, generators = _stack_of(learners)
+    for t in range(steps):
+        stats = []
+        for i, learner in enumerate(learners):
+            torch.manual_seed(1000 * t + i)  # seed i's noise stream at step t ...
+            stats.append(learner.fused_step().step(batches[i]))
+        for i, g in enumerate(generators):
+            g.manual_seed(1000 * t + i)  # ... and the same stream for seed i in the stack
+        stacked_stats = stacked.step(stack_batches(batches))
+        for i, one in enumerate(stats):
+            assert bool(stacked_stats[FINITE][i]) == bool(one[FINITE])
+            for key in ("qf_loss", "qf_twin_loss", "policy_loss", "alpha_loss", "logps", "td_error_mean"):
+                assert stacked_stats[key][i].item() == pytest.approx(
+                    one[key].item(), rel=1e-5, abs=1e-6, nan_ok=True
+                ), (
+                    key,
+                    i,
+                    t,
+                )
+    return stacked
+
+
+def test_a_stack_of_three_seeds_gives_each_seed_its_own_update():
+    learners = [_learner(s) for s in SEEDS]
+    first = [learner.module[DEFAULT_MODULE_ID].unwrapped().pi_encoder for learner in learners]
+    # The seeds start apart (each module built with its own seed), so a mixed-up slice shows.
+    weights = [next(enc.parameters()).detach().clone() for enc in first]
+    assert not torch.equal(weights[0], weights[1]) and not torch.equal(weights[1], weights[2])
+    before_target = [
+        learner.module[DEFAULT_MODULE_ID].unwrapped().target_qf_encoder.net.mlp[0].weight.detach().clone()
+        for learner in learners
+    ]
+    stacked = _run(learners, [_batch(s) for s in SEEDS])
+    for i, learner in enumerate(learners):
+        _assert_seed_matches(stacked, learner, i)
+        after = learner.module[DEFAULT_MODULE_ID].unwrapped().target_qf_encoder.net.mlp[0].weight
+        assert not torch.equal(before_target[i], after)  # the targets moved, and the stack followed
+    assert stacked.skipped.tolist() == [0, 0, 0]
+    assert stacked.optimizer.step_count.tolist() == [3.0, 3.0, 3.0]
+
+
+def test_a_seed_with_a_non_finite_gradient_stays_put_and_the_others_step():
+    learners = [_learner(s) for s in SEEDS]
+    bad = _batch(1, reward=float("nan"))
+    stacked, _ = _stack_of(learners)
+    start = {
+        name: [(w[1].clone(), b[1].clone()) for w, b in stacked.agents.nets[name]] for name, _, _ in NETWORKS
+    }
+    start_alpha = stacked.agents.log_alpha[1].clone()
+    stacked = _run(learners, [_batch(0), bad, _batch(2)], steps=2)
+    assert stacked.skipped.tolist() == [0, 2, 0]
+    assert stacked.optimizer.step_count.tolist() == [2.0, 0.0, 2.0]
+    for name, _, _ in NETWORKS:  # seed 1: parameters and targets untouched, and finite
+        for (weight, bias), (w0, b0) in zip(stacked.agents.nets[name], start[name], strict=True):
+            assert torch.equal(weight[1], w0) and torch.equal(bias[1], b0), name
+    assert torch.equal(stacked.agents.log_alpha[1], start_alpha)
+    for i in (0, 2):  # the others took their own one-seed steps
+        _assert_seed_matches(stacked, learners[i], i)
+
+
+def test_write_to_puts_each_seed_back_into_its_module():
+    learners = [_learner(s) for s in SEEDS]
+    stacked = _run(learners, [_batch(s) for s in SEEDS], steps=1)
+    fresh = [_learner(s) for s in SEEDS]  # the untrained modules, then seed i's trained slice
+    modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in fresh]
+    log_alphas = [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in fresh]
+    stacked.agents.write_to(modules, log_alphas)
+    for i, learner in enumerate(fresh):
+        _assert_seed_matches(stacked, learner, i)
+
+
+def test_stacking_refuses_what_it_cannot_stack():
+    learner = _learner(0)
+    module = learner.module[DEFAULT_MODULE_ID].unwrapped()
+    with pytest.raises(ValueError, match="one log alpha per module"):
+        StackedSAC.from_modules([module, module], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
+    agents = StackedSAC.from_modules([module], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
+    with pytest.raises(ValueError, match=r"one generator per seed \(1\), got 2"):
+        StackedSACStep(
+            agents,
+            {"qf": 1e-3, "policy": 1e-3, "alpha": 1e-3},
+            -2.0,
+            gamma=0.99,
+            tau=0.005,
+            critic_loss="huber",
+            generators=[torch.Generator(), torch.Generator()],
+        )
+
+
+def test_the_stacked_update_benchmark_samples_each_seed_from_its_own_replay_and_prints_its_rows(
+    capsys, monkeypatch
+):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import stacked_update
+
+    replay = stacked_update._replay(3, torch.device("cpu"))
+    batch = stacked_update._sample(replay, seed_axis=True)
+    assert batch["obs"].shape == (3, stacked_update.BATCH, stacked_update.OBS)
+    for i in range(3):  # every sampled row of seed i is a row of seed i's replay (the replays differ)
+        rows = (batch["obs"][i][:, None, :] == replay["obs"][i][None, :, :]).all(-1).any(-1)
+        assert bool(rows.all())
+        others = (batch["obs"][i][:, None, :] == replay["obs"][(i + 1) % 3][None, :, :]).all(-1).any(-1)
+        assert not bool(others.any())
+    monkeypatch.setattr(
+        sys, "argv", ["stacked_update.py", "--seeds", "2", "--seconds", "0.2", "--threads", "1"]
+    )
+    stacked_update.main()
+    lines = capsys.readouterr().out.splitlines()
+    rows = {line.split("  ")[0].strip(): line for line in lines if "seed-updates/s" in line}
+    assert set(rows) == {"one seed, fused", "2 stacked"}
+    rate, seed_rate = (float(x) for x in rows["2 stacked"].split()[2:5:2])
+    assert rate > 0 and seed_rate == pytest.approx(2 * rate, abs=0.11)  # both printed to 0.1
+    monkeypatch.setattr(sys, "argv", ["stacked_update.py", "--seeds", "0"])
+    with pytest.raises(SystemExit) as exit_info:
+        stacked_update.main()
+    assert exit_info.value.code == 2
+    assert "--seeds: every N must be >= 1, got [0]" in capsys.readouterr().err
