@@ -7,8 +7,8 @@ Rows, per device: "one seed, fused" (`FusedSACStep`, the path a trial takes toda
 seed-updates/s), then for each N "N stacked" (one `StackedSACStep` for N seeds); on a GPU each also
 "captured" (one CUDA graph per update, `graph_capture.CapturedCall`). Each row warms up for 3 calls,
 then runs for `--seconds`; it prints updates/s of the stack and seed-updates/s (N x that). Each seed
-samples its batch from its own replay inside the step (random transitions, one [N, capacity, ...]
-tensor per column on the device; a uniform gather per seed, no host sync).
+samples its batch from its own replay inside the step (`seed_replay.StackedTransitionBuffer`, random
+transitions; one gather per column for all seeds, no host sync).
 
 On a CPU compare "N stacked" at `--threads` T against T one-seed trials side by side, each on one
 thread (`--threads 1` for the one-seed row): that is what stacking replaces on a two-core machine.
@@ -26,7 +26,9 @@ from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac import use_fast_learner
+from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
+from copilot_ray.algorithms.gc_sac.seed_replay import StackedTransitionBuffer
 from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
 
 OBS, ACT, BATCH, CAPACITY = 4, 2, 256, 100_000
@@ -45,26 +47,24 @@ def _learner(device: str):
     )
 
 
-def _replay(num_seeds: int, device: torch.device) -> dict[str, torch.Tensor]:
-    g = torch.Generator(device="cpu").manual_seed(0)
-    obs = torch.rand(num_seeds, CAPACITY, OBS, generator=g)
+def _transitions(seed: int) -> dict[str, np.ndarray]:
+    """CAPACITY random transitions of four-rooms' sizes."""
+    rng = np.random.default_rng(seed)
+    obs = rng.uniform(0, 1, (CAPACITY, OBS)).astype(np.float32)
     return {
-        "obs": obs.to(device),
-        "new_obs": (obs + 0.01 * torch.randn(obs.shape, generator=g)).clamp(0, 1).to(device),
-        "actions": (2 * torch.rand(num_seeds, CAPACITY, ACT, generator=g) - 1).to(device),
-        "rewards": torch.full((num_seeds, CAPACITY), -1.0).to(device),
-        "terminateds": (torch.rand(num_seeds, CAPACITY, generator=g) < 0.05).to(device),
+        "obs": obs,
+        "new_obs": np.clip(obs + rng.normal(0, 0.01, obs.shape), 0, 1).astype(np.float32),
+        "actions": rng.uniform(-1, 1, (CAPACITY, ACT)).astype(np.float32),
+        "rewards": np.full(CAPACITY, -1.0, np.float32),
+        "terminateds": rng.random(CAPACITY) < 0.05,
     }
 
 
-def _sample(replay: dict[str, torch.Tensor], seed_axis: bool) -> dict[str, torch.Tensor]:
-    num_seeds = replay["obs"].shape[0]
-    rows = torch.randint(0, CAPACITY, (num_seeds, BATCH), device=replay["obs"].device)
-    out = {}
-    for key, column in replay.items():
-        index = rows.view(num_seeds, BATCH, *([1] * (column.dim() - 2))).expand(-1, -1, *column.shape[2:])
-        out[key] = torch.gather(column, 1, index)
-    return out if seed_axis else {k: v[0] for k, v in out.items()}
+def _replay(num_seeds: int, device: torch.device) -> StackedTransitionBuffer:
+    replay = StackedTransitionBuffer(num_seeds, CAPACITY, device, OBS, ACT)
+    for seed, rows in enumerate(replay.seeds):
+        rows.add(_transitions(seed))
+    return replay
 
 
 def _rate(fn, seconds: float, device: torch.device) -> float:
@@ -113,9 +113,10 @@ def main() -> None:
         flush=True,
     )
 
-    one = _replay(1, device)
+    one = DeviceTransitionBuffer(CAPACITY, device)
+    one.add(_transitions(0))
     fused = learner.fused_step()
-    _row("one seed, fused", 1, lambda: fused.step(_sample(one, seed_axis=False)), args.seconds, device)
+    _row("one seed, fused", 1, lambda: fused.step(one.sample(BATCH)), args.seconds, device)
     for n in args.seeds:
         replay = _replay(n, device)
         agents = StackedSAC.from_modules([module] * n, [log_alpha] * n)  # same start: speed is what counts
@@ -129,7 +130,7 @@ def main() -> None:
         )
 
         def run(step=step, replay=replay):
-            return step.step(_sample(replay, seed_axis=True))
+            return step.step(replay.sample(BATCH))
 
         _row(f"{n} stacked", n, run, args.seconds, device)
         if device.type == "cuda":

@@ -32,9 +32,10 @@ from copilot_ray.algorithms.gc_sac.replay_buffer import (
 )
 
 
-def uniform_rows(size: torch.Tensor, batch_size: int, device: torch.device) -> torch.Tensor:
-    """`batch_size` uniform row indices in [0, size) for a 0-d int64 device tensor `size` >= 1,
-    without reading `size` on the host (float64 uniforms keep the rounding below one row)."""
+def uniform_rows(size: torch.Tensor, batch_size: int | tuple[int, ...], device: torch.device) -> torch.Tensor:
+    """`batch_size` uniform row indices in [0, size) for an int64 device tensor `size` >= 1 (0-d, or
+    [N, 1] with batch_size (N, B): each row of indices under its own size), without reading `size` on
+    the host (float64 uniforms keep the rounding below one row)."""
     u = torch.rand(batch_size, device=device, dtype=torch.float64)
     return torch.minimum((u * size).long(), size - 1)
 

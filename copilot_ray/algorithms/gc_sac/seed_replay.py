@@ -1,0 +1,109 @@
+"""N seeds' replay buffers in one set of device tensors, sampled for all seeds at once.
+
+`StackedTransitionBuffer(num_seeds, capacity, ...)` keeps each column as one [N, capacity, ...]
+tensor and each seed's fill count in one [N] tensor. Seed i's buffer, `buffer.seeds[i]`, is a
+`device_replay.DeviceTransitionBuffer` whose rows are row i of that storage: adding, its ring
+arithmetic and checks, `transitions()` and its checkpoint format (`get_state`/`set_state`, the
+one-seed `FlatTransitionBuffer` format) are that class's own. `sample(B)` draws B uniform rows from each
+seed's own filled rows as one [N, B, ...] batch: one gather per column for all seeds and no host sync,
+so it can sit inside `seed_stack.StackedSACStep`'s captured step. Its uniforms come from the device's
+default generator as one [N, B] draw (a seed's rows are not the rows its one-seed run would draw).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import torch
+
+from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer, uniform_rows
+from copilot_ray.algorithms.gc_sac.replay_buffer import (
+    ACTIONS,
+    NEXT_OBS,
+    OBS,
+    REWARDS,
+    TERMINATEDS,
+    TRAIN_COLUMNS,
+    TRUNCATEDS,
+)
+
+
+class _SeedRows(DeviceTransitionBuffer):
+    """One seed's `DeviceTransitionBuffer` over its row of the stacked storage (never reallocated)."""
+
+    def __init__(self, stack: StackedTransitionBuffer, seed: int):
+        self._stack, self._seed = stack, seed
+        super().__init__(stack.capacity, stack.device)
+        self._size_t = stack.sizes[seed]  # a 0-d view: this seed's fills write the stack's counts
+        self._allocate(stack.obs_dim, stack.action_dim)
+
+    def _allocate(self, obs_dim: int, action_dim: int) -> None:
+        stack = self._stack
+        if (self.capacity, int(obs_dim), int(action_dim)) != (
+            stack.capacity,
+            stack.obs_dim,
+            stack.action_dim,
+        ):
+            raise ValueError(
+                f"seed {self._seed}: a buffer of capacity {self.capacity}, obs_dim {obs_dim}, action_dim "
+                f"{action_dim} does not fit the stack's (capacity {stack.capacity}, obs_dim {stack.obs_dim}, "
+                f"action_dim {stack.action_dim})"
+            )
+        self._obs_dim, self._action_dim = int(obs_dim), int(action_dim)
+        self._data = {k: v[self._seed] for k, v in stack.storage.items()}
+        self.storage_version = stack.storage_version
+
+    def set_state(self, state) -> None:
+        """`DeviceTransitionBuffer.set_state`, refusing a snapshot of another capacity before touching
+        anything (the stack's storage cannot grow for one seed)."""
+        if int(state["capacity"]) != self._stack.capacity:
+            raise ValueError(
+                f"seed {self._seed}: a snapshot of capacity {state['capacity']} does not fit the stack's "
+                f"capacity {self._stack.capacity}"
+            )
+        super().set_state(state)
+        if self._data is None:  # an empty snapshot without dims: keep this seed's rows
+            self._allocate(self._stack.obs_dim, self._stack.action_dim)
+
+
+class StackedTransitionBuffer:
+    """N seeds' FIFO rings of flat transitions on `device` (module docstring)."""
+
+    def __init__(
+        self, num_seeds: int, capacity: int, device: torch.device | str, obs_dim: int, action_dim: int
+    ):
+        if int(num_seeds) < 1:
+            raise ValueError(f"num_seeds must be >= 1, got {num_seeds}")
+        if int(capacity) <= 0:
+            raise ValueError(f"capacity must be > 0, got {capacity}")
+        self.num_seeds, self.capacity = int(num_seeds), int(capacity)
+        self.device = torch.device(device)
+        self.obs_dim, self.action_dim = int(obs_dim), int(action_dim)
+        shape, dev = (self.num_seeds, self.capacity), self.device
+        self.storage = {
+            OBS: torch.zeros(*shape, self.obs_dim, device=dev),
+            NEXT_OBS: torch.zeros(*shape, self.obs_dim, device=dev),
+            ACTIONS: torch.zeros(*shape, self.action_dim, device=dev),
+            REWARDS: torch.zeros(shape, device=dev),
+            TERMINATEDS: torch.zeros(shape, dtype=torch.bool, device=dev),
+            TRUNCATEDS: torch.zeros(shape, dtype=torch.bool, device=dev),
+        }
+        self.storage_version = 1  # allocated once: a captured step that reads it stays valid
+        self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=dev)
+        self.seeds = [_SeedRows(self, i) for i in range(self.num_seeds)]
+
+    def __len__(self) -> int:
+        """The smallest seed's fill (sampling needs every seed non-empty)."""
+        return min(len(seed) for seed in self.seeds)
+
+    def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
+        """`batch_size` uniform transitions of each seed's own, as [N, batch_size, ...] device tensors,
+        with no host sync. The caller makes sure every seed holds one (`len(buffer) > 0`)."""
+        n, b = self.num_seeds, int(batch_size)
+        rows = uniform_rows(self.sizes.unsqueeze(1), (n, b), self.device)
+        out = {}
+        for key in columns:
+            column = self.storage[key]
+            index = rows.view(n, b, *([1] * (column.dim() - 2))).expand(n, b, *column.shape[2:])
+            out[key] = torch.gather(column, 1, index)
+        return out
