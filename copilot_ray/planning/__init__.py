@@ -2,49 +2,56 @@
 
 Pure numpy / torch; no RLlib and no environment import. Environment hooks (``segments_collide``,
 ``goal_distance``) are passed in as plain callables.
+
+The names below are loaded on first use (PEP 562), so that importing one light submodule (the alpha
+schedule, which every command line parses) does not import torch: a refused flag or spec answers in
+about half the time.
 """
 
-from .alpha_schedule import PRESETS as ALPHA_PRESETS
-from .alpha_schedule import AlphaClock, AlphaSchedule
-from .construction import ConstructionResult, construct_trees
-from .planner import SubgoalPlanner, group_baseline
-from .segment_cost import SegmentCost, euclidean_distance, tree_cost, tree_segments
-from .subgoal_tree import (
-    SubgoalTree,
-    depth_of,
-    empty_tree,
-    layer_indices,
-    layer_path,
-    layer_segments,
-    new_layer_indices,
-    parent_indices,
-    path_indices,
-    tree_size,
-)
-from .time_cost import TimeCostDataset, TimeCostModel
+from importlib import import_module
 
-__all__ = [
-    "ALPHA_PRESETS",
-    "AlphaClock",
-    "AlphaSchedule",
-    "ConstructionResult",
-    "SegmentCost",
-    "SubgoalPlanner",
-    "SubgoalTree",
-    "TimeCostDataset",
-    "TimeCostModel",
-    "construct_trees",
-    "depth_of",
-    "empty_tree",
-    "euclidean_distance",
-    "group_baseline",
-    "layer_indices",
-    "layer_path",
-    "layer_segments",
-    "new_layer_indices",
-    "parent_indices",
-    "path_indices",
-    "tree_cost",
-    "tree_segments",
-    "tree_size",
-]
+_HOMES = {
+    "ALPHA_PRESETS": ("alpha_schedule", "PRESETS"),
+    "AlphaClock": ("alpha_schedule", "AlphaClock"),
+    "AlphaSchedule": ("alpha_schedule", "AlphaSchedule"),
+    "ConstructionResult": ("construction", "ConstructionResult"),
+    "construct_trees": ("construction", "construct_trees"),
+    "SubgoalPlanner": ("planner", "SubgoalPlanner"),
+    "group_baseline": ("planner", "group_baseline"),
+    "SegmentCost": ("segment_cost", "SegmentCost"),
+    "euclidean_distance": ("segment_cost", "euclidean_distance"),
+    "tree_cost": ("segment_cost", "tree_cost"),
+    "tree_segments": ("segment_cost", "tree_segments"),
+    **{
+        name: ("subgoal_tree", name)
+        for name in (
+            "SubgoalTree",
+            "depth_of",
+            "empty_tree",
+            "layer_indices",
+            "layer_path",
+            "layer_segments",
+            "new_layer_indices",
+            "parent_indices",
+            "path_indices",
+            "tree_size",
+        )
+    },
+    "TimeCostDataset": ("time_cost", "TimeCostDataset"),
+    "TimeCostModel": ("time_cost", "TimeCostModel"),
+}
+
+__all__ = sorted(_HOMES)
+
+
+def __getattr__(name: str):
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{home[0]}"), home[1])
+    globals()[name] = value  # the next lookup is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOMES))

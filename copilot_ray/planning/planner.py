@@ -40,21 +40,12 @@ from torch import nn
 
 from copilot_ray.torch_checks import all_finite
 
+from .planner_modes import ANGLE_MODES, MEAN_MODES, NOISE_MODES
 from .subgoal_tree import check_depth, depth_of, empty_tree, new_layer_indices, parent_indices
 
 __all__ = ["SubgoalPlanner", "group_baseline"]
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
-NOISE_MODES = ("absolute", "relative")
-# How pi_p treats a goal space's angles (`SubgoalPlanner.from_settings(..., geometry=)`): raw: as plain
-# coordinates (the reference code, which only had positions); wrapped: short-way midpoints, wrapped samples;
-# scaled: wrapped, and each dim's std divided by its distance weight (the same exploration in distance units).
-ANGLE_MODES = ("raw", "wrapped", "scaled")
-# free: the parents' midpoint plus the MLP's output, samples clipped into the box (the reference code);
-# squashed: that mean mapped into the box by a tanh, so an update cannot throw it outside, where every
-# clipped sample would land on one border point and leave the update no advantage to learn from;
-# leaky: the free mean inside the box, and outside it the border plus LEAK x the overshoot (a gradient back).
-MEAN_MODES = ("free", "squashed", "leaky")
 LEAK = 0.01
 MIN_STD = 1e-3  # floor of a relative std (goal units): a zero-length parent segment keeps a density
 

@@ -31,7 +31,7 @@ from copilot_ray.planning.alpha_schedule import CLOCKS as ALPHA_CLOCKS
 from copilot_ray.planning.alpha_schedule import KINDS as ALPHA_KINDS
 from copilot_ray.planning.alpha_schedule import PRESETS as ALPHA_PRESETS
 from copilot_ray.planning.alpha_schedule import AlphaSchedule
-from copilot_ray.planning.planner import ANGLE_MODES, MEAN_MODES, NOISE_MODES
+from copilot_ray.planning.planner_modes import ANGLE_MODES, MEAN_MODES, NOISE_MODES
 from copilot_ray.planning.segment_cost import COLLISION_COSTS
 from copilot_ray.privileges import COLLISION_CHECKS
 from copilot_ray.settings import (
