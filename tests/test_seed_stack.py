@@ -156,6 +156,34 @@ def test_write_to_puts_each_seed_back_into_its_module():
         _assert_seed_matches(stacked, learner, i)
 
 
+def test_a_restored_stack_continues_exactly_and_a_foreign_snapshot_is_refused():
+    learners = [_learner(s) for s in SEEDS]
+    batch = stack_batches([_batch(s) for s in SEEDS])
+    first, _ = _stack_of(learners)
+    fresh, _ = _stack_of(learners)  # built before any step: the snapshot must carry everything
+    for g in first.generators:
+        g.manual_seed(7)
+    first.step(batch)
+    first.step(batch)
+    snapshot = first.get_state()
+    ahead = [first.step(batch)["qf_loss"].clone() for _ in range(2)]
+    fresh.set_state(snapshot)
+    again = [fresh.step(batch)["qf_loss"].clone() for _ in range(2)]
+    for want, got in zip(ahead, again, strict=True):
+        assert torch.equal(want, got)
+    assert torch.equal(first.agents.flat, fresh.agents.flat)
+    assert torch.equal(first.agents.target_flat, fresh.agents.target_flat)
+    assert torch.equal(first.optimizer.exp_avg_sq, fresh.optimizer.exp_avg_sq)
+    assert fresh.optimizer.step_count.tolist() == [4.0, 4.0, 4.0]
+    two, _ = _stack_of(learners[:2])
+    before = two.agents.flat.detach().clone()
+    with pytest.raises(
+        ValueError, match=r"flat has shape \(3, \d+\), this stack's is \(2, \d+\) \(2 seeds\)"
+    ):
+        two.set_state(snapshot)
+    assert torch.equal(two.agents.flat, before)
+
+
 def test_stacking_refuses_what_it_cannot_stack():
     learner = _learner(0)
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()

@@ -18,6 +18,9 @@ every batch column ([N, B, ...]):
   seed i's update equals its one-seed update for the same generator state (tested on the CPU);
   without, one draw for all seeds comes from the default generator (what a CUDA graph captures).
 
+`StackedSACStep.get_state()` / `set_state()` checkpoint every seed (parameters, targets, Adam moments and
+counts, skips, noise streams); a restore writes in place, so a captured graph stays valid.
+
 `StackedSAC.from_modules(modules)` stacks N `catalog.GCSACTorchRLModule`s (each built with its seed, so
 seed i starts where its one-seed run starts); `write_to(modules)` copies seed i back into module i
 (weight sync to env runners, checkpoints in the one-seed format).
@@ -27,7 +30,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import Any
 
+import numpy as np
 import torch
 from ray.rllib.algorithms.sac.sac_learner import QF_PREDS, QF_TWIN_PREDS
 from ray.rllib.core.columns import Columns
@@ -296,6 +301,51 @@ class StackedSACStep:
             lr_of[start:end] = float(lrs[group])
         self.optimizer = StackedAdam(agents.flat, lr_of)
         self.skipped = torch.zeros(agents.num_seeds, dtype=torch.int64, device=agents.flat.device)
+
+    # ------------------------------------------------------------------ checkpoints
+    def get_state(self) -> dict[str, Any]:
+        """Every seed's parameters, targets, Adam moments and counts, skip counts and noise streams
+        (numpy / bytes, device-free)."""
+        opt = self.optimizer
+        tensors = {
+            "flat": self.agents.flat,
+            "target_flat": self.agents.target_flat,
+            "exp_avg": opt.exp_avg,
+            "exp_avg_sq": opt.exp_avg_sq,
+            "step_count": opt.step_count,
+            "skipped": self.skipped,
+        }
+        state: dict[str, Any] = {k: v.detach().cpu().numpy().copy() for k, v in tensors.items()}
+        state["generators"] = None if self.generators is None else [g.get_state() for g in self.generators]
+        return state
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restores `get_state`'s snapshot in place (the tensors keep their storage, so a captured graph
+        stays valid). A snapshot of another stack shape is refused before anything changes."""
+        targets = {
+            "flat": self.agents.flat,
+            "target_flat": self.agents.target_flat,
+            "exp_avg": self.optimizer.exp_avg,
+            "exp_avg_sq": self.optimizer.exp_avg_sq,
+            "step_count": self.optimizer.step_count,
+            "skipped": self.skipped,
+        }
+        for key, tensor in targets.items():
+            shape = tuple(np.shape(state[key]))
+            if shape != tuple(tensor.shape):
+                raise ValueError(
+                    f"stacked SAC state: {key} has shape {shape}, this stack's is {tuple(tensor.shape)} "
+                    f"({self.agents.num_seeds} seeds)"
+                )
+        if (state.get("generators") is None) != (self.generators is None):
+            raise ValueError(
+                "stacked SAC state: per-seed generators in one of the snapshot and this stack only"
+            )
+        with torch.no_grad():
+            for key, tensor in targets.items():
+                tensor.copy_(torch.as_tensor(state[key]))
+        for g, g_state in zip(self.generators or [], state.get("generators") or [], strict=True):
+            g.set_state(g_state)
 
     def _noise(self, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Standard-normal noise [N, B, A] for the current and the next actions."""
