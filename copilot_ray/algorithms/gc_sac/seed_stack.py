@@ -292,6 +292,10 @@ class StackedSACStep:
     ):
         if generators is not None and len(generators) != agents.num_seeds:
             raise ValueError(f"need one generator per seed ({agents.num_seeds}), got {len(generators)}")
+        device = agents.flat.device
+        wrong = sorted({str(g.device) for g in generators or [] if g.device.type != device.type})
+        if wrong:
+            raise ValueError(f"the seeds' generators must be on the stack's device ({device}), got {wrong}")
         self.agents = agents
         self.generators = None if generators is None else list(generators)
         self.target_entropy = target_entropy
