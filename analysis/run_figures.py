@@ -178,6 +178,13 @@ _DIAG_PANELS = (
     ),
 )
 
+# Each panel's y axis (by its title as written above); a panel not named here shows a rate in [0, 1].
+_DIAG_Y_LABELS = {
+    "sub-goals inside obstacles": "share of sub-goals",
+    "segments longer than one sub-task can cover": "share of segments",
+    "critic's mean Q": "mean Q (return units)",
+}
+
 
 def depth_of(trial) -> int:
     layers = [int(k.rsplit("_", 1)[1]) for k in trial.curves if k.startswith(DIAG_SEGMENT_LENGTH_LAYER)]
@@ -216,6 +223,7 @@ def diagnostics(
         return None
 
     named = [(title.format(tasks=tasks), lines, needs) for title, lines, needs in _DIAG_PANELS]
+    y_label = {title.format(tasks=tasks): _DIAG_Y_LABELS.get(title, "rate") for title, _, _ in _DIAG_PANELS}
     panels = [
         (title, lines, needs)
         for title, lines, needs in named
@@ -267,6 +275,7 @@ def diagnostics(
             ax.plot([], [], style, color="black", label=label)
         ax.set_title(wrap(title, 4.0, 9), fontsize=9)
         ax.set_xlabel("environment steps", fontsize=7)
+        ax.set_ylabel(y_label[title], fontsize=7)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
         steps_axis(ax)

@@ -288,6 +288,23 @@ def test_diagnostics_page_draws_the_diag_curves_and_tau_hat(store):
     assert "## Diagnostics" in report and "## Learned time cost tau_hat against segment length" in report
 
 
+def test_every_diagnostics_panel_says_what_its_y_axis_is(store, tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from analysis import run_figures
+    from analysis.aggregate import summarise
+    from analysis.load import load_sweep
+
+    drawn = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+    configs, _ = summarise(load_sweep(store["uri"], EXP), reps=10)
+    assert run_figures.diagnostics(configs, tmp_path / "diagnostics.png") is not None
+    (fig,) = drawn
+    labels = {ax.get_title().replace("\n", " "): ax.get_ylabel() for ax in fig.axes if ax.get_title()}
+    assert labels and all(labels.values()), labels
+    assert labels["critic's mean Q"] == "mean Q (return units)"
+
+
 def test_diagnostics_draw_a_flat_methods_lines_only_where_they_mean_what_the_panel_says():
     """HER's "plan" is the straight segment and its training "sub-task" the whole task: drawn in the
     sub-goal panels they would read as a planner's. A tree draws everywhere; SoRB (planned success
