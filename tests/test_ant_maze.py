@@ -199,7 +199,9 @@ def test_copilot_and_sac_train_and_evaluate_on_the_ant_maze(ray_session):
         assert 0 < keys.result_value(result, keys.ENV_STEPS) <= 30
         assert 0.0 <= keys.result_value(result, keys.EVAL_SUCCESS) <= 1.0
         assert keys.result_value(result, keys.EVAL_RETURN) in (0.0, 500.0, 1000.0)  # 2 tasks, R = 1000
-        trees = copilot.curriculum.planner.sample(*copilot.goal_env.unwrapped.tasks("test"), deterministic=True)
+        trees = copilot.curriculum.planner.sample(
+            *copilot.goal_env.unwrapped.tasks("test"), deterministic=True
+        )
         assert np.abs(trees).max() <= 10.0  # inside the 20 m x 20 m maze
     finally:
         copilot.stop()

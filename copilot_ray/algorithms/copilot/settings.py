@@ -608,9 +608,7 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(
         description="Print CO-PILOT's settings tables, or write them into a page (docs/settings.md)."
     )
-    parser.add_argument(
-        "--write", metavar="PAGE", help="replace the tables between the markers in this file"
-    )
+    parser.add_argument("--write", metavar="PAGE", help="replace the tables between the markers in this file")
     args = parser.parse_args()
     if args.write:
         path = Path(args.write)
