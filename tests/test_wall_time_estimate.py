@@ -96,3 +96,39 @@ def test_how_far_past_the_budget_a_trial_may_run_and_the_comparison_warnings():
     (only,) = overshoot_warnings([part("s", "sac", 1_000_000), wide_long])
     assert "evaluations may be up to" in only  # a large budget hides the overshoot, not the spacing
     assert overshoot_warnings([sac, part("h", "her", 50000)]) == []
+
+
+def _gpu_spec():
+    data = {
+        "name": "est",
+        "env": {"id": "maze-point", "config": {"layout": "four-rooms"}},
+        "algorithm": "sac",
+        "config": {"eval_every_env_steps": 10000},
+        "seeds": [0],
+        "stop": {"env_steps": 200000},
+        "resources": {"max_concurrent_trials": 1, "num_env_runners": 0, "gpus_per_trial": 1},
+    }
+    return parse_spec(data, "est.yaml")
+
+
+def test_a_gpu_spec_reads_the_gpu_figure_and_without_one_is_not_estimated(rates_file):
+    """A trial on a GPU runs at another rate than on the CPU: its estimate reads the GPU section, names
+    that machine, and says where a figure comes from when there is none (never the CPU figure)."""
+    spec = _gpu_spec()
+    assert estimate.wall_seconds(spec) is None
+    line = estimate.wall_time_line(spec)
+    assert "not estimated (no env-steps/s measured for sac on a GPU" in line and "device_check.sh" in line
+    data = json.loads(rates_file.read_text())
+    data["env_steps_per_s_gpu"] = {
+        "machine": "one H200, 16 cores",
+        "source": "scripts/device_check.sh at abc1234",
+        "env_steps_per_s": {"sac": {"lone": 400}},
+    }
+    rates_file.write_text(json.dumps(data))
+    assert estimate.wall_seconds(spec) == pytest.approx(200000 / 400)
+    line = estimate.wall_time_line(spec)
+    assert (
+        "~400 env steps/s per trial" in line
+        and "one H200, 16 cores; scripts/device_check.sh at abc1234" in line
+    )
+    assert estimate.wall_seconds(_spec(1, [0])) == pytest.approx(200000 / 50)  # the CPU spec keeps its figure

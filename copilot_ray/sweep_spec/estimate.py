@@ -9,7 +9,9 @@
   and its final figure would be one or two noisy points (or none).
 * Wall time: trials x budget / a measured env-steps-per-second figure (`copilot_ray/
   measured_throughput.json`, written by `benchmarks/throughput.py --write`), in waves of
-  `max_concurrent_trials`.
+  `max_concurrent_trials`. A spec whose trials hold a GPU (`resources.gpus_per_trial` > 0) reads the
+  file's GPU figures (`env_steps_per_s_gpu`, from the GPU check `scripts/device_check.sh`) and is not
+  estimated without one: a CPU figure would be wrong either way.
 
 Standard library only (no Ray): `--check` and the spec's validation use it.
 """
@@ -117,19 +119,29 @@ def budget_overshoot(spec: SweepSpec) -> int | None:
     return max(e.max_env_steps_between_checks for e in estimates) - 1
 
 
-def measured_rate(algorithm: str, concurrent: int) -> tuple[float, str] | None:
-    """(env steps per second of one trial, where the figure comes from), or None without one."""
+GPU_RATES = "env_steps_per_s_gpu"
+
+
+def measured_rate(algorithm: str, concurrent: int, gpu: bool = False) -> tuple[float, str] | None:
+    """(env steps per second of one trial, where the figure comes from), or None without one. `gpu`:
+    the figure of a trial holding a GPU share (the file's GPU section, its own machine and source)."""
     try:
         data = json.loads(THROUGHPUT_FILE.read_text())
     except (OSError, ValueError):
         return None
+    if gpu:  # the GPU section has the file's layout: its own machine, source(s) and rates
+        data = data.get(GPU_RATES, {})
     rates = data.get("env_steps_per_s", {}).get(algorithm)
-    if not rates:
-        return None
     slot = "lone" if concurrent <= 1 else "side_by_side"
+    if not rates or slot not in rates:
+        return None
     # A figure measured apart from the others names its own source (`sources`: "<algorithm>.<slot>").
     source = data.get("sources", {}).get(f"{algorithm}.{slot}", data.get("source", "?"))
     return float(rates[slot]), f"{THROUGHPUT_FILE.name}: {data.get('machine', '?')}; {source}"
+
+
+def _uses_gpu(spec: SweepSpec) -> bool:
+    return float(spec.resources.gpus_per_trial) > 0
 
 
 def wall_seconds(spec: SweepSpec) -> float | None:
@@ -138,7 +150,7 @@ def wall_seconds(spec: SweepSpec) -> float | None:
     if budget is None or get_algorithm(spec.algorithm).max_iteration_env_steps is None:
         return None
     concurrent = spec.resources.max_concurrent_trials
-    found = measured_rate(spec.algorithm, concurrent)
+    found = measured_rate(spec.algorithm, concurrent, gpu=_uses_gpu(spec))
     if found is None:
         return None
     return math.ceil(len(spec.trial_plan()) / concurrent) * budget / found[0]
@@ -158,8 +170,15 @@ def wall_time_line(spec: SweepSpec) -> str:
     if budget is None or get_algorithm(spec.algorithm).max_iteration_env_steps is None:
         return "  wall time: not estimated (no env-step budget to scale a measured rate by)"
     concurrent = spec.resources.max_concurrent_trials
-    found = measured_rate(spec.algorithm, concurrent)
+    gpu = _uses_gpu(spec)
+    found = measured_rate(spec.algorithm, concurrent, gpu=gpu)
     if found is None:
+        if gpu:
+            return (
+                f"  wall time: not estimated (no env-steps/s measured for {spec.algorithm} on a GPU: "
+                f"{THROUGHPUT_FILE.name} has no {GPU_RATES} figure for it yet; scripts/device_check.sh "
+                "measures one)"
+            )
         return f"  wall time: not estimated (no measured env-steps/s for {spec.algorithm} in {THROUGHPUT_FILE.name})"
     rate, source = found
     waves = math.ceil(len(spec.trial_plan()) / concurrent)
