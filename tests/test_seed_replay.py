@@ -1,13 +1,21 @@
-"""`seed_replay.StackedTransitionBuffer`: N seeds' rings in one storage. Each seed keeps exactly what
-its own `DeviceTransitionBuffer` would keep, a sample gives every seed rows of its own, and a seed's
-checkpoint is the one-seed format (either way round)."""
+"""`seed_replay`'s stacked buffers: N seeds' rings in one storage. Each seed keeps exactly what its own
+buffer (`DeviceTransitionBuffer`, `DeviceHindsightBuffer`) would keep, a sample gives every seed rows of
+its own (HER's relabelled within that seed's episodes), and a seed's checkpoint is the one-seed format
+(either way round)."""
 
 import numpy as np
 import pytest
 import torch
 
-from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, FlatTransitionBuffer
-from copilot_ray.algorithms.gc_sac.seed_replay import StackedTransitionBuffer
+from copilot_ray.algorithms.gc_sac import (
+    DeviceHindsightBuffer,
+    DeviceTransitionBuffer,
+    FlatTransitionBuffer,
+    GoalLayout,
+    HindsightReplayBuffer,
+)
+from copilot_ray.algorithms.gc_sac.replay_buffer import OBS, REWARDS, TERMINATEDS
+from copilot_ray.algorithms.gc_sac.seed_replay import StackedHindsightBuffer, StackedTransitionBuffer
 
 
 def _rows(seed, start, n):
@@ -87,3 +95,89 @@ def test_a_stack_refuses_what_does_not_fit():
         stack.seeds[0].add({**_rows(0, 0, 2), "actions": np.zeros((2, 3), np.float32)})
     with pytest.raises(ValueError, match="num_seeds must be >= 1, got 0"):
         StackedTransitionBuffer(0, capacity=8, device="cpu", obs_dim=2, action_dim=2)
+
+
+# ------------------------------------------------------------------------ HER's buffer, stacked
+LAYOUT = GoalLayout(obs_dim=2, goal_dim=2, with_delta=True)
+
+
+def _reached_reward(next_achieved, goals, collisions):
+    reached = torch.linalg.norm(next_achieved - goals, dim=1) <= 0.01
+    return reached.double() - 0.5 * collisions.double(), reached
+
+
+def _line(buffer, x0, steps, goal=(9.0, 9.0)):
+    """An episode moving +1 in x per step from (x0, 0); achieved goal = observation; it collides at 2."""
+    pos = np.stack([x0 + np.arange(steps + 1), np.zeros(steps + 1)], axis=1).astype(np.float32)
+    collisions = np.arange(steps) == 2
+    buffer.add_episode(
+        pos, pos, np.array(goal, np.float32), np.ones((steps, 1)), np.zeros(steps), False, collisions
+    )
+
+
+def _her_stack(num_seeds=3, capacity=1000, **kwargs):
+    return StackedHindsightBuffer(num_seeds, capacity, LAYOUT, _reached_reward, action_dim=1, **kwargs)
+
+
+def test_each_seeds_her_buffer_keeps_what_its_own_buffer_keeps():
+    stack = _her_stack(2, capacity=12)
+    alone = DeviceHindsightBuffer(12, LAYOUT, _reached_reward)
+    for x0, steps in ((0, 5), (100, 6), (200, 4)):  # the third wraps the ring
+        _line(stack.seeds[1], x0, steps)
+        _line(alone, x0, steps)
+    mine, want = stack.seeds[1].get_state(), alone.get_state()
+    assert {k: v for k, v in mine.items() if k != "data"} == {k: v for k, v in want.items() if k != "data"}
+    for key in want["data"]:
+        np.testing.assert_array_equal(mine["data"][key], want["data"][key], err_msg=key)
+    assert stack.sizes.tolist() == [0, 12] and len(stack) == 0
+
+
+def test_a_stacked_her_sample_relabels_each_seed_within_its_own_episodes():
+    stack = _her_stack(3)
+    for seed in range(3):  # seed s moves in x from 1000 s: two episodes each
+        _line(stack.seeds[seed], 1000 * seed, 10)
+        _line(stack.seeds[seed], 1000 * seed + 100, 10)
+    torch.manual_seed(0)
+    batch = stack.sample(2000)
+    assert batch[OBS].shape == (3, 2000, 6) and batch[REWARDS].shape == (3, 2000)
+    for seed in range(3):
+        obs, goal = (t.numpy() for t in LAYOUT.split(batch[OBS][seed]))
+        x = obs[:, 0]
+        assert ((x >= 1000 * seed) & (x < 1000 * seed + 111)).all()  # its own transitions
+        relabelled = goal[:, 1] != 9.0  # the real goal has y = 9, a relabelled one y = 0
+        assert relabelled[:1600].all() and not relabelled[1600:].any()  # the first her_ratio = 4/5
+        g = goal[relabelled, 0]
+        assert ((x[relabelled] < 1000 * seed + 50) == (g < 1000 * seed + 50)).all()  # its own episode
+        assert (g >= x[relabelled] + 1).all()  # "future": this step's next achieved goal or a later one
+        np.testing.assert_allclose(batch[OBS][seed][:, 4:].numpy(), goal - obs)  # goal - achieved rebuilt
+        # rewards recomputed for the new goals: 1 where the step reaches it, -0.5 for the collision at step 2
+        reached = np.isclose(g, x[relabelled] + 1)
+        collided = np.isin(x[relabelled] - 1000 * seed, (2, 102))
+        want = reached.astype(float) - 0.5 * collided
+        np.testing.assert_allclose(batch[REWARDS][seed].numpy()[relabelled], want)
+        assert (batch[TERMINATEDS][seed].numpy()[relabelled] == reached).all()
+
+
+def test_a_stacked_her_seeds_state_is_the_one_seed_format_and_bad_input_is_named():
+    stack = _her_stack(2, capacity=50)
+    _line(stack.seeds[0], 0, 8)
+    plain = HindsightReplayBuffer(50, LAYOUT, lambda *a: None)
+    plain.set_state(stack.seeds[0].get_state())
+    other = _her_stack(2, capacity=50)
+    other.seeds[1].set_state(plain.get_state())
+    np.testing.assert_array_equal(
+        other.seeds[1].get_state()["data"]["next_achieved"],
+        stack.seeds[0].get_state()["data"]["next_achieved"],
+    )
+    assert other.sizes.tolist() == [0, 8]
+    with pytest.raises(ValueError, match="action size 3 != buffer action size 1"):
+        pos = np.zeros((3, 2), np.float32)
+        other.seeds[0].add_episode(
+            pos, pos, np.zeros(2, np.float32), np.ones((2, 3)), np.zeros(2), False, np.zeros(2, bool)
+        )
+    with pytest.raises(ValueError, match="a checkpoint of capacity 50 into a buffer of 60"):
+        _her_stack(1, capacity=60).seeds[0].set_state(plain.get_state())
+    with pytest.raises(ValueError, match="goal_selection='best' is invalid"):
+        _her_stack(1, goal_selection="best")
+    with pytest.raises(ValueError, match="capacity must be > 0, got 0"):
+        _her_stack(1, capacity=0)

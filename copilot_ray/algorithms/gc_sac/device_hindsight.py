@@ -12,6 +12,7 @@ goals. It draws from torch's generator of the device (no numpy rng).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 import torch
@@ -31,7 +32,7 @@ from copilot_ray.algorithms.gc_sac.replay_buffer import (
 # (next achieved goals [n, g], goals [n, g], collisions bool [n]) -> (rewards [n], terminateds bool [n]),
 # torch tensors on the buffer's device, no host synchronisation.
 TorchRewardFn = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
-_TORCH_DTYPES = {np.float32: torch.float32, bool: torch.bool, np.int64: torch.int64}
+TORCH_DTYPES = {np.float32: torch.float32, bool: torch.bool, np.int64: torch.int64}
 
 
 class DeviceHindsightBuffer(HindsightReplayBuffer):
@@ -58,7 +59,7 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         self._data = {
             name: torch.zeros(
                 (self.capacity,) if w is None else (self.capacity, widths[w]),
-                dtype=_TORCH_DTYPES[dtype],
+                dtype=TORCH_DTYPES[dtype],
                 device=self.device,
             )
             for name, (w, dtype) in STORED_COLUMNS.items()
@@ -91,49 +92,72 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         self._size_t.fill_(self._size)
 
     # ------------------------------------------------------------------------------------ sampling
-    def _device_hindsight_goals(self, rows: torch.Tensor) -> torch.Tensor:
-        d = self._data
-        start, length, step = (
-            d[k].index_select(0, rows) for k in ("episode_start", "episode_length", "step")
-        )
-        if self.goal_selection == "final":
-            offset = length - 1
-        else:
-            low = step if self.goal_selection == "future" else torch.zeros_like(step)
-            u = torch.rand(rows.shape[0], device=self.device, dtype=torch.float64)
-            offset = torch.minimum(low + (u * (length - low)).long(), length - 1)  # uniform in [low, length)
-        return d["next_achieved"].index_select(0, (start + offset) % self.capacity)
-
-    def _compose(self, observation: torch.Tensor, goal: torch.Tensor, achieved: torch.Tensor) -> torch.Tensor:
-        parts = [observation, goal, goal - achieved] if self.layout.with_delta else [observation, goal]
-        return torch.cat(parts, dim=-1)
+    def _take(self, name: str, rows: torch.Tensor) -> torch.Tensor:
+        """Column `name` at storage rows `rows` ([B])."""
+        return self._data[name].index_select(0, rows)
 
     def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
         """`batch_size` uniform transitions, the first her_ratio of them with hindsight goals, as the
         agent's flat columns (device tensors; no host sync)."""
         if self._size == 0:
             raise ValueError("cannot sample from an empty DeviceHindsightBuffer")
-        d = self._data
         rows = uniform_rows(self._size_t, int(batch_size), self.device)
+        return relabelled_columns(self, rows, self._take, columns)
 
-        def at(name: str, which: torch.Tensor = rows) -> torch.Tensor:
-            return d[name].index_select(0, which)
 
-        goals, rewards, terminateds = at("goal"), at(REWARDS), at(TERMINATEDS)
-        n_her = int(round(self.her_ratio * len(rows)))
-        if n_her:
-            her = rows[:n_her]
-            new_goals = self._device_hindsight_goals(her)
-            r, t = self.reward_fn(at("next_achieved", her), new_goals, at("collision", her))
-            goals = torch.cat([new_goals, goals[n_her:]])
-            rewards = torch.cat([(r + at("dense", her)).to(torch.float32), rewards[n_her:]])
-            terminateds = torch.cat([t.to(torch.bool), terminateds[n_her:]])
-        out = {
-            OBS: self._compose(at("observation"), goals, at("achieved")),
-            NEXT_OBS: self._compose(at("next_observation"), goals, at("next_achieved")),
-            ACTIONS: at(ACTIONS),
-            REWARDS: rewards,
-            TERMINATEDS: terminateds,
-            TRUNCATEDS: torch.zeros(len(rows), dtype=torch.bool, device=self.device),
-        }
-        return {k: out[k] for k in columns}
+def relabelled_columns(
+    buffer: Any,
+    rows: torch.Tensor,
+    take: Callable[[str, torch.Tensor], torch.Tensor],
+    columns: Iterable[str] = TRAIN_COLUMNS,
+) -> dict[str, torch.Tensor]:
+    """The agent's flat columns for storage rows `rows` ([..., B]: a batch, or a batch per seed), the
+    first her_ratio of each batch with hindsight goals; `take(name, rows)` gathers a stored column at
+    rows of that shape. `buffer` gives her_ratio, goal_selection, reward_fn, layout and capacity (a
+    `DeviceHindsightBuffer`, or `seed_replay.StackedHindsightBuffer` for its seeds)."""
+    axis = rows.dim() - 1  # the batch axis of rows; a column's rows carry its width after it
+    goals, rewards, terminateds = take("goal", rows), take(REWARDS, rows), take(TERMINATEDS, rows)
+    n_her = int(round(buffer.her_ratio * rows.shape[axis]))
+    if n_her:
+        her = rows.narrow(axis, 0, n_her)
+        new_goals = _hindsight_goals(buffer, her, take)
+        width = new_goals.shape[-1]
+        r, t = buffer.reward_fn(
+            take("next_achieved", her).reshape(-1, width),
+            new_goals.reshape(-1, width),
+            take("collision", her).reshape(-1),
+        )
+        rest = rows.shape[axis] - n_her
+        goals = torch.cat([new_goals, goals.narrow(axis, n_her, rest)], dim=axis)
+        relabelled = (r.reshape(her.shape) + take("dense", her)).to(torch.float32)
+        rewards = torch.cat([relabelled, rewards.narrow(axis, n_her, rest)], dim=axis)
+        terminateds = torch.cat(
+            [t.reshape(her.shape).to(torch.bool), terminateds.narrow(axis, n_her, rest)], dim=axis
+        )
+    out = {
+        OBS: _compose(buffer, take("observation", rows), goals, take("achieved", rows)),
+        NEXT_OBS: _compose(buffer, take("next_observation", rows), goals, take("next_achieved", rows)),
+        ACTIONS: take(ACTIONS, rows),
+        REWARDS: rewards,
+        TERMINATEDS: terminateds,
+        TRUNCATEDS: torch.zeros(rows.shape, dtype=torch.bool, device=rows.device),
+    }
+    return {k: out[k] for k in columns}
+
+
+def _hindsight_goals(buffer: Any, rows: torch.Tensor, take) -> torch.Tensor:
+    """A next achieved goal of each row's own episode: its last (final), one from its step on (future)
+    or one from anywhere in it (episode)."""
+    start, length, step = (take(k, rows) for k in ("episode_start", "episode_length", "step"))
+    if buffer.goal_selection == "final":
+        offset = length - 1
+    else:
+        low = step if buffer.goal_selection == "future" else torch.zeros_like(step)
+        u = torch.rand(rows.shape, device=rows.device, dtype=torch.float64)
+        offset = torch.minimum(low + (u * (length - low)).long(), length - 1)  # uniform in [low, length)
+    return take("next_achieved", (start + offset) % buffer.capacity)
+
+
+def _compose(buffer: Any, observation, goal, achieved) -> torch.Tensor:
+    parts = [observation, goal, goal - achieved] if buffer.layout.with_delta else [observation, goal]
+    return torch.cat(parts, dim=-1)

@@ -1,5 +1,8 @@
 """N seeds' replay buffers in one set of device tensors, sampled for all seeds at once.
 
+Two kinds, as a one-seed trial has: flat transitions (`StackedTransitionBuffer`, CO-PILOT's and SAC's)
+and HER's relabelling buffer (`StackedHindsightBuffer`, HER's and SoRB's).
+
 `StackedTransitionBuffer(num_seeds, capacity, ...)` keeps each column as one [N, capacity, ...]
 tensor and each seed's fill count in one [N] tensor. Seed i's buffer, `buffer.seeds[i]`, is a
 `device_replay.DeviceTransitionBuffer` whose rows are row i of that storage: adding, its ring
@@ -16,7 +19,14 @@ from collections.abc import Iterable
 
 import torch
 
+from copilot_ray.algorithms.gc_sac.device_hindsight import (
+    TORCH_DTYPES,
+    DeviceHindsightBuffer,
+    TorchRewardFn,
+    relabelled_columns,
+)
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer, uniform_rows
+from copilot_ray.algorithms.gc_sac.hindsight_buffer import STORED_COLUMNS, GoalLayout
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
     NEXT_OBS,
@@ -66,6 +76,13 @@ class _SeedRows(DeviceTransitionBuffer):
             self._allocate(self._stack.obs_dim, self._stack.action_dim)
 
 
+def gather_rows(column: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+    """column [N, capacity, ...] at rows [N, B] (each seed its own rows): [N, B, ...]."""
+    n, b = rows.shape
+    index = rows.view(n, b, *([1] * (column.dim() - 2))).expand(n, b, *column.shape[2:])
+    return torch.gather(column, 1, index)
+
+
 class StackedTransitionBuffer:
     """N seeds' FIFO rings of flat transitions on `device` (module docstring)."""
 
@@ -99,11 +116,88 @@ class StackedTransitionBuffer:
     def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
         """`batch_size` uniform transitions of each seed's own, as [N, batch_size, ...] device tensors,
         with no host sync. The caller makes sure every seed holds one (`len(buffer) > 0`)."""
-        n, b = self.num_seeds, int(batch_size)
-        rows = uniform_rows(self.sizes.unsqueeze(1), (n, b), self.device)
-        out = {}
-        for key in columns:
-            column = self.storage[key]
-            index = rows.view(n, b, *([1] * (column.dim() - 2))).expand(n, b, *column.shape[2:])
-            out[key] = torch.gather(column, 1, index)
-        return out
+        rows = uniform_rows(self.sizes.unsqueeze(1), (self.num_seeds, int(batch_size)), self.device)
+        return {key: gather_rows(self.storage[key], rows) for key in columns}
+
+
+class _SeedEpisodes(DeviceHindsightBuffer):
+    """One seed's `DeviceHindsightBuffer` over its row of the stacked storage (never reallocated)."""
+
+    def __init__(self, stack: StackedHindsightBuffer, seed: int):
+        self._stack, self._seed = stack, seed
+        super().__init__(
+            stack.capacity,
+            stack.layout,
+            stack.reward_fn,
+            stack.n_sampled_goal,
+            stack.goal_selection,
+            stack.device,
+        )
+        self._size_t = stack.sizes[seed]  # a 0-d view: this seed's adds write the stack's counts
+        self._allocate(stack.action_dim)
+
+    def _allocate(self, action_dim: int) -> None:
+        if int(action_dim) != self._stack.action_dim:
+            raise ValueError(
+                f"seed {self._seed}: action size {action_dim} does not fit the stack's {self._stack.action_dim}"
+            )
+        self._action_dim = int(action_dim)
+        self._data = {k: v[self._seed] for k, v in self._stack.storage.items()}
+        self.storage_version = self._stack.storage_version
+
+    def set_state(self, state) -> None:
+        """`DeviceHindsightBuffer.set_state` (which refuses another capacity before changing anything);
+        an empty snapshot without an action size keeps this seed's rows."""
+        super().set_state(state)
+        if self._data is None:
+            self._allocate(self._stack.action_dim)
+
+
+class StackedHindsightBuffer:
+    """N seeds' HER buffers (`DeviceHindsightBuffer`, one per row of [N, capacity, ...] storage:
+    `seeds[i]` adds seed i's episodes and checkpoints in the one-seed format); `sample(B)` gives every
+    seed B of its own transitions, the first her_ratio of them relabelled, as [N, B, ...] columns,
+    with no host sync (`device_hindsight.relabelled_columns`, the one-seed buffer's own relabelling)."""
+
+    def __init__(
+        self,
+        num_seeds: int,
+        capacity: int,
+        layout: GoalLayout,
+        reward_fn: TorchRewardFn,
+        action_dim: int,
+        n_sampled_goal: int = 4,
+        goal_selection: str = "future",
+        device: torch.device | str = "cpu",
+    ):
+        if int(num_seeds) < 1:
+            raise ValueError(f"num_seeds must be >= 1, got {num_seeds}")
+        if int(capacity) <= 0:
+            raise ValueError(f"capacity must be > 0, got {capacity}")
+        self.num_seeds, self.capacity, self.action_dim = int(num_seeds), int(capacity), int(action_dim)
+        self.layout, self.reward_fn = layout, reward_fn
+        self.n_sampled_goal, self.goal_selection = int(n_sampled_goal), goal_selection
+        self.device = torch.device(device)
+        widths = {"obs": layout.obs_dim, "goal": layout.goal_dim, "action": self.action_dim}
+        shape = (self.num_seeds, self.capacity)
+        self.storage = {
+            name: torch.zeros(
+                shape if w is None else (*shape, widths[w]), dtype=TORCH_DTYPES[dtype], device=self.device
+            )
+            for name, (w, dtype) in STORED_COLUMNS.items()
+        }
+        self.storage_version = 1
+        self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=self.device)
+        # Each seed's buffer checks capacity, n_sampled_goal and goal_selection as the one-seed one does.
+        self.seeds = [_SeedEpisodes(self, i) for i in range(self.num_seeds)]
+        self.her_ratio = self.seeds[0].her_ratio
+
+    def __len__(self) -> int:
+        """The smallest seed's fill (sampling needs every seed non-empty)."""
+        return min(len(seed) for seed in self.seeds)
+
+    def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
+        """`batch_size` transitions of each seed's own, relabelled as one seed's buffer relabels, as
+        [N, batch_size, ...] device tensors. The caller makes sure every seed holds one."""
+        rows = uniform_rows(self.sizes.unsqueeze(1), (self.num_seeds, int(batch_size)), self.device)
+        return relabelled_columns(self, rows, lambda name, at: gather_rows(self.storage[name], at), columns)
