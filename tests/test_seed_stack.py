@@ -184,6 +184,26 @@ def test_a_restored_stack_continues_exactly_and_a_foreign_snapshot_is_refused():
     assert torch.equal(two.agents.flat, before)
 
 
+def test_one_batched_forward_acts_as_each_seeds_module_acts():
+    """The traversal's runner samples a seed's action from its module's distribution (exploring) or takes
+    its deterministic twin; the stack's `act` gives every seed the same in one pass."""
+    learners = [_learner(s) for s in SEEDS]
+    stacked, _ = _stack_of(learners)
+    obs = torch.as_tensor(np.random.default_rng(0).uniform(0, 1, (3, 5, 4)), dtype=torch.float32)
+    generators = [torch.Generator().manual_seed(10 + i) for i in range(3)]
+    noise = torch.stack([torch.empty(5, 2).normal_(generator=g) for g in generators])
+    explored, greedy = stacked.agents.act(obs, noise), stacked.agents.act(obs)
+    for i, learner in enumerate(learners):
+        module = learner.module[DEFAULT_MODULE_ID].unwrapped()
+        with torch.no_grad():
+            logits = module._forward_exploration({"obs": obs[i]})["action_dist_inputs"]
+            dist = module.get_exploration_action_dist_cls().from_logits(logits)
+            torch.manual_seed(10 + i)  # the module's sample draws its noise as seed i's generator did
+            torch.testing.assert_close(explored[i], dist.sample(), rtol=1e-5, atol=1e-6)
+            torch.testing.assert_close(greedy[i], dist.to_deterministic().sample(), rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(explored, greedy)
+
+
 def test_stacking_refuses_what_it_cannot_stack():
     learner = _learner(0)
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()

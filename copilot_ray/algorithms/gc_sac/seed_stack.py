@@ -222,6 +222,16 @@ class StackedSAC:
         action = ((torch.tanh(unsquashed) + 1.0) / 2.0) * (self.high - self.low) + self.low
         return torch.clamp(action, self.low, self.high), logp - jacobian.sum(-1)
 
+    @torch.no_grad()
+    def act(self, obs: torch.Tensor, noise: torch.Tensor | None = None) -> torch.Tensor:
+        """Every seed's actions for its own observations `obs` [N, E, d] in one batched forward pass,
+        as the traversal's env runner takes them from a seed's module: with standard-normal `noise`
+        [N, E, A] a sample of the squashed Gaussian (exploring), without it the distribution's
+        deterministic twin (RLlib's: the Gaussian's mean, before squashing)."""
+        if noise is None:
+            return _mlp(self.nets["pi"], obs).chunk(2, dim=-1)[0]
+        return self.policy(self.nets, obs, noise)[0]
+
     def forward_train(self, batch: Mapping[str, torch.Tensor], noise: torch.Tensor, noise_next: torch.Tensor):
         """`GCSACTorchRLModule._forward_train_continuous`'s outputs, each with a leading seed axis."""
         obs, next_obs = batch[Columns.OBS], batch[Columns.NEXT_OBS]
