@@ -210,6 +210,10 @@ def test_stacking_refuses_what_it_cannot_stack():
     with pytest.raises(ValueError, match="one log alpha per module"):
         StackedSAC.from_modules([module, module], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
     agents = StackedSAC.from_modules([module], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
+    other = _learner(1).module[DEFAULT_MODULE_ID].unwrapped()
+    other.pi_encoder.net.mlp[1] = torch.nn.Tanh()  # a network the batched layers do not compute
+    with pytest.raises(ValueError, match=r"Linear/ReLU networks .* got layers \['linear', 'Tanh', 'linear'"):
+        StackedSAC.from_modules([other], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
     with pytest.raises(ValueError, match=r"one generator per seed \(1\), got 2"):
         StackedSACStep(
             agents,

@@ -58,14 +58,8 @@ def _linear_layers(encoder: torch.nn.Module, head: torch.nn.Module) -> list[torc
     """The Linear layers of encoder + head, checked to be Linear, ReLU, ..., Linear (SB3's shape)."""
     leaves = [m for net in (encoder, head) for m in net.modules() if not list(m.children())]
     leaves = [m for m in leaves if not isinstance(m, torch.nn.Identity)]
-    kinds = [
-        "linear"
-        if isinstance(m, torch.nn.Linear)
-        else "relu"
-        if isinstance(m, torch.nn.ReLU)
-        else type(m).__name__
-        for m in leaves
-    ]
+    names = {torch.nn.Linear: "linear", torch.nn.ReLU: "relu"}
+    kinds = [names.get(type(m), type(m).__name__) for m in leaves]
     want = ["linear", "relu"] * (len(kinds) // 2) + ["linear"]
     if kinds != want:
         raise ValueError(
