@@ -175,6 +175,10 @@ def test_a_stacked_her_seeds_state_is_the_one_seed_format_and_bad_input_is_named
         other.seeds[0].add_episode(
             pos, pos, np.zeros(2, np.float32), np.ones((2, 3)), np.zeros(2), False, np.zeros(2, bool)
         )
+    wide = StackedHindsightBuffer(1, 50, LAYOUT, _reached_reward, action_dim=2)
+    with pytest.raises(ValueError, match="seed 0: a snapshot of action size 1 does not fit the stack's 2"):
+        wide.seeds[0].set_state(plain.get_state())
+    assert wide.seeds[0].get_state()["action_dim"] == 2 and len(wide) == 0  # untouched
     with pytest.raises(ValueError, match="a checkpoint of capacity 50 into a buffer of 60"):
         _her_stack(1, capacity=60).seeds[0].set_state(plain.get_state())
     with pytest.raises(ValueError, match="goal_selection='best' is invalid"):

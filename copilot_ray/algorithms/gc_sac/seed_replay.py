@@ -147,7 +147,12 @@ class _SeedEpisodes(DeviceHindsightBuffer):
 
     def set_state(self, state) -> None:
         """`DeviceHindsightBuffer.set_state` (which refuses another capacity before changing anything);
-        an empty snapshot without an action size keeps this seed's rows."""
+        another action size is refused first too; an empty snapshot without one keeps this seed's rows."""
+        if state["action_dim"] is not None and int(state["action_dim"]) != self._stack.action_dim:
+            raise ValueError(
+                f"seed {self._seed}: a snapshot of action size {state['action_dim']} does not fit the "
+                f"stack's {self._stack.action_dim}"
+            )
         super().set_state(state)
         if self._data is None:
             self._allocate(self._stack.action_dim)
