@@ -28,10 +28,14 @@ ACT_SPACE = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
 SEEDS = (0, 1, 2)
 
 
-def _learner(seed):
+def _learner(seed, critic_loss="huber"):
     cfg = SACConfig().environment(observation_space=OBS_SPACE, action_space=ACT_SPACE).debugging(seed=seed)
     cfg.training(tau=0.05, actor_lr=3e-4, critic_lr=1e-3, alpha_lr=2e-3)  # distinct rates: a mix-up shows
-    return use_fast_learner(cfg, hidden=(32, 32), torch_threads=1).build_learner_group()._learner
+    return (
+        use_fast_learner(cfg, hidden=(32, 32), torch_threads=1, critic_loss=critic_loss)
+        .build_learner_group()
+        ._learner
+    )
 
 
 def _batch(seed, n=64, reward=-1.0):
@@ -47,7 +51,7 @@ def _batch(seed, n=64, reward=-1.0):
     return {k: torch.as_tensor(v) for k, v in cols.items()}
 
 
-def _stack_of(learners):
+def _stack_of(learners, critic_loss="huber"):
     modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in learners]
     agents = StackedSAC.from_modules(
         modules, [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in learners]
@@ -61,7 +65,7 @@ def _stack_of(learners):
         learners[0].target_entropy[DEFAULT_MODULE_ID],
         gamma=config.gamma,
         tau=config.tau,
-        critic_loss="huber",
+        critic_loss=critic_loss,
         generators=generators,
     )
     return step, generators
@@ -83,9 +87,9 @@ def _assert_seed_matches(stacked, learner, i):
     )
 
 
-def _run(learners, batches, steps=3):
+def _run(learners, batches, steps=3, critic_loss="huber"):
     """`steps` one-seed fused steps per learner and the same steps stacked; the stacked step."""
-    stacked, generators = _stack_of(learners)
+    stacked, generators = _stack_of(learners, critic_loss)
     for t in range(steps):
         stats = []
         for i, learner in enumerate(learners):
@@ -107,8 +111,9 @@ def _run(learners, batches, steps=3):
     return stacked
 
 
-def test_a_stack_of_three_seeds_gives_each_seed_its_own_update():
-    learners = [_learner(s) for s in SEEDS]
+@pytest.mark.parametrize("critic_loss", ["huber", "mse"])
+def test_a_stack_of_three_seeds_gives_each_seed_its_own_update(critic_loss):
+    learners = [_learner(s, critic_loss) for s in SEEDS]
     first = [learner.module[DEFAULT_MODULE_ID].unwrapped().pi_encoder for learner in learners]
     # The seeds start apart (each module built with its own seed), so a mixed-up slice shows.
     weights = [next(enc.parameters()).detach().clone() for enc in first]
@@ -117,7 +122,7 @@ def test_a_stack_of_three_seeds_gives_each_seed_its_own_update():
         learner.module[DEFAULT_MODULE_ID].unwrapped().target_qf_encoder.net.mlp[0].weight.detach().clone()
         for learner in learners
     ]
-    stacked = _run(learners, [_batch(s) for s in SEEDS])
+    stacked = _run(learners, [_batch(s) for s in SEEDS], critic_loss=critic_loss)
     for i, learner in enumerate(learners):
         _assert_seed_matches(stacked, learner, i)
         after = learner.module[DEFAULT_MODULE_ID].unwrapped().target_qf_encoder.net.mlp[0].weight
