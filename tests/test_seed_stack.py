@@ -150,6 +150,26 @@ def test_a_seed_with_a_non_finite_gradient_stays_put_and_the_others_step():
         _assert_seed_matches(stacked, learners[i], i)
 
 
+def test_an_inactive_seed_keeps_everything_and_is_not_counted_as_skipped():
+    learners = [_learner(s) for s in SEEDS]
+    stacked, generators = _stack_of(learners)
+    start = stacked.get_state()
+    active = torch.tensor([True, False, True])
+    for t in range(2):
+        for i in (0, 2):
+            torch.manual_seed(1000 * t + i)
+            learners[i].fused_step().step(_batch(i))
+        for i, g in enumerate(generators):
+            g.manual_seed(1000 * t + i)
+        stacked.step(stack_batches([_batch(s) for s in SEEDS]), active=active)
+    now = stacked.get_state()
+    for key in ("flat", "target_flat", "exp_avg", "exp_avg_sq"):
+        np.testing.assert_array_equal(now[key][1], start[key][1], err_msg=key)
+    assert now["step_count"].tolist() == [2.0, 0.0, 2.0] and now["skipped"].tolist() == [0, 0, 0]
+    for i in (0, 2):
+        _assert_seed_matches(stacked, learners[i], i)
+
+
 def test_write_to_puts_each_seed_back_into_its_module():
     learners = [_learner(s) for s in SEEDS]
     stacked = _run(learners, [_batch(s) for s in SEEDS], steps=1)

@@ -363,8 +363,12 @@ class StackedSACStep:
         draws = [[torch.empty_like(like[0]).normal_(generator=g) for _ in range(2)] for g in self.generators]
         return torch.stack([d[0] for d in draws]), torch.stack([d[1] for d in draws])
 
-    def step(self, batch: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """One gradient step for every seed; `batch` columns are [N, B, ...]. Returns each loss
+    def step(
+        self, batch: Mapping[str, torch.Tensor], active: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
+        """One gradient step for every seed; `batch` columns are [N, B, ...]. `active` ([N] bool, default
+        all): the seeds that take this step; the others keep everything, as a skipped seed does, but are
+        not counted as skipped (a seed that owes fewer updates than the stack runs). Returns each loss
         statistic, `total_loss` and `finite` as [N] device tensors."""
         self.agents.flat.grad = None
         actions = batch[Columns.ACTIONS]
@@ -386,11 +390,12 @@ class StackedSACStep:
         total, stats = torch.func.vmap(one_seed)(fwd_out, loss_batch, self.agents.log_alpha)
         total.sum().backward()
         finite = torch.isfinite(self.agents.flat.grad).all(1)
-        self.optimizer.step(finite)
+        steps = finite if active is None else finite & active
+        self.optimizer.step(steps)
         with torch.no_grad():
             critics = self.agents.flat[:, : self.agents.num_critic_params]
-            self.agents.target_flat.lerp_(critics, (finite * self.tau).unsqueeze(1))
-            self.skipped.add_(torch.logical_not(finite))
+            self.agents.target_flat.lerp_(critics, (steps * self.tau).unsqueeze(1))
+            self.skipped.add_(torch.logical_not(finite) if active is None else active & ~finite)
         stats = dict(stats)
         stats[TOTAL_LOSS] = total.detach()
         stats[FINITE] = finite
