@@ -35,6 +35,18 @@ TorchRewardFn = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], tuple[torch
 TORCH_DTYPES = {np.float32: torch.float32, bool: torch.bool, np.int64: torch.int64}
 
 
+def hindsight_storage(
+    rows: tuple[int, ...], layout: GoalLayout, action_dim: int, device: torch.device
+) -> dict[str, torch.Tensor]:
+    """Zeroed device columns of HER's stored layout (`STORED_COLUMNS`), each `rows` deep: (capacity,)
+    for one buffer, (seeds, capacity) for a stack."""
+    widths = {"obs": layout.obs_dim, "goal": layout.goal_dim, "action": action_dim}
+    return {
+        name: torch.zeros(rows if w is None else (*rows, widths[w]), dtype=TORCH_DTYPES[dtype], device=device)
+        for name, (w, dtype) in STORED_COLUMNS.items()
+    }
+
+
 class DeviceHindsightBuffer(HindsightReplayBuffer):
     """A `HindsightReplayBuffer` on `device` (module docstring); `reward_fn` is a `TorchRewardFn`."""
 
@@ -54,16 +66,8 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
 
     # ------------------------------------------------------------------------- storage on the device
     def _allocate(self, action_dim: int) -> None:
-        widths = {"obs": self.layout.obs_dim, "goal": self.layout.goal_dim, "action": action_dim}
         self._action_dim = action_dim
-        self._data = {
-            name: torch.zeros(
-                (self.capacity,) if w is None else (self.capacity, widths[w]),
-                dtype=TORCH_DTYPES[dtype],
-                device=self.device,
-            )
-            for name, (w, dtype) in STORED_COLUMNS.items()
-        }
+        self._data = hindsight_storage((self.capacity,), self.layout, action_dim, self.device)
         self.storage_version += 1
 
     def _write_rows(self, rows: np.ndarray, cols: Mapping[str, np.ndarray]) -> None:

@@ -20,13 +20,13 @@ from collections.abc import Iterable
 import torch
 
 from copilot_ray.algorithms.gc_sac.device_hindsight import (
-    TORCH_DTYPES,
     DeviceHindsightBuffer,
     TorchRewardFn,
+    hindsight_storage,
     relabelled_columns,
 )
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer, uniform_rows
-from copilot_ray.algorithms.gc_sac.hindsight_buffer import STORED_COLUMNS, GoalLayout
+from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
     NEXT_OBS,
@@ -183,14 +183,9 @@ class StackedHindsightBuffer:
         self.layout, self.reward_fn = layout, reward_fn
         self.n_sampled_goal, self.goal_selection = int(n_sampled_goal), goal_selection
         self.device = torch.device(device)
-        widths = {"obs": layout.obs_dim, "goal": layout.goal_dim, "action": self.action_dim}
-        shape = (self.num_seeds, self.capacity)
-        self.storage = {
-            name: torch.zeros(
-                shape if w is None else (*shape, widths[w]), dtype=TORCH_DTYPES[dtype], device=self.device
-            )
-            for name, (w, dtype) in STORED_COLUMNS.items()
-        }
+        self.storage = hindsight_storage(
+            (self.num_seeds, self.capacity), layout, self.action_dim, self.device
+        )
         self.storage_version = 1
         self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=self.device)
         # Each seed's buffer checks capacity, n_sampled_goal and goal_selection as the one-seed one does.
