@@ -21,7 +21,6 @@ import torch
 
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
-    COLUMNS,
     NEXT_OBS,
     OBS,
     REWARDS,
@@ -40,8 +39,9 @@ def uniform_rows(size: torch.Tensor, batch_size: int | tuple[int, ...], device: 
     return torch.minimum((u * size).long(), size - 1)
 
 
-class DeviceTransitionBuffer:
-    """A fixed-capacity FIFO ring of flat transitions in torch tensors on `device` (module docstring).
+class DeviceTransitionBuffer(FlatTransitionBuffer):
+    """A `FlatTransitionBuffer` (its adds, checks and ring) whose rows are torch tensors on `device`
+    (module docstring).
 
     Args:
         capacity: transitions kept; the oldest are overwritten first.
@@ -56,19 +56,10 @@ class DeviceTransitionBuffer:
         obs_dim: int | None = None,
         action_dim: int | None = None,
     ):
-        if int(capacity) <= 0:
-            raise ValueError(f"capacity must be > 0, got {capacity}")
-        self.capacity = int(capacity)
         self.device = torch.device(device)
-        self._obs_dim, self._action_dim = obs_dim, action_dim
-        self._data: dict[str, torch.Tensor] | None = None
-        self._ptr = 0
-        self._size = 0
-        self._num_added = 0
         self._size_t = torch.zeros((), dtype=torch.int64, device=self.device)
         self.storage_version = 0
-        if obs_dim is not None and action_dim is not None:
-            self._allocate(int(obs_dim), int(action_dim))
+        super().__init__(capacity, obs_dim, action_dim)
 
     def _allocate(self, obs_dim: int, action_dim: int) -> None:
         c, dev = self.capacity, self.device
@@ -83,72 +74,22 @@ class DeviceTransitionBuffer:
         }
         self.storage_version += 1
 
-    def __len__(self) -> int:
-        return self._size
-
-    @property
-    def num_added(self) -> int:
-        """Transitions added over the buffer's lifetime (including overwritten ones)."""
-        return self._num_added
-
-    @property
-    def obs_dim(self) -> int | None:
-        return self._obs_dim
-
-    @property
-    def action_dim(self) -> int | None:
-        return self._action_dim
-
-    # ---------------------------------------------------------------- adding
-    def add(self, transitions: Mapping[str, Any]) -> int:
-        """Adds a batch of transitions (a dict of equally long arrays; `FlatTransitionBuffer.add`'s
-        keys and rules). Returns the number of rows added."""
-        obs = np.asarray(transitions[OBS])
-        n = int(obs.shape[0])
-        if n == 0:
-            return 0
-        obs = obs.reshape(n, -1)
-        actions = np.asarray(transitions[ACTIONS]).reshape(n, -1)
-        if self._data is None:
-            self._allocate(obs.shape[1], actions.shape[1])
-        cols = {
-            OBS: obs,
-            NEXT_OBS: np.asarray(transitions[NEXT_OBS]).reshape(n, -1),
-            ACTIONS: actions,
-            REWARDS: np.asarray(transitions[REWARDS], dtype=np.float32).reshape(n),
-        }
-        for key in (TERMINATEDS, TRUNCATEDS):
-            flags = transitions.get(key)
-            cols[key] = np.zeros(n, bool) if flags is None else np.asarray(flags, dtype=bool).reshape(n)
-        for key in (OBS, NEXT_OBS):
-            if cols[key].shape[1] != self._obs_dim:
-                raise ValueError(f"observation size {cols[key].shape[1]} != buffer obs_dim {self._obs_dim}")
-        if actions.shape[1] != self._action_dim:
-            raise ValueError(f"action size {actions.shape[1]} != buffer action_dim {self._action_dim}")
-        if n >= self.capacity:  # only the newest `capacity` rows survive
-            cols = {k: v[n - self.capacity :] for k, v in cols.items()}
-            self._write(0, cols)
-            self._ptr, self._size = 0, self.capacity
-        else:
-            first = min(n, self.capacity - self._ptr)
-            self._write(self._ptr, {k: v[:first] for k, v in cols.items()})
-            if first < n:
-                self._write(0, {k: v[first:] for k, v in cols.items()})
-            self._ptr = (self._ptr + n) % self.capacity
-            self._size = min(self._size + n, self.capacity)
-        self._num_added += n
-        self._size_t.fill_(self._size)
-        return n
-
     def _write(self, start: int, cols: Mapping[str, np.ndarray]) -> None:
         for key, values in cols.items():
             target = self._data[key][start : start + len(values)]
             target.copy_(torch.from_numpy(np.ascontiguousarray(values)).to(target.dtype), non_blocking=False)
 
-    def add_episodes(self, episodes: Iterable[Any]) -> int:
-        """Adds RLlib `SingleAgentEpisode`s (as `FlatTransitionBuffer.add_episodes`); returns rows added."""
-        transitions = FlatTransitionBuffer.episodes_to_transitions(episodes)
-        return self.add(transitions) if transitions else 0
+    def add(self, transitions: Mapping[str, Any]) -> int:
+        """`FlatTransitionBuffer.add`, then the device's copy of the size (what sampling reads)."""
+        added = super().add(transitions)
+        self._size_t.fill_(self._size)
+        return added
+
+    # Pickled as plain attributes (tensors included), not through the numpy buffer's snapshot.
+    __getstate__ = object.__getstate__
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
 
     # ---------------------------------------------------------------- sampling
     def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
@@ -187,14 +128,5 @@ class DeviceTransitionBuffer:
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restores a `get_state` snapshot of either buffer (capacity, dims, rows, write pointer)."""
-        self.capacity = int(state["capacity"])
-        self._data, self._ptr, self._size = None, 0, 0
-        self._obs_dim, self._action_dim = state["obs_dim"], state["action_dim"]
-        self._num_added = int(state["num_added"])
-        if self._obs_dim is not None and self._action_dim is not None:
-            self._allocate(int(self._obs_dim), int(self._action_dim))
-        if state.get("data"):
-            size = int(state["size"])
-            self._write(0, {k: np.asarray(v)[:size] for k, v in state["data"].items() if k in COLUMNS})
-            self._size, self._ptr = size, int(state["ptr"])
+        super().set_state(state)
         self._size_t.fill_(self._size)

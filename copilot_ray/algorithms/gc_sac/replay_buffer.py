@@ -127,20 +127,23 @@ class FlatTransitionBuffer:
             TRUNCATEDS: trunc,
         }
         if n >= self.capacity:  # only the newest `capacity` rows survive
-            for k, v in cols.items():
-                self._data[k][:] = v[n - self.capacity :]
+            self._write(0, {k: v[n - self.capacity :] for k, v in cols.items()})
             self._ptr = 0
             self._size = self.capacity
         else:
             first = min(n, self.capacity - self._ptr)
-            for k, v in cols.items():
-                self._data[k][self._ptr : self._ptr + first] = v[:first]
-                if first < n:
-                    self._data[k][: n - first] = v[first:]
+            self._write(self._ptr, {k: v[:first] for k, v in cols.items()})
+            if first < n:
+                self._write(0, {k: v[first:] for k, v in cols.items()})
             self._ptr = (self._ptr + n) % self.capacity
             self._size = min(self._size + n, self.capacity)
         self._num_added += n
         return n
+
+    def _write(self, start: int, cols: Mapping[str, np.ndarray]) -> None:
+        """Stores equally long `cols` at storage rows start, start + 1, ... (the storage's only writer)."""
+        for key, values in cols.items():
+            self._data[key][start : start + len(values)] = values
 
     @staticmethod
     def episodes_to_transitions(episodes: Iterable[Any]) -> dict[str, np.ndarray]:
@@ -251,8 +254,7 @@ class FlatTransitionBuffer:
             self._allocate(int(self._obs_dim), int(self._action_dim))
         if state.get("data"):
             size = int(state["size"])
-            for k, v in state["data"].items():
-                self._data[k][:size] = v
+            self._write(0, {k: np.asarray(v)[:size] for k, v in state["data"].items() if k in COLUMNS})
             self._size, self._ptr = size, int(state["ptr"])
 
     @classmethod
