@@ -229,6 +229,17 @@ def validation_metrics(*test_keys: str) -> tuple[str, ...]:
     return tuple(validation_key(k) for k in test_keys)
 
 
+# What an agent that traverses sub-goal trees offers at evaluation (CO-PILOT, the RRT* curriculum):
+# searchers, schedulers and probes read the validation tasks' figures; the test tasks' are reported.
+TREE_AGENT_EVAL_METRICS: tuple[str, ...] = (
+    *validation_metrics(EVAL_SUCCESS, SUCCESS_PLANNED, SUCCESS_DIRECT, EVAL_SUCCESS_AUC, EVAL_RETURN),
+    EVAL_SUCCESS,
+    SUCCESS_PLANNED,
+    SUCCESS_DIRECT,
+    EVAL_SUCCESS_AUC,
+)
+
+
 def is_test_metric(key: str) -> bool:
     """Whether `key` is a figure of the test tasks (evaluation or path metrics): never a searcher's."""
     return key.startswith((EVAL_PREFIX, PATHS_PREFIX))

@@ -447,14 +447,7 @@ LABELS = {"K": "tree_depth", "b": "repetitions", "alpha_schedule": "alpha_schedu
 GPU_LEARNER = True
 
 METRICS: tuple[str, ...] = (
-    # Searchers, schedulers and probes read the validation tasks' figures; the test tasks' are reported.
-    *keys.validation_metrics(
-        keys.EVAL_SUCCESS, keys.SUCCESS_PLANNED, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN
-    ),
-    keys.EVAL_SUCCESS,
-    keys.SUCCESS_PLANNED,
-    keys.SUCCESS_DIRECT,
-    keys.EVAL_SUCCESS_AUC,
+    *keys.TREE_AGENT_EVAL_METRICS,  # validation figures for searchers, test figures reported
     keys.ALPHA,
     keys.PLANNER_COST_LAYER + "<k>",
     keys.PLANNER_APPROX_KL_MAX,

@@ -77,13 +77,7 @@ LABELS = {"K": "tree_depth", "b": "repetitions"}
 GPU_LEARNER = True
 
 METRICS: tuple[str, ...] = (
-    *keys.validation_metrics(
-        keys.EVAL_SUCCESS, keys.SUCCESS_PLANNED, keys.SUCCESS_DIRECT, keys.EVAL_SUCCESS_AUC, keys.EVAL_RETURN
-    ),
-    keys.EVAL_SUCCESS,
-    keys.SUCCESS_PLANNED,
-    keys.SUCCESS_DIRECT,
-    keys.EVAL_SUCCESS_AUC,
+    *keys.TREE_AGENT_EVAL_METRICS,  # validation figures for searchers, test figures reported
     keys.AGENT_STEPS_LAYER + "<k>",
     keys.AGENT_SUCCESS_LAYER + "<k>",
     keys.CURRICULUM_RRT_TASKS,
