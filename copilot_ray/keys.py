@@ -199,6 +199,12 @@ REPORT_ARTIFACT = "report"
 # Keys of a sweep trial's flat Tune config besides the searched dotted params.
 SPEC_PATH_KEY = "_spec_path"  # the (resolved) spec the trial belongs to
 SEED_PARAM = "seed"  # also the MLflow param
+# A stacked trial (spec `seeds_per_trial` > 1) has `_seeds: [..]` instead of `seed`; its results carry
+# each seed's metrics under SEED_RESULTS ({seed: {metric: value}}) and its failed seeds' errors under
+# SEED_ERRORS ({seed: error}); copilot_ray.trials.seed_stack_trial.
+SEEDS_KEY = "_seeds"
+SEED_RESULTS = "seed_results"
+SEED_ERRORS = "seed_errors"
 VARIANT_PARAM = "variant"
 ENV_PARAM = "env.id"  # a trial's env when the spec lists several (`env: {id: [..]}`): a grid axis
 

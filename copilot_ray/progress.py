@@ -118,12 +118,18 @@ def paces_by_algorithm(specs, observed: dict[str, Observed] | None = None) -> di
     return best
 
 
+def planned_runs(spec) -> int:
+    """The MLflow runs a part makes: one per trial, one per seed of a stacked trial (a stack's seeds
+    take turns in their trial, so each is timed, and scheduled here, as a trial of its own)."""
+    return len(spec.trial_plan()) * spec.seeds_per_trial
+
+
 def _seconds_left(spec, taken: list[float], pace: Pace) -> float:
     """The trials left (begun ones first, then the planned ones not begun) in list scheduling on the
     part's max_concurrent_trials slots."""
     budget = float(spec.stop.env_steps)
     trials = [pace.trial_seconds(max(0.0, budget - t), begun=t > 0) for t in taken]
-    trials += [pace.trial_seconds(budget, begun=False)] * max(0, len(spec.trial_plan()) - len(taken))
+    trials += [pace.trial_seconds(budget, begun=False)] * max(0, planned_runs(spec) - len(taken))
     slots = [0.0] * max(1, spec.resources.max_concurrent_trials)
     for seconds in trials:
         slots[slots.index(min(slots))] += seconds
@@ -135,7 +141,7 @@ def part_progress(
 ) -> PartProgress:
     """Where one part stands; its time left at its own trials' pace, else `paces[spec.algorithm]`, else
     --check's rates. `observed`: what the store holds of it, when already read."""
-    planned = len(spec.trial_plan())
+    planned = planned_runs(spec)
     budget = spec.stop.env_steps
     planned_steps = planned * budget if budget else None
     observed = observed or observe(spec)

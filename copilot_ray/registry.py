@@ -23,6 +23,9 @@ starts) and provide:
                                           whose value grants more says so itself (Setting.grants)
     GPU_LEARNER: bool                     optional: its learner runs on a GPU when a spec gives trials
                                           one (resources.gpus_per_trial; RLlib places it); default False
+    SEED_STACK: bool                      optional: several seeds can share one trial, their SAC updates
+                                          stacked (a spec's seeds_per_trial; a GoalSAC agent with the
+                                          fused update); default False
     PRESETS: dict[str, dict]              optional: named sets of values (`preset: <name>`)
     as_logged(values)                     optional: effective flat values -> the settings as its runs'
                                           params hold them, where a setting is logged as other keys
@@ -150,6 +153,7 @@ class AlgorithmEntry:
     # (K: tree_depth, b: repetitions, alpha_schedule); the settings module's LABELS.
     labels: Mapping[str, str] = field(default_factory=dict)
     gpu_learner: bool = False  # the settings module's GPU_LEARNER
+    seed_stack: bool = False  # the settings module's SEED_STACK: seeds_per_trial > 1 is allowed
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # the settings module's PRESETS
     as_logged: Callable[[Mapping[str, Any]], dict[str, Any]] = dict  # the settings module's as_logged
 
@@ -196,6 +200,11 @@ def _load(path: str) -> Any:
     return getattr(importlib.import_module(module), name)
 
 
+def stackable_algorithms() -> list[str]:
+    """The algorithms whose seeds can share one trial (SEED_STACK)."""
+    return [name for name in algorithm_names() if get_algorithm(name).seed_stack]
+
+
 def algorithm_names() -> list[str]:
     return sorted(ALGORITHMS)
 
@@ -229,6 +238,7 @@ def get_algorithm(name: str) -> AlgorithmEntry:
         max_env_steps_past_budget=getattr(module, "max_env_steps_past_budget", None),
         labels=dict(getattr(module, "LABELS", {})),
         gpu_learner=bool(getattr(module, "GPU_LEARNER", False)),
+        seed_stack=bool(getattr(module, "SEED_STACK", False)),
         presets=dict(getattr(module, "PRESETS", {})),
         as_logged=getattr(module, "as_logged", dict),
     )

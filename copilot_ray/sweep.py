@@ -443,7 +443,15 @@ def report_sweep(
     if interrupted:
         _say(f"interrupted: state saved. Resume with: {resume_command(spec)}")
     elif errored:
-        _say(f"some trials failed; retry them from their last checkpoint with: {resume_command(spec)}")
+        stopped = [r for r in rows if r.status == "error" and r.stacked]
+        if len(stopped) < sum(r.status == "error" for r in rows):
+            _say(f"some trials failed; retry them from their last checkpoint with: {resume_command(spec)}")
+        if stopped:
+            _say(
+                "seeds that stopped alone in a stacked trial (their MLflow runs are FAILED with the error): "
+                + ", ".join(f"seed {r.seed} of {r.config_key}" for r in stopped)
+                + "; a stack does not retry a seed: run them again as a part of their own (`seeds: [..]`)"
+            )
     code = EXIT_INTERRUPTED if interrupted else (1 if errored else 0)
     return SweepOutcome(status, code, rows, summary, uri, parent_id, tune_paths, wall)
 

@@ -18,14 +18,16 @@ from copilot_ray.keys import (
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
     PATHS_PREFIX,
+    SEED_ERRORS,
     SEED_PARAM,
+    SEED_RESULTS,
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
     TIME_TOTAL_S,
     result_value,
     validation_key,
 )
-from copilot_ray.trials.description import config_key, trial_flat
+from copilot_ray.trials.description import config_key, stacked_seeds, trial_flat
 
 
 @dataclass
@@ -37,6 +39,7 @@ class TrialRow:
     figures: dict[str, float]  # the last evaluated value of each of SUMMARY_METRICS (NaN: not logged)
     env_steps: int
     wall_s: float
+    stacked: bool = False  # a seed of a stacked trial (spec seeds_per_trial > 1)
 
 
 @dataclass
@@ -79,37 +82,62 @@ def _last_valid(df, column: str) -> float:
 
 
 def rows_from_grid(grid) -> list[TrialRow]:
-    """One row per Tune trial of a ResultGrid (Result.config is RLlib's full config: use the trials)."""
+    """One row per Tune trial of a ResultGrid (Result.config is RLlib's full config: use the trials); a
+    stacked trial (spec `seeds_per_trial` > 1) gives a row per seed, as its seeds' own trials would."""
     analysis = grid._experiment_analysis  # noqa: SLF001 - the trials with their flat Tune configs
     rows = []
     for trial in sorted(analysis.trials, key=lambda t: t.trial_id):
         flat = trial_flat(trial.config or {})
         m = trial.last_result or {}
         df = analysis.trial_dataframes.get(trial.trial_id)
-        if df is not None and EVAL_FRESH in df.columns:
-            df = df[df[EVAL_FRESH] == 1.0]  # the evaluations themselves
         # After Ctrl-C, Tune's cleanup marks stopped trials TERMINATED too: finished means a final result.
         if trial.status == "ERROR":
             status = "error"
         else:
             status = "finished" if trial.status == "TERMINATED" and m.get("done") else "unfinished"
-        rows.append(
-            TrialRow(
-                trial_id=trial.trial_id,
-                config_key=config_key(flat),
-                seed=flat.get(SEED_PARAM),
-                status=status,
-                # success: the last evaluation's; a path figure: the last result's (NaN where it was
-                # undefined then, e.g. a length ratio with no successful path, not an older value)
-                figures={
-                    key: (_last_row(df, key) if key.startswith(PATHS_PREFIX) else _last_valid(df, key))
-                    for key in SUMMARY_METRICS
-                },
-                env_steps=int(result_value(m, ENV_STEPS, 0) or 0),
-                wall_s=float(m.get(TIME_TOTAL_S, 0.0) or 0.0),
-            )
-        )
+        wall_s = float(m.get(TIME_TOTAL_S, 0.0) or 0.0)
+        seeds = stacked_seeds(trial.config or {})
+        if seeds is None:
+            steps = int(result_value(m, ENV_STEPS, 0) or 0)
+            rows.append(_row(trial.trial_id, flat, flat.get(SEED_PARAM), status, df, steps, wall_s))
+            continue
+        failed = {str(s) for s in (m.get(SEED_ERRORS) or {})}
+        for seed in seeds:
+            own = (m.get(SEED_RESULTS) or {}).get(str(seed), {})
+            steps = int(own.get(ENV_STEPS, 0) or 0)
+            seed_status = "error" if str(seed) in failed else status
+            row = _row(trial.trial_id, flat, seed, seed_status, _seed_frame(df, seed), steps, wall_s)
+            row.stacked = True
+            rows.append(row)
     return rows
+
+
+def _seed_frame(df, seed: int):
+    """A stacked trial's dataframe narrowed to one seed's columns, named as a one-seed trial's."""
+    if df is None:
+        return None
+    prefix = f"{SEED_RESULTS}/{seed}/"
+    columns = [c for c in df.columns if str(c).startswith(prefix)]
+    return df[columns].rename(columns={c: c[len(prefix) :] for c in columns})
+
+
+def _row(trial_id, flat, seed, status, df, env_steps: int, wall_s: float) -> TrialRow:
+    if df is not None and EVAL_FRESH in df.columns:
+        df = df[df[EVAL_FRESH] == 1.0]  # the evaluations themselves
+    return TrialRow(
+        trial_id=trial_id,
+        config_key=config_key(flat),
+        seed=seed,
+        status=status,
+        # success: the last evaluation's; a path figure: the last result's (NaN where it was undefined
+        # then, e.g. a length ratio with no successful path, not an older value)
+        figures={
+            key: (_last_row(df, key) if key.startswith(PATHS_PREFIX) else _last_valid(df, key))
+            for key in SUMMARY_METRICS
+        },
+        env_steps=env_steps,
+        wall_s=wall_s,
+    )
 
 
 def summary_keys(searched: bool) -> list[str]:

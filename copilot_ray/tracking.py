@@ -35,7 +35,9 @@ from copilot_ray.keys import (
     ROLE_SWEEP,
     ROLE_TAG,
     ROLE_TRIAL,
+    SEED_ERRORS,
     SEED_PARAM,
+    SEED_RESULTS,
     SEED_TAG,
     SUMMARY_ARTIFACT,
     SWEEP_TAG,
@@ -52,7 +54,13 @@ from copilot_ray.mlflow_view import configuration
 from copilot_ray.privileges import tag_value
 from copilot_ray.settings import logged_text
 from copilot_ray.store import missing_sqlite_file
-from copilot_ray.trials.description import describe_trial, env_params, trial_config_yaml
+from copilot_ray.trials.description import (
+    describe_trial,
+    env_params,
+    seed_config,
+    stacked_seeds,
+    trial_config_yaml,
+)
 
 
 def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str, Any]:
@@ -363,13 +371,17 @@ def result_metrics(result: Mapping[str, Any], rllib_timers: bool = False) -> dic
 
 
 class TrialRuns:
-    """One MLflow child run per Tune trial under the sweep's parent run (see the table above).
+    """One MLflow child run per Tune trial under the sweep's parent run (see the table above); a stacked
+    trial (spec `seeds_per_trial` > 1) gets one run per seed, each tagged and logged as a one-seed trial's
+    run would be (its seed's metrics from the result's `keys.SEED_RESULTS`), and a seed that failed ends
+    FAILED on its own with its error (`keys.SEED_ERRORS`) while the others go on.
 
     ``copilot_ray.tune_runtime.MlflowSweepCallback`` calls it from Tune's hooks; ``trial`` is a Tune
     trial (``trial_id``, ``config``, ``status``, ``last_result``, ``checkpoint``, ``error_file``, ...).
-    Stateless across a resume: a trial's run is found again by its ``copilot.trial_id`` tag, and metric
-    rows whose step (env steps) is <= the largest step already logged for that run are skipped (a trial
-    restored from a checkpoint replays the iterations after it). Pickled without its caches.
+    Stateless across a resume: a trial's run is found again by its ``copilot.trial_id`` tag (and its
+    seed's, in a stack), and metric rows whose step (env steps) is <= the largest step already logged for
+    that run are skipped (a trial restored from a checkpoint replays the iterations after it). Pickled
+    without its caches.
     """
 
     _STATE = ("tracking_uri", "experiment_id", "sweep", "parent_run_id", "rllib_timers")
@@ -391,8 +403,9 @@ class TrialRuns:
 
     def _reset(self) -> None:
         self._client_obj = None
-        self._runs: dict[str, str] = {}  # tune trial id -> mlflow run id
+        self._runs: dict[tuple[str, int | None], str] = {}  # (tune trial id, stacked seed) -> mlflow run id
         self._last_step: dict[str, int] = {}  # mlflow run id -> largest step logged
+        self._failed: set[str] = set()  # runs of stacked seeds already ended FAILED
         self._commit: str | None = None
 
     def __getstate__(self):
@@ -409,21 +422,33 @@ class TrialRuns:
         return self._client_obj
 
     # ---------------------------------------------------------------------- the run of a trial
-    def run_id(self, trial) -> str:
-        """The trial's run: cached, else found again (resume), else created."""
-        run_id = self._runs.get(trial.trial_id)
+    @staticmethod
+    def seeds_of(trial) -> list[int | None]:
+        """The seeds a trial has a run for: a stacked trial's, else [None] (its one run)."""
+        return stacked_seeds(trial.config or {}) or [None]
+
+    def open(self, trial) -> None:
+        """The trial's run(s), created or found again (a stacked trial: one per seed)."""
+        for seed in self.seeds_of(trial):
+            self.run_id(trial, seed)
+
+    def run_id(self, trial, seed: int | None = None) -> str:
+        """The trial's run (`seed`: a stacked seed's): cached, else found again (resume), else created."""
+        key = (trial.trial_id, seed)
+        run_id = self._runs.get(key)
         if run_id is None:
-            run_id = self._find_run(trial)
+            run_id = self._find_run(trial, seed)
             if run_id is None:
-                run_id = self._create_run(trial)
+                run_id = self._create_run(trial, seed)
                 self._last_step[run_id] = -1
-            self._runs[trial.trial_id] = run_id
+            self._runs[key] = run_id
         return run_id
 
-    def _find_run(self, trial) -> str | None:
-        found = find_runs(
-            self.client, self.experiment_id, {PARENT_TAG: self.parent_run_id, TRIAL_ID_TAG: trial.trial_id}
-        )
+    def _find_run(self, trial, seed: int | None) -> str | None:
+        tags = {PARENT_TAG: self.parent_run_id, TRIAL_ID_TAG: trial.trial_id}
+        if seed is not None:
+            tags[SEED_TAG] = str(seed)
+        found = find_runs(self.client, self.experiment_id, tags)
         if not found:
             return None
         run_id = found[0].info.run_id
@@ -433,8 +458,8 @@ class TrialRuns:
         self._last_step[run_id] = max((m.step for m in history), default=-1)
         return run_id
 
-    def _create_run(self, trial) -> str:
-        info = describe_trial(trial.config)
+    def _create_run(self, trial, seed: int | None) -> str:
+        info = describe_trial(trial.config if seed is None else seed_config(trial.config, seed))
         # what the row says in MLflow's table: the configuration and the seed
         name = f"{configuration(info['algorithm'], info['config_key'])} seed {info['seed']}"
         run = self.client.create_run(self.experiment_id, run_name=name, tags=self._tags(trial, info))
@@ -473,12 +498,27 @@ class TrialRuns:
 
     # ---------------------------------------------------------------------- what happens to it
     def log_result(self, trial, result: Mapping[str, Any]) -> None:
-        """One metric row at step = env steps, unless a run restored from a checkpoint logged it already."""
-        run_id = self.run_id(trial)
-        step = int(result_value(result, ENV_STEPS, 0))
+        """One metric row at step = env steps, unless a run restored from a checkpoint logged it already;
+        a stacked trial: a row per seed, and a seed that failed ends FAILED now."""
+        per_seed = result.get(SEED_RESULTS)
+        if per_seed is None:
+            step = int(result_value(result, ENV_STEPS, 0))
+            self._log_row(self.run_id(trial), result_metrics(result, self.rllib_timers), step)
+            return
+        for seed, metrics in sorted(per_seed.items()):
+            kept = {k: v for k, v in metrics.items() if self.rllib_timers or not is_rllib_internal(k)}
+            self._log_row(self.run_id(trial, int(seed)), kept, int(metrics.get(ENV_STEPS, 0)))
+        for seed, error in sorted((result.get(SEED_ERRORS) or {}).items()):
+            run_id = self.run_id(trial, int(seed))
+            if run_id not in self._failed:
+                self.client.set_tag(run_id, ERROR_TAG, str(error)[:300] or "(no message)")
+                self.client.set_terminated(run_id, status="FAILED")
+                self._failed.add(run_id)
+
+    def _log_row(self, run_id: str, metrics: Mapping[str, float], step: int) -> None:
         if step <= self._last_step.get(run_id, -1):
             return
-        self._log_metrics(run_id, result_metrics(result, self.rllib_timers), step)
+        self._log_metrics(run_id, metrics, step)
         self._last_step[run_id] = step
 
     def _log_metrics(self, run_id: str, metrics: Mapping[str, float], step: int) -> None:
@@ -491,19 +531,25 @@ class TrialRuns:
             self.client.log_batch(run_id, metrics=items[i : i + 500])
 
     def finish(self, trial, status: str) -> None:
-        """The final checkpoint, the sub-goal trees (and the error) as artifacts; the run ends ``status``."""
-        run_id = self.run_id(trial)
-        try:
-            self._log_final_artifacts(run_id, trial, status)
-        finally:
-            self.client.set_terminated(run_id, status=status)
-            self._runs.pop(trial.trial_id, None)
+        """The final checkpoint, the sub-goal trees (and the error) as artifacts; the run(s) end
+        ``status`` (a stacked seed that failed stays FAILED)."""
+        failed = {str(s) for s in ((trial.last_result or {}).get(SEED_ERRORS) or {})}
+        for seed in self.seeds_of(trial):
+            run_id = self.run_id(trial, seed)
+            own = "FAILED" if str(seed) in failed else status
+            try:
+                self._log_final_artifacts(run_id, trial, own, seed)
+            finally:
+                self.client.set_terminated(run_id, status=own)
+                self._runs.pop((trial.trial_id, seed), None)
 
-    def _log_final_artifacts(self, run_id: str, trial, status: str) -> None:
+    def _log_final_artifacts(self, run_id: str, trial, status: str, seed: int | None) -> None:
         checkpoint = trial.checkpoint
         if checkpoint is not None and Path(checkpoint.path).is_dir():
-            self.client.log_artifacts(run_id, checkpoint.path, CHECKPOINT_ARTIFACT)
-        for tree_dir in _tree_dirs(trial):
+            path = Path(checkpoint.path) if seed is None else Path(checkpoint.path) / f"seed_{seed}"
+            if path.is_dir():
+                self.client.log_artifacts(run_id, str(path), CHECKPOINT_ARTIFACT)
+        for tree_dir in _tree_dirs(trial, seed):
             self.client.log_artifacts(run_id, str(tree_dir), TREES_DIR)
             break
         error_file = getattr(trial, "error_file", None)
@@ -514,10 +560,13 @@ class TrialRuns:
     def kill_unfinished(self, trials) -> None:
         """Interrupted (Ctrl-C / SIGTERM): runs of unfinished trials wait, KILLED, for --resume."""
         for trial in trials:
-            run_id = self._runs.get(trial.trial_id)
             done = trial.status == "ERROR" or (trial.last_result or {}).get("done")
-            if run_id is not None and not done:  # (cleanup marks stopped trials TERMINATED)
-                self.client.set_terminated(run_id, status="KILLED")
+            if done:  # (cleanup marks stopped trials TERMINATED)
+                continue
+            for seed in self.seeds_of(trial):
+                run_id = self._runs.get((trial.trial_id, seed))
+                if run_id is not None and run_id not in self._failed:
+                    self.client.set_terminated(run_id, status="KILLED")
 
 
 def error_reason(error_file: str | None, limit: int = 300) -> str:
@@ -529,8 +578,9 @@ def error_reason(error_file: str | None, limit: int = 300) -> str:
     return lines[-1][:limit] if lines else ""
 
 
-def _tree_dirs(trial) -> list[Path]:
-    """Where a trial's ``copilot_trees/`` can be: the synced trial dir, or the local working dir.
+def _tree_dirs(trial, seed: int | None = None) -> list[Path]:
+    """Where a trial's ``copilot_trees/`` can be: the synced trial dir, or the local working dir (a
+    stacked seed's: their ``seed_<s>/`` folder).
 
     ``Algorithm.logdir`` of a Tune trial is Tune's per-trial *working directory* under the Ray session
     (``/tmp/ray/session_*/artifacts/<time>/<experiment>/working_dirs/<trial>``); the sweep syncs it into
@@ -542,6 +592,8 @@ def _tree_dirs(trial) -> list[Path]:
         candidates.append(trial.storage.trial_working_directory)
     except Exception:  # noqa: BLE001 - no storage context: nothing to look at
         pass
+    if seed is not None:
+        candidates = [None if base is None else str(Path(base) / f"seed_{seed}") for base in candidates]
     for base in candidates:
         if base and (Path(base) / TREES_DIR).is_dir() and any((Path(base) / TREES_DIR).iterdir()):
             out.append(Path(base) / TREES_DIR)

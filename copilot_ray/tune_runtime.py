@@ -22,6 +22,7 @@ from copilot_ray.keys import (
     EVAL_FRESH,
     PATH_LENGTH_VS_RRT,
     PATH_SUCCESS,
+    SEED_ERRORS,
     SEED_PARAM,
     SPEC_PATH_KEY,
     SUCCESS_METRICS,
@@ -43,7 +44,12 @@ from copilot_ray.trials.description import describe_trial, load_spec_cached
 
 
 def trainable(spec) -> type:
-    """The trial class of the spec's algorithm (the registry's third entry)."""
+    """The trial class of the spec's algorithm (the registry's third entry), or the stacked-seeds trial
+    for `seeds_per_trial` > 1."""
+    if spec.seeds_per_trial > 1:
+        from copilot_ray.trials.seed_stack_trial import SeedStackTrial
+
+        return SeedStackTrial
     return get_algorithm(spec.algorithm).trial_class()
 
 
@@ -54,12 +60,13 @@ class ProgressPrinter(Callback):
 
     def __init__(self):
         self._info: dict[str, dict[str, Any]] = {}
+        self._stopped: set[tuple[str, str]] = set()  # (trial, seed) of stacked seeds said to have stopped
 
     def __getstate__(self):
         return {}
 
     def __setstate__(self, state):
-        self._info = {}
+        self._info, self._stopped = {}, set()
 
     def _head(self, trial) -> str:
         info = self._info.get(trial.trial_id)
@@ -108,6 +115,10 @@ class ProgressPrinter(Callback):
             f"{self._head(trial)}  iter {result.get(TRAINING_ITERATION, 0):4d}  "
             f"env_steps {int(steps):8d}  {figures}  {result.get(TIME_TOTAL_S, 0.0):7.1f}s"
         )
+        for seed, error in (result.get(SEED_ERRORS) or {}).items():
+            if (trial.trial_id, seed) not in self._stopped:
+                self._stopped.add((trial.trial_id, seed))
+                _say(f"{self._head(trial)}  seed {seed} stopped ({error}); the other seeds go on")
 
     def on_trial_complete(self, iteration, trials, trial, **info):
         _say(f"{self._head(trial)}  done")
@@ -144,7 +155,7 @@ class MlflowSweepCallback(Callback):
         self.runs = TrialRuns(tracking_uri, experiment_id, sweep, parent_run_id, rllib_timers)
 
     def on_trial_start(self, iteration, trials, trial, **info):
-        self.runs.run_id(trial)
+        self.runs.open(trial)
 
     def on_trial_result(self, iteration, trials, trial, result, **info):
         self.runs.log_result(trial, result)

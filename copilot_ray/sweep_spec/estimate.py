@@ -153,7 +153,8 @@ def wall_seconds(spec: SweepSpec) -> float | None:
     found = measured_rate(spec.algorithm, concurrent, gpu=_uses_gpu(spec))
     if found is None:
         return None
-    return math.ceil(len(spec.trial_plan()) / concurrent) * budget / found[0]
+    # A stacked trial's seeds take turns at the env steps: its seeds' budgets one after another.
+    return math.ceil(len(spec.trial_plan()) / concurrent) * budget * spec.seeds_per_trial / found[0]
 
 
 def total_wall_time_line(specs: list[SweepSpec]) -> str:
@@ -182,11 +183,17 @@ def wall_time_line(spec: SweepSpec) -> str:
         return f"  wall time: not estimated (no measured env-steps/s for {spec.algorithm} in {THROUGHPUT_FILE.name})"
     rate, source = found
     waves = math.ceil(len(spec.trial_plan()) / concurrent)
-    seconds = waves * budget / rate
+    stacked = spec.seeds_per_trial
+    seconds = waves * budget * stacked / rate
+    per_trial = (
+        f"{budget:,} env steps" if stacked == 1 else f"{stacked} seeds x {budget:,} env steps in turns"
+    )
     return (
-        f"  wall time: about {duration_text(seconds)} ({waves} wave(s) x {budget:,} env steps at ~{rate:.0f} env "
+        f"  wall time: about {duration_text(seconds)} ({waves} wave(s) x {per_trial} at ~{rate:.0f} env "
         f"steps/s per trial{' side by side' if concurrent > 1 else ''}; measured on maze-point, other envs "
-        f"differ; {source})"
+        f"differ; {source}"
+        + ("; a stack's speed-up on a GPU is not measured yet, so not counted" if stacked > 1 else "")
+        + ")"
     )
 
 

@@ -23,6 +23,7 @@ from copilot_ray.registry import (
     algorithm_names,
     get_algorithm,
     metric_known,
+    stackable_algorithms,
 )
 from copilot_ray.settings import Setting
 from copilot_ray.settings import problems as setting_problems
@@ -74,6 +75,9 @@ class SweepSpec(_Model):
     search: dict[str, ParamSearch] = Field(default_factory=dict)
     best_of: BestOfSpec | None = None
     seeds: list[int] = Field(default_factory=lambda: [0])
+    # Seeds trained together in one trial, their SAC updates stacked (consecutive groups of `seeds`);
+    # 1: a trial per seed (copilot_ray.trials.seed_stack_trial).
+    seeds_per_trial: int = 1
     searcher: SearcherSpec = Field(default_factory=SearcherSpec)
     scheduler: SchedulerSpec | None = None
     stop: StopSpec
@@ -129,6 +133,7 @@ class SweepSpec(_Model):
         issues += self._check_variants(entry.settings)
         issues += self._check_search(entry.settings)
         issues += self._check_seeds()
+        issues += self._check_seed_stacking(entry)
         issues += self._check_searcher(entry)
         issues += self._check_best_of(entry.settings)
         if self.resources.gpus_per_trial > 0 and not entry.gpu_learner:
@@ -291,6 +296,49 @@ class SweepSpec(_Model):
             )
         return issues
 
+    def _check_seed_stacking(self, entry: AlgorithmEntry) -> list[Issue]:
+        """`seeds_per_trial`: groups `seeds` evenly, under a grid, for an agent whose update stacks."""
+        n = self.seeds_per_trial
+        if n == 1:
+            return []
+        where = "seeds_per_trial"
+        if n < 1:
+            return [Issue(where, n, "must be >= 1 (1: a trial per seed)")]
+        if len(self.seeds) % n:
+            return [
+                Issue(where, n, f"must divide the {len(self.seeds)} seeds {self.seeds} into equal groups")
+            ]
+        if not entry.seed_stack:
+            return [
+                Issue(
+                    where,
+                    n,
+                    f"{entry.name!r} has no stacked update (SEED_STACK in its settings module); "
+                    "stackable: " + ", ".join(stackable_algorithms()),
+                )
+            ]
+        if self.searcher.type != "grid":
+            return [
+                Issue(
+                    where, n, "needs searcher.type grid (a search runs one study per seed, a trial per seed)"
+                )
+            ]
+        if self.resources.num_env_runners != 0:
+            return [
+                Issue(
+                    where,
+                    n,
+                    f"needs resources.num_env_runners 0, got {self.resources.num_env_runners} (the stacked "
+                    "seeds step their envs in the trial's own process)",
+                )
+            ]
+        return []
+
+    def seed_groups(self) -> list[list[int]]:
+        """The seeds of each trial: one each, or consecutive groups of `seeds_per_trial`."""
+        n = self.seeds_per_trial
+        return [list(self.seeds[i : i + n]) for i in range(0, len(self.seeds), n)]
+
     def _check_searcher(self, entry: AlgorithmEntry) -> list[Issue]:
         issues = []
         s = self.searcher
@@ -441,6 +489,8 @@ class SweepSpec(_Model):
         applies it). optuna: ``num_samples`` x seeds placeholders ``{"sample": i, "seed": s}``: the values
         are drawn by Optuna while the sweep runs (one study per seed).
         """
+        if self.searcher.type == "grid" and self.seeds_per_trial > 1:
+            return [{**point, "seeds": group} for point in self.grid_points() for group in self.seed_groups()]
         if self.searcher.type == "grid":
             return [{**point, "seed": seed} for point in self.grid_points() for seed in self.seeds]
         return [
@@ -452,7 +502,9 @@ class SweepSpec(_Model):
         waves = math.ceil(n / self.resources.max_concurrent_trials)
         return {
             "trials": n,
-            "env_steps": None if self.stop.env_steps is None else n * self.stop.env_steps,
+            "env_steps": None
+            if self.stop.env_steps is None
+            else n * self.seeds_per_trial * self.stop.env_steps,
             "iterations": None if self.stop.iterations is None else n * self.stop.iterations,
             "waves": waves,
             "cpus": self.resources.max_concurrent_trials * (self.resources.cpus_per_trial or 1),

@@ -70,10 +70,17 @@ def _what_runs(spec: SweepSpec) -> list[str]:
             + ([keys.ENV_PARAM] if len(spec.env.ids) > 1 else [])
             + list(spec.search)
         )
+        if spec.seeds_per_trial > 1:  # a trial per group: "0, 1, 2 | 3, 4, 5"
+            seeds = " | ".join(", ".join(str(s) for s in group) for group in spec.seed_groups())
         header = ["#", *columns, "seeds"]
         rows = [[str(i + 1), *(_cell(p[k]) for k in columns), seeds] for i, p in enumerate(points)]
         widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
         lines.append(f"  grid: {len(points)} configuration(s) x {len(spec.seeds)} seed(s)")
+        if spec.seeds_per_trial > 1:
+            lines.append(
+                f"  {spec.seeds_per_trial} seeds per trial: each trial trains its seeds together, their SAC "
+                "updates stacked into one (each seed still its own MLflow run)"
+            )
         for row in [header, *rows]:
             lines.append(
                 "    " + "  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip()

@@ -26,7 +26,8 @@ def tune_stop(spec: SweepSpec) -> dict[str, int]:
 def to_tune_search_space(spec: SweepSpec) -> dict[str, Any]:
     """The flat Tune ``param_space`` of the searched keys (dotted names; imports ray.tune).
 
-    grid -> ``tune.grid_search`` (plus ``seed: tune.grid_search(seeds)``); int -> ``randint`` /
+    grid -> ``tune.grid_search`` (plus ``seed: tune.grid_search(seeds)``, or ``_seeds`` over the seed
+    groups with ``seeds_per_trial`` > 1); int -> ``randint`` /
     ``lograndint`` / ``qrandint`` (``high`` inclusive, as in the spec); float -> ``uniform`` /
     ``loguniform`` / ``quniform``; categorical -> ``choice``. Under an optuna searcher the seed is not
     searched (one study per seed: add ``"seed": seed`` per Tuner). Conditional spaces (``when``) cannot be
@@ -62,7 +63,9 @@ def to_tune_search_space(spec: SweepSpec) -> dict[str, Any]:
         space[keys.VARIANT_PARAM] = tune.grid_search(list(spec.variants))
     if len(spec.env.ids) > 1:
         space[keys.ENV_PARAM] = tune.grid_search(spec.env.ids)
-    if spec.searcher.type == "grid":
+    if spec.searcher.type == "grid" and spec.seeds_per_trial > 1:
+        space[keys.SEEDS_KEY] = tune.grid_search(spec.seed_groups())  # a stacked trial's seeds
+    elif spec.searcher.type == "grid":
         space[keys.SEED_PARAM] = tune.grid_search(list(spec.seeds))
     return space
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from copilot_ray.keys import ENV_PARAM, SEED_PARAM, SPEC_PATH_KEY, VARIANT_PARAM
+from copilot_ray.keys import ENV_PARAM, SEED_PARAM, SEEDS_KEY, SPEC_PATH_KEY, VARIANT_PARAM
 from copilot_ray.registry import get_algorithm
 from copilot_ray.sweep_spec import build_algorithm_config, load_spec
 
@@ -36,6 +36,19 @@ def algorithm_config(config: Mapping[str, Any]) -> Any:
     """The algorithm config of a sweep trial's flat Tune config (spec path + searched values + seed)."""
     spec = load_spec_cached(str(config[SPEC_PATH_KEY]))
     return build_algorithm_config(trial_flat(config), spec)
+
+
+def stacked_seeds(config: Mapping[str, Any]) -> list[int] | None:
+    """The seeds of a stacked trial's Tune config (spec `seeds_per_trial` > 1), None for a one-seed trial."""
+    seeds = config.get(SEEDS_KEY)
+    return None if seeds is None else [int(s) for s in seeds]
+
+
+def seed_config(config: Mapping[str, Any], seed: int) -> dict[str, Any]:
+    """A stacked trial's Tune config as seed `seed`'s one-seed trial config."""
+    out = {k: v for k, v in config.items() if k != SEEDS_KEY}
+    out[SEED_PARAM] = int(seed)
+    return out
 
 
 def trial_flat(config: Mapping[str, Any]) -> dict[str, Any]:
@@ -80,7 +93,9 @@ def describe_trial(config: Mapping[str, Any]) -> dict[str, Any]:
     flat = trial_flat(config)
     algo_config = build_algorithm_config(flat, spec)
     merged = spec.merged(flat)
-    seed = flat.get(SEED_PARAM, spec.seeds[0])
+    seeds = stacked_seeds(config)
+    # (a stacked trial's progress lines name all its seeds: "0+1+2")
+    seed = "+".join(map(str, seeds)) if seeds else flat.get(SEED_PARAM, spec.seeds[0])
     effective = effective_settings(algo_config, settings)
     return {
         "spec": spec,

@@ -445,6 +445,8 @@ LABELS = {"K": "tree_depth", "b": "repetitions", "alpha_schedule": "alpha_schedu
 
 # An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
 GPU_LEARNER = True
+# Seeds of one configuration can share one trial and one stacked update (a spec's seeds_per_trial).
+SEED_STACK = True
 
 METRICS: tuple[str, ...] = (
     *keys.TREE_AGENT_EVAL_METRICS,  # validation figures for searchers, test figures reported

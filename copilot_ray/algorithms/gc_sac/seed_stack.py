@@ -355,24 +355,40 @@ class StackedSACStep:
         for g, g_state in zip(self.generators or [], state.get("generators") or [], strict=True):
             g.set_state(g_state)
 
-    def _noise(self, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Standard-normal noise [N, B, A] for the current and the next actions."""
+    def _noise(
+        self, like: torch.Tensor, drawing: Sequence[bool] | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Standard-normal noise [N, B, A] for the current and the next actions; with per-seed
+        generators, only the seeds `drawing` (host-side, default all) draw (the others get zeros and
+        their streams stay where they are)."""
         if self.generators is None:
             return torch.randn_like(like), torch.randn_like(like)
+        drawing = [True] * len(self.generators) if drawing is None else list(drawing)
         # Seed i's two draws in its one-seed order: current actions, then next actions.
-        draws = [[torch.empty_like(like[0]).normal_(generator=g) for _ in range(2)] for g in self.generators]
+        draws = [
+            [
+                torch.empty_like(like[0]).normal_(generator=g) if draw else torch.zeros_like(like[0])
+                for _ in range(2)
+            ]
+            for g, draw in zip(self.generators, drawing, strict=True)
+        ]
         return torch.stack([d[0] for d in draws]), torch.stack([d[1] for d in draws])
 
     def step(
-        self, batch: Mapping[str, torch.Tensor], active: torch.Tensor | None = None
+        self,
+        batch: Mapping[str, torch.Tensor],
+        active: torch.Tensor | None = None,
+        drawing: Sequence[bool] | None = None,
     ) -> dict[str, torch.Tensor]:
         """One gradient step for every seed; `batch` columns are [N, B, ...]. `active` ([N] bool, default
         all): the seeds that take this step; the others keep everything, as a skipped seed does, but are
-        not counted as skipped (a seed that owes fewer updates than the stack runs). Returns each loss
-        statistic, `total_loss` and `finite` as [N] device tensors."""
+        not counted as skipped (a seed that owes fewer updates than the stack runs). `drawing` (host
+        bools, with per-seed generators): the seeds that draw noise, so an inactive seed's stream does
+        not move (pass the host twin of `active`). Returns each loss statistic, `total_loss` and
+        `finite` as [N] device tensors."""
         self.agents.flat.grad = None
         actions = batch[Columns.ACTIONS]
-        noise, noise_next = self._noise(actions)
+        noise, noise_next = self._noise(actions, drawing)
         fwd_out = self.agents.forward_train(batch, noise, noise_next)
         loss_batch = {k: batch[k] for k in LOSS_COLUMNS if k in batch}
 

@@ -75,6 +75,7 @@ SETTINGS: dict[str, Setting] = {
 PRIVILEGES = (COLLISION_CHECKS,)
 LABELS = {"K": "tree_depth", "b": "repetitions"}
 GPU_LEARNER = True
+SEED_STACK = True  # the agent's stacked update, as CO-PILOT's
 
 METRICS: tuple[str, ...] = (
     *keys.TREE_AGENT_EVAL_METRICS,  # validation figures for searchers, test figures reported

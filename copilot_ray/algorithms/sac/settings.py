@@ -245,6 +245,8 @@ LEARNER_SEARCH_SPACE: dict[str, dict] = {
 SEARCH_SPACE: dict[str, dict] = dict(LEARNER_SEARCH_SPACE)
 # An RLlib learner: on the trial's GPU share when the spec asks for one (resources.gpus_per_trial).
 GPU_LEARNER = True
+# Seeds of one configuration can share one trial and one stacked update (a spec's seeds_per_trial).
+SEED_STACK = True
 
 # What a run logs that a sweep may optimise or stop on.
 METRICS: tuple[str, ...] = (

@@ -1,0 +1,183 @@
+"""The SAC updates of N seeds' agents (one `GoalSAC` each, in one process) as one stacked update.
+
+`StackedAgentUpdates(algos)` stacks the seeds' learner modules (`gc_sac.seed_stack.StackedSAC`) and
+their replay (`gc_sac.seed_replay.StackedTransitionBuffer`), and gives each algorithm an updater view,
+`SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the seed's rows of the
+stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep` rendezvous. When every
+seed of the stack is parked (or done with its iteration), `run(requests)` runs max(n) stacked steps,
+seed i active in its first n_i, then writes every seed's weights back into its learner's module (the
+env runners sync from there, as after any update) and logs each seed's figures on its own learner.
+
+Random streams: each seed samples its replay rows and its SAC noise from two generators of its own,
+seeded from its seed, and an inactive seed draws nothing; so seed i's updates in a stack of any size are
+its updates in a stack of one (tested). They are not the draws of a one-seed trial's fused update,
+which samples from the device's default generator.
+
+What the stacked path refuses (named, before anything runs): the numpy or stock update paths
+(`fused_update=False`, `fast_learner=False`), HER's relabelling buffer, learning-rate schedules,
+gradient clipping, and algorithms whose configurations differ in anything but the seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from ray.rllib.core import DEFAULT_MODULE_ID
+
+from copilot_ray.algorithms.gc_sac.fused_step import FINITE
+from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
+from copilot_ray.algorithms.gc_sac.seed_replay import StackedTransitionBuffer, gather_rows
+from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
+from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
+
+# The streams a seed's stacked updates draw from: SeedSequence([seed, STREAM]) (distinct from the
+# algorithm's own numpy and torch streams, which it seeds with its seed alone).
+SAMPLE_STREAM, NOISE_STREAM = 1_001, 1_002
+
+
+def stream_generator(seed: int, stream: int, device: torch.device) -> torch.Generator:
+    """A torch generator on `device` for seed `seed`'s stream `stream`."""
+    value = int(np.random.SeedSequence([int(seed), int(stream)]).generate_state(1, np.uint64)[0] >> 1)
+    return torch.Generator(device=device).manual_seed(value)
+
+
+def stacking_problems(algos: Sequence[Any]) -> list[str]:
+    """Why these algorithms' agents cannot share one stacked update ([] when they can)."""
+    problems = []
+    first = algos[0].config
+    for name, ok in (
+        ("fast_learner", bool(first.fast_learner)),
+        ("learner_config_dict['gc_sac']['fused_update']", fused_update(first)),
+        (
+            "her.n_sampled_goal (HER's relabelling buffer is not stacked yet)",
+            not first.uses_hindsight_buffer(),
+        ),
+        ("grad_clip", first.grad_clip is None),
+        ("twin_q", bool(first.twin_q)),
+    ):
+        if not ok:
+            problems.append(f"{name}: the stacked update needs the default (got a value it cannot stack)")
+    for lr_name in ("actor_lr", "critic_lr", "alpha_lr"):
+        if not isinstance(getattr(first, lr_name), int | float):
+            problems.append(f"{lr_name}={getattr(first, lr_name)!r}: the stacked update takes constant rates")
+    base = first.setting_values()
+    for algo in algos[1:]:
+        other = algo.config.setting_values()
+        differ = sorted(k for k in base if repr(base[k]) != repr(other.get(k)))
+        if differ:
+            problems.append(f"seed {algo.config.seed}: its configuration differs in {differ[:5]}")
+    return problems
+
+
+class StackedAgentUpdates:
+    """N seeds' agent updates as one (module docstring). `algos`: built `GoalSAC`s, one per seed."""
+
+    def __init__(self, algos: Sequence[Any]):
+        problems = stacking_problems(algos)
+        if problems:
+            raise ValueError("these seeds' agents cannot be stacked: " + "; ".join(problems))
+        self.algos = list(algos)
+        self.seeds = [int(a.config.seed or 0) for a in algos]
+        self.learners = [local_learner(a.config, a.learner_group) for a in algos]
+        self.device = self.learners[0].device
+        modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in self.learners]
+        self.modules = modules
+        self.log_alphas = [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in self.learners]
+        self.agents = StackedSAC.from_modules(modules, self.log_alphas)
+        cfg = algos[0].config
+        module_cfg = self.learners[0].config.get_config_for_module(DEFAULT_MODULE_ID)
+        self.step = StackedSACStep(
+            self.agents,
+            {"qf": module_cfg.critic_lr, "policy": module_cfg.actor_lr, "alpha": module_cfg.alpha_lr},
+            self.learners[0].target_entropy[DEFAULT_MODULE_ID],
+            gamma=module_cfg.gamma,
+            tau=module_cfg.tau,
+            critic_loss=self.learners[0]._gc_settings["critic_loss"],
+            generators=[stream_generator(s, NOISE_STREAM, self.device) for s in self.seeds],
+        )
+        self.samplers = [stream_generator(s, SAMPLE_STREAM, self.device) for s in self.seeds]
+        obs_dim = int(np.prod(modules[0].observation_space.shape))
+        action_dim = int(np.prod(modules[0].action_space.shape))
+        self.replay = StackedTransitionBuffer(
+            len(algos), replay_capacity(cfg), self.device, obs_dim, action_dim
+        )
+        self.batch_size = int(cfg.train_batch_size_per_learner)
+
+    def view(self, index: int, lockstep) -> SeedUpdater:
+        """Seed `index`'s updater (what its algorithm's `agent_updater` becomes)."""
+        return SeedUpdater(self, index, lockstep)
+
+    # ------------------------------------------------------------------ one round
+    def run(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
+        """{seed index: (gradient steps, timesteps)} -> {seed index: [its learner's results]}."""
+        owed = [int(requests[i][0]) if i in requests else 0 for i in range(len(self.algos))]
+        last: dict[int, dict[str, torch.Tensor]] = {}
+        for t in range(max(owed)):
+            drawing = [n > t for n in owed]
+            active = torch.tensor(drawing, device=self.device)
+            stats = self.step.step(self._sample(drawing), active=active, drawing=drawing)
+            for i, n in enumerate(owed):
+                if n == t + 1:  # seed i's last step of this round: its figures
+                    last[i] = {k: v[i].detach().clone() for k, v in stats.items() if k != FINITE}
+        self.agents.write_to(self.modules, self.log_alphas)
+        skipped = self.step.skipped.cpu().tolist()
+        out = {}
+        for i, (n, timesteps) in requests.items():
+            figures = {k: float(v) for k, v in last[i].items()} if i in last else {}
+            results = self.learners[i].log_outside_update(figures, skipped[i], n, self.batch_size, timesteps)
+            out[i] = [results] if figures else []
+        return out
+
+    def _sample(self, drawing: Sequence[bool]) -> dict[str, torch.Tensor]:
+        """A [N, B] batch: seed i's rows drawn from its own generator where `drawing[i]`, row 0 else."""
+        rows = []
+        for i, draw in enumerate(drawing):
+            size = len(self.replay.seeds[i])
+            if draw and size > 0:
+                u = torch.rand(
+                    self.batch_size, generator=self.samplers[i], dtype=torch.float64, device=self.device
+                )
+                rows.append(torch.clamp((u * size).long(), max=size - 1))
+            else:
+                rows.append(torch.zeros(self.batch_size, dtype=torch.int64, device=self.device))
+        index = torch.stack(rows)
+        return {key: gather_rows(self.replay.storage[key], index) for key in TRAIN_COLUMNS}
+
+    # ------------------------------------------------------------------ checkpoints
+    def get_state(self) -> dict[str, Any]:
+        """Every seed's parameters, optimizer state and noise stream, and its sampling stream (each
+        seed's replay rows are in its algorithm's checkpoint, through its `SeedUpdater`)."""
+        return {"step": self.step.get_state(), "samplers": [g.get_state() for g in self.samplers]}
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restores `get_state`'s snapshot and writes the weights into the learners' modules."""
+        self.step.set_state(state["step"])
+        for g, g_state in zip(self.samplers, state["samplers"], strict=True):
+            g.set_state(g_state)
+        self.agents.write_to(self.modules, self.log_alphas)
+
+
+class SeedUpdater:
+    """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface."""
+
+    def __init__(self, stack: StackedAgentUpdates, index: int, lockstep):
+        self.stack, self.index, self.lockstep = stack, int(index), lockstep
+        self.buffer = stack.replay.seeds[self.index]
+
+    def add(self, episodes) -> None:
+        self.buffer.add_episodes(episodes)
+
+    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
+        """Waits for the stack's next round and returns this seed's results ([] for no step)."""
+        if num_updates <= 0 or len(self.buffer) == 0:
+            return []
+        return self.lockstep.meet(self.index, (int(num_updates), dict(timesteps)))
+
+    def get_state(self) -> dict[str, Any]:
+        return {"buffer": self.buffer.get_state()}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.buffer.set_state(state["buffer"])

@@ -1,0 +1,141 @@
+"""N jobs (one per seed) run one at a time in a fixed order, meeting at rendezvous points: what lets the
+seeds of one stacked trial share one update (no Ray, no RLlib).
+
+Each job runs in its own thread, but only the job holding the baton runs: the coordinator hands it to
+job 0, 1, ..., N-1 in turn, and a job gives it back when it reaches a rendezvous (`meet(i, request)`),
+finishes or raises. Once every unfinished job is parked at a rendezvous, the coordinator calls
+`on_round(requests)` once for all of them (the stacked SAC update) and hands each job its answer on its
+next turn. So the interleaving is the same on every run, whatever the threads' timing.
+
+Global random state is per job: torch's CPU generator and numpy's legacy global state are saved when a
+job gives the baton back and restored when it takes it again (each job starts from the state it was
+built with, `states[i]`). A job therefore draws exactly what it would draw running alone, whatever the
+other jobs draw in between: seed i of a stack acts as seed i alone.
+
+A job that raises is finished with its exception (`Outcome.error`); the others go on.
+
+Why turns rather than parallel threads: a CPU has no parallelism to gain here (the update is one
+stacked call, and the env stepping is Python under one lock), and turns make a stack reproducible.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+
+@dataclass
+class Outcome:
+    """What one job ended with: its return value, or the exception it raised."""
+
+    value: Any = None
+    error: BaseException | None = None
+
+
+@dataclass
+class RandomState:
+    """The process-global random state a job draws from (torch's CPU generator, numpy's legacy one)."""
+
+    torch_state: torch.Tensor
+    numpy_state: tuple
+
+    @classmethod
+    def capture(cls) -> RandomState:
+        return cls(torch.get_rng_state(), np.random.get_state())
+
+    def restore(self) -> None:
+        torch.set_rng_state(self.torch_state)
+        np.random.set_state(self.numpy_state)
+
+
+class Lockstep:
+    """Runs jobs in turn with rendezvous points (module docstring).
+
+    `states`: each job's global random state to start from (kept across `run` calls: a job's next
+    run continues its own streams). `on_round(requests)`: {job: request} of every job parked at a
+    rendezvous -> {job: answer}; it runs on the coordinator's thread while every job is parked, so it
+    must draw from generators of its own, not the global ones. If it raises, every parked job raises
+    that error from `meet`."""
+
+    def __init__(
+        self, states: Sequence[RandomState], on_round: Callable[[Mapping[int, Any]], Mapping[int, Any]]
+    ):
+        self.states = list(states)
+        self.on_round = on_round
+        self._cond = threading.Condition()
+        self._turn: int | None = None  # the job holding the baton (None: the coordinator)
+        self._requests: dict[int, Any] = {}
+        self._answers: dict[int, Any] = {}
+
+    # ------------------------------------------------------------------ called by a job's thread
+    def meet(self, job: int, request: Any) -> Any:
+        """Parks job `job` at a rendezvous with `request` and returns its answer once the round ran."""
+        with self._cond:
+            self._requests[job] = request
+            self._give_back(job)
+            self._cond.wait_for(lambda: self._turn == job)
+            self.states[job].restore()
+            answer = self._answers.pop(job)
+        if isinstance(answer, Exception):
+            raise answer
+        return answer
+
+    def _give_back(self, job: int) -> None:
+        self.states[job] = RandomState.capture()
+        self._turn = None
+        self._cond.notify_all()
+
+    # ------------------------------------------------------------------ the coordinator
+    def run(self, jobs: Mapping[int, Callable[[], Any]]) -> dict[int, Outcome]:
+        """Runs every job to its end, in turns; {job: Outcome}."""
+        outcomes: dict[int, Outcome] = {}
+        threads = []
+
+        def body(job: int, fn: Callable[[], Any]) -> None:
+            with self._cond:
+                self._cond.wait_for(lambda: self._turn == job)
+                self.states[job].restore()
+            outcome = Outcome()
+            try:
+                outcome.value = fn()
+            except BaseException as err:  # noqa: BLE001 - a job's failure is its outcome, not the trial's
+                outcome.error = err
+            with self._cond:
+                outcomes[job] = outcome
+                self._give_back(job)
+
+        for job, fn in sorted(jobs.items()):
+            thread = threading.Thread(target=body, args=(job, fn), name=f"lockstep-job-{job}", daemon=True)
+            thread.start()
+            threads.append(thread)
+        pending = sorted(jobs)  # the jobs to hand the baton to, in order, this pass
+        while pending:
+            for job in pending:
+                self._hand(job)
+            with self._cond:
+                requests = dict(sorted(self._requests.items()))
+                self._requests.clear()
+            if not requests:
+                break
+            try:
+                answers = dict(self.on_round(requests))
+            except Exception as err:  # noqa: BLE001 - handed to every parked job, which raises it
+                answers = dict.fromkeys(requests, err)
+            with self._cond:
+                self._answers.update({job: answers[job] for job in requests})
+            pending = sorted(requests)
+        for thread in threads:
+            thread.join()
+        return outcomes
+
+    def _hand(self, job: int) -> None:
+        """Gives job `job` the baton and waits until it is given back."""
+        with self._cond:
+            self._turn = job
+            self._cond.notify_all()
+            self._cond.wait_for(lambda: self._turn is None)

@@ -1,0 +1,179 @@
+"""SeedStackTrial: one Tune trial that trains several seeds of one configuration together (a spec's
+`seeds_per_trial`), their SAC updates stacked into one (`algorithms.sac.stacked_updates`).
+
+The trial's Tune config is a one-seed trial's with `_seeds: [s0, s1, ...]` in place of `seed`. It builds
+the algorithm's own trial class once per seed (its config with `seed: s`, its files under `seed_<s>/`),
+so each seed plans, traverses, evaluates and checkpoints exactly as a one-seed trial does; each
+iteration runs every seed's `train()` in turns (`trials.lockstep.Lockstep`), meeting for the stacked
+update.
+
+What it reports (`step`):
+* `keys.SEED_RESULTS`: {seed: that seed's metrics, as a one-seed trial logs them} (the MLflow callback
+  writes each seed as its own run), and `keys.SEED_ERRORS`: {seed: error} for seeds that failed;
+* at the top level, what a searcher or scheduler reads: the mean over the seeds still alive of every
+  metric, except the env steps, which are the fewest of any seed still running (a stop criterion on env
+  steps ends the trial once every seed reached it).
+
+A seed whose iteration raises (a non-finite planner, a crashed env) stops alone: its error is kept, its
+run ends FAILED, the others go on; the trial fails only when every seed has. A seed that reached the
+spec's stop criterion does not train further while the others catch up.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import pickle
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import ray
+from ray import tune
+
+from copilot_ray import keys
+from copilot_ray.registry import get_algorithm
+from copilot_ray.sweep_spec import tune_stop
+from copilot_ray.tracking import result_metrics
+from copilot_ray.trials.description import load_spec_cached, seed_config
+from copilot_ray.trials.lockstep import Lockstep, RandomState
+
+logger = logging.getLogger(__name__)
+_STATE_FILE = "seed_stack.pkl"
+
+
+def _seed_dir(base: str | Path, seed: int) -> Path:
+    return Path(base) / f"seed_{seed}"
+
+
+def _move_logdir(algo, logdir: Path) -> None:
+    """Points a seed's algorithm at its own folder of the trial's (its trees go there), dropping the
+    empty temporary folder a Trainable built outside Tune makes for itself."""
+    made = Path(algo.logdir)
+    algo._logdir = str(logdir)  # noqa: SLF001 - Trainable has no other way to set it outside Tune
+    if made != logdir and made.is_dir() and not any(made.iterdir()):
+        made.rmdir()
+
+
+def _unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        *parents, leaf = key.split("/")
+        node = out
+        for part in parents:
+            node = node.setdefault(part, {})
+        if isinstance(node, dict):
+            node[leaf] = value
+    return out
+
+
+def _reached(metrics: Mapping[str, float], stop: Mapping[str, int]) -> bool:
+    """Whether a seed's metrics meet any of the stop criteria (Tune's rule: either one ends a trial)."""
+    return any(metrics.get(key, -math.inf) >= value for key, value in stop.items())
+
+
+class SeedStackTrial(tune.Trainable):
+    """Several seeds of one configuration in one trial (module docstring)."""
+
+    @classmethod
+    def default_resource_request(cls, config):
+        """One seed's request: every seed steps in this trial's process (num_env_runners 0)."""
+        spec = load_spec_cached(str(config[keys.SPEC_PATH_KEY]))
+        trial_class = get_algorithm(spec.algorithm).trial_class()
+        return trial_class.default_resource_request(seed_config(config, config[keys.SEEDS_KEY][0]))
+
+    def setup(self, config: dict[str, Any]) -> None:
+        from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
+
+        spec = load_spec_cached(str(config[keys.SPEC_PATH_KEY]))
+        trial_class = get_algorithm(spec.algorithm).trial_class()
+        self.seeds = [int(s) for s in config[keys.SEEDS_KEY]]
+        self.stop_at = tune_stop(spec)
+        self.algos, states = [], []
+        for seed in self.seeds:
+            logdir = _seed_dir(self.logdir, seed)
+            logdir.mkdir(parents=True, exist_ok=True)
+            algo = trial_class(config=seed_config(config, seed))
+            _move_logdir(algo, logdir)
+            self.algos.append(algo)
+            # Seed i's global random state as its own setup left it: it continues from there.
+            states.append(RandomState.capture())
+        self.stack = StackedAgentUpdates(self.algos)
+        self.lockstep = Lockstep(states, self.stack.run)
+        for i, algo in enumerate(self.algos):
+            algo.agent_updater = self.stack.view(i, self.lockstep)
+        self.metrics: dict[int, dict[str, float]] = {}  # seed index -> its last metrics
+        self.errors: dict[int, str] = {}  # seed index -> why it stopped
+        self.finished: set[int] = set()  # seed indices that reached the stop criterion
+
+    def step(self) -> dict[str, Any]:
+        running = [i for i in range(len(self.seeds)) if i not in self.errors and i not in self.finished]
+        outcomes = self.lockstep.run({i: self.algos[i].train for i in running})
+        for i, outcome in sorted(outcomes.items()):
+            if outcome.error is not None:
+                self.errors[i] = f"{type(outcome.error).__name__}: {outcome.error}"
+                logger.error("seed %d stopped: %s", self.seeds[i], self.errors[i], exc_info=outcome.error)
+                continue
+            self.metrics[i] = result_metrics(outcome.value, rllib_timers=True)
+            if _reached(self.metrics[i], self.stop_at):
+                self.finished.add(i)
+        if len(self.errors) == len(self.seeds):
+            raise RuntimeError(
+                "every seed of the stack failed: "
+                + "; ".join(f"seed {self.seeds[i]}: {e}" for i, e in sorted(self.errors.items()))
+            )
+        return self._result()
+
+    def _result(self) -> dict[str, Any]:
+        alive = [i for i in self.metrics if i not in self.errors]
+        keys_seen = sorted({k for i in alive for k in self.metrics[i]})
+        skip = (keys.TRAINING_ITERATION, keys.TIME_TOTAL_S)
+        mean = {
+            k: sum(self.metrics[i][k] for i in alive if k in self.metrics[i])
+            / sum(1 for i in alive if k in self.metrics[i])
+            for k in keys_seen
+            if k not in skip
+        }
+        still = [i for i in alive if i not in self.finished] or alive
+        mean[keys.ENV_STEPS] = min(self.metrics[i].get(keys.ENV_STEPS, 0.0) for i in still)
+        result = _unflatten(mean)
+        result[keys.SEED_RESULTS] = {str(self.seeds[i]): dict(self.metrics[i]) for i in sorted(self.metrics)}
+        result[keys.SEED_ERRORS] = {str(self.seeds[i]): e for i, e in sorted(self.errors.items())}
+        if ray.is_initialized():
+            result[keys.NODE_ID] = ray.get_runtime_context().get_node_id()
+        result["done"] = len(self.finished) + len(self.errors) == len(self.seeds)
+        return result
+
+    # ------------------------------------------------------------------ checkpoints
+    def save_checkpoint(self, checkpoint_dir: str) -> None:
+        for seed, algo in zip(self.seeds, self.algos, strict=True):
+            algo.save_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
+        state = {
+            "seeds": self.seeds,
+            "stack": self.stack.get_state(),
+            "random": self.lockstep.states,
+            "metrics": self.metrics,
+            "errors": self.errors,
+            "finished": sorted(self.finished),
+        }
+        with open(Path(checkpoint_dir) / _STATE_FILE, "wb") as f:
+            pickle.dump(state, f)
+
+    def load_checkpoint(self, checkpoint_dir: str) -> None:
+        with open(Path(checkpoint_dir) / _STATE_FILE, "rb") as f:
+            state = pickle.load(f)
+        if state["seeds"] != self.seeds:
+            raise ValueError(
+                f"a checkpoint of seeds {state['seeds']} cannot restore a stack of seeds {self.seeds}"
+            )
+        for seed, algo in zip(self.seeds, self.algos, strict=True):
+            algo.load_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
+        self.stack.set_state(state["stack"])  # after the algorithms: the stack's weights are the live ones
+        self.lockstep.states = list(state["random"])
+        self.metrics = dict(state["metrics"])
+        self.errors = dict(state["errors"])
+        self.finished = set(state["finished"])
+
+    def cleanup(self) -> None:
+        for algo in self.algos:
+            algo.stop()
