@@ -17,6 +17,10 @@ Drills (each on its own copy of the smoke sweep: two trials, tree depth 1 and 2,
 * runner: the smoke sweep with one env runner per trial; SIGKILL that runner's process at a random
   moment (`--kill-seed`) of the first trial's 3rd iteration: Ray restarts the actor, CO-PILOT counts the sub-tasks the runner took with it
   (`copilot/agent/subtasks_lost`, printed) and the trial goes on without a Tune retry.
+* driver_stacked: one configuration, seeds 0, 1 and 2 stacked in one trial (`seeds_per_trial: 3`) and
+  `COPILOT_RAY_FAULT=planner_nan@3:seed=1`; SIGKILL the driver at the trial's 4th result, then
+  `--resume` to the end: seeds 0 and 2 must each have one FINISHED run with every iteration once, seed 1
+  one FAILED run naming the non-finite planner (it stops alone, the others go on).
 * nan: one configuration, seeds 0 and 1, and `COPILOT_RAY_FAULT=planner_nan@3:seed=1` (NaN into seed 1's
   planner weights at iteration 3; copilot_ray/planning/health.py): seed 1 must stop with the
   reason in the console and in its MLflow run (FAILED, tag copilot.error) after its retries, seed 0 must
@@ -162,12 +166,15 @@ def audit(spec_path: Path, iterations: int, failing_seeds: tuple[str, ...] = ())
         if run.info.status != "FAILED" or "non-finite" not in reason:
             found["lost"] += 1
     children = [r for r in children if r not in failing]
-    planned = len(spec.trial_plan()) - len(failing_seeds)
-    by_trial: dict[str, list] = {}
+    planned = len(spec.trial_plan()) * spec.seeds_per_trial - len(failing_seeds)
+    by_trial: dict[tuple[str, str], list] = {}  # (trial, seed): a stacked trial has a run per seed
     for run in children:
-        by_trial.setdefault(run.data.tags[TRIAL_ID_TAG], []).append(run)
+        by_trial.setdefault((run.data.tags[TRIAL_ID_TAG], run.data.tags[SEED_TAG]), []).append(run)
     finished = [r for r in children if r.info.status == "FINISHED"]
-    found["lost"] += planned - len({r.data.tags[TRIAL_ID_TAG] for r in finished})
+    found["lost"] += planned - len({(r.data.tags[TRIAL_ID_TAG], r.data.tags[SEED_TAG]) for r in finished})
+    if len(failing) != len(failing_seeds):
+        print(f"  {len(failing)} run(s) of the failing seeds {failing_seeds}, expected one each")
+        found["lost" if len(failing) < len(failing_seeds) else "duplicated"] += 1
     found["duplicated"] += sum(len(v) - 1 for v in by_trial.values()) + max(0, len(parents) - 1)
     if not parents or parents[0].info.status not in ("FINISHED", "FAILED" if failing_seeds else "FINISHED"):
         print(f"  parent run not closed: {[p.info.status for p in parents]}")
@@ -191,15 +198,17 @@ def audit(spec_path: Path, iterations: int, failing_seeds: tuple[str, ...] = ())
     return found
 
 
-def kill_driver_then_resume(spec: Path, tune_dir: Path) -> None:
-    """Start the sweep, SIGKILL its driver and everything it started at the first trial's 3rd result,
-    then run `--resume` to the end."""
-    proc = sweep(spec)
-    rows = wait_for_results(tune_dir, 3, proc)
+def kill_driver_then_resume(
+    spec: Path, tune_dir: Path, at: int = 3, env_extra: dict | None = None, exit_codes: tuple[int, ...] = (0,)
+) -> None:
+    """Start the sweep, SIGKILL its driver and everything it started at the first trial's `at`-th
+    result, then run `--resume` to the end (which must exit with one of `exit_codes`)."""
+    proc = sweep(spec, env_extra=env_extra)
+    rows = wait_for_results(tune_dir, at, proc)
     killed = kill_tree(proc.pid)
     print(f"  killed the driver and {killed - 1} processes it started after iteration {len(rows)}")
-    resumed = sweep(spec, "--resume")
-    if resumed.wait(timeout=900) != 0:
+    resumed = sweep(spec, "--resume", env_extra=env_extra)
+    if resumed.wait(timeout=900) not in exit_codes:
         raise RuntimeError(f"--resume exited {resumed.returncode} (log next to {spec})")
 
 
@@ -378,6 +387,32 @@ def _cmdline(pid: int) -> str:
         return ""
 
 
+def spec_driver_stacked(directory: Path, iterations: int) -> Path:
+    return write_spec(
+        directory,
+        "drill_driver_stacked",
+        iterations,
+        search={"tree_depth": {"grid": [1]}},
+        seeds=[0, 1, 2],
+        seeds_per_trial=3,
+    )
+
+
+def drill_driver_stacked(directory: Path, iterations: int) -> dict[str, int]:
+    spec = spec_driver_stacked(directory, iterations)
+    fault = {"COPILOT_RAY_FAULT": "planner_nan@3:seed=1"}
+    tune_dir = directory / "results" / "drill_driver_stacked" / "tune"
+    # (a seed that failed makes the sweep's exit status 1)
+    kill_driver_then_resume(spec, tune_dir, at=4, env_extra=fault, exit_codes=(1,))
+    logs = "\n".join(p.read_text() for p in sorted(directory.glob("drill_driver_stacked.*.log")))
+    stopped = [line for line in logs.splitlines() if "seed 1 stopped" in line]
+    print(f"  console: {stopped[-1].strip() if stopped else '(no line for the stopped seed)'}")
+    found = audit(spec, iterations, failing_seeds=("1",))
+    if not stopped:
+        found["lost"] += 1
+    return found
+
+
 def spec_nan(directory: Path, iterations: int) -> Path:
     return write_spec(directory, "drill_nan", iterations, search={"tree_depth": {"grid": [1]}}, seeds=[0, 1])
 
@@ -402,6 +437,7 @@ DRILL_SPECS = {
     "driver_her": spec_driver_her,
     "driver_hrl": spec_driver_hrl,
     "driver_optuna": spec_driver_optuna,
+    "driver_stacked": spec_driver_stacked,
     "trial": spec_trial,
     "runner": spec_runner,
     "nan": spec_nan,
@@ -412,6 +448,7 @@ DRILLS = {
     "driver_her": drill_driver_her,
     "driver_hrl": drill_driver_hrl,
     "driver_optuna": drill_driver_optuna,
+    "driver_stacked": drill_driver_stacked,
     "trial": drill_trial,
     "runner": drill_runner,
     "nan": drill_nan,

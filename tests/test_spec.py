@@ -766,3 +766,47 @@ def test_a_spec_with_mistakes_in_several_sections_gets_them_all_in_one_report():
         "searcher.metric: 'copilot/eval/success' is invalid: is a test-set metric",
     ):
         assert expected in text, expected
+
+
+# ------------------------------------------------------------------------------------------ stacked seeds
+@pytest.mark.parametrize(
+    ("changes", "expected"),
+    [
+        ({"seeds_per_trial": 0}, "seeds_per_trial: 0 is invalid: must be >= 1"),
+        ({"seeds": [0, 1, 2], "seeds_per_trial": 2}, "must divide the 3 seeds [0, 1, 2] into equal groups"),
+        ({"seeds_per_trial": 2, "algorithm": "ppo", "config": {}}, "'ppo' has no stacked update"),
+        (
+            {"seeds_per_trial": 2, "searcher": _optuna()},
+            "seeds_per_trial: 2 is invalid: needs searcher.type grid",
+        ),
+        (
+            {"seeds_per_trial": 2, "resources": {"num_env_runners": 1}},
+            "needs resources.num_env_runners 0, got 1",
+        ),
+    ],
+)
+def test_stacked_seeds_are_refused_where_a_stack_cannot_run(changes, expected):
+    data = spec_with(**changes)
+    if "searcher" in changes:
+        data["search"] = {"repetitions": {"int": [1, 2]}}
+    assert expected in rejected(data)
+
+
+def test_stacked_seeds_make_a_trial_per_group_and_say_so_in_the_plan():
+    spec = parse_spec(
+        spec_with(seeds=[0, 1, 2, 3], seeds_per_trial=2, resources={"num_env_runners": 0}), "x.yaml"
+    )
+    assert spec.seed_groups() == [[0, 1], [2, 3]]
+    assert spec.trial_plan() == [
+        {"repetitions": 1, "seeds": [0, 1]},
+        {"repetitions": 1, "seeds": [2, 3]},
+        {"repetitions": 2, "seeds": [0, 1]},
+        {"repetitions": 2, "seeds": [2, 3]},
+    ]
+    assert spec.budget()["trials"] == 4 and spec.budget()["env_steps"] == 4 * 2 * 10000  # every seed's budget
+    plan = format_plan(spec)
+    assert "2 seeds per trial: each trial trains its seeds together" in plan
+    assert "0, 1 | 2, 3" in plan
+    if _has("ray"):
+        space = to_tune_search_space(spec)
+        assert space[keys.SEEDS_KEY] == {"grid_search": [[0, 1], [2, 3]]} and "seed" not in space

@@ -15,6 +15,9 @@
     search:                             # parameter -> one domain (same dotted keys as `config`)
       tree_depth: {grid: [1, 2, 3, 4, 5, 6]}
     seeds: [0, 1, 2]                    # every configuration runs once per seed
+    seeds_per_trial: 3                  # optional (default 1): seeds trained together in one trial, their
+                                        #   SAC updates stacked into one (grid, num_env_runners 0, copilot /
+                                        #   sac / rrt_curriculum); each seed is still its own MLflow run
     searcher: {type: grid}              # or {type: optuna, sampler: tpe, metric: ..., mode: max, ...}
     scheduler: {type: asha, max_t: 200000, grace_period: 20000, reduction_factor: 3}   # optional
     stop: {env_steps: 200000}           # and/or iterations
@@ -22,6 +25,14 @@
                                         # gpus_per_trial (default 0; 0.25 shares a GPU): the RLlib learner's
     fault_tolerance: {checkpoint_every: 1, max_failures: 2}   # optional: checkpoints, retries of a trial
     tracking: {storage: results/}       # uri default: sqlite:///<abs storage>/<name>/mlflow.db
+
+Stacked seeds (``seeds_per_trial`` > 1): ``seeds`` is cut into consecutive groups of that size, one Tune
+trial per group and configuration (``copilot_ray.trials.seed_stack_trial``). The seeds take turns at their
+env steps and share one stacked SAC update; each seed's figures, MLflow run, tags, checkpoint folder and
+failure are its own, so ``stages``, ``best_of``, ``progress``, ``carry`` and the report read a stacked
+sweep as an unstacked one. What Tune's scheduler and a stop criterion see of a stacked trial: the mean
+over its live seeds of every metric, except env steps, the fewest of any seed still running. A seed whose
+iteration raises stops alone (its run FAILED with the error) and is not retried.
 
 ``env.id`` may be a list: every configuration runs on each env (trial param ``env.id``, grid only). A file
 may hold several specs as YAML documents separated by ``---`` (``load_specs``), each complete and with its

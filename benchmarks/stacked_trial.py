@@ -1,0 +1,132 @@
+"""Env steps/s of a stacked-seeds trial (`SeedStackTrial`, a spec's `seeds_per_trial`) against one seed's
+own trial, both in this process, CO-PILOT on the u-maze with one SAC update per env step.
+
+    PYTHONPATH=. python benchmarks/stacked_trial.py [--stacks 2 4] [--iterations 4] [--rounds 2]
+
+Each row builds its trial (not timed), runs one iteration to warm up (the planner's warm start, SAC's
+learning start), then times `--iterations` iterations; rows alternate over `--rounds` so that a machine
+whose load drifts affects both alike. Printed per row: aggregate env steps/s (all its seeds) and per seed.
+
+What it answers on a CPU: a two-core machine runs either seeds as trials two at a time (two one-seed
+processes side by side) or stacks side by side; a stack of N is not slower in aggregate when its row is
+at least the one-seed row (each process then gets one core either way). On a GPU the stack's one update
+for N seeds is the point (benchmarks/stacked_update.py measures the update alone).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+import yaml
+
+from copilot_ray import keys
+
+SPEC = {
+    "name": "stacked_trial_benchmark",
+    "env": {"id": "maze-point", "config": {"layout": "u-maze"}},
+    "algorithm": "copilot",
+    "config": {
+        "tree_depth": 3,
+        "repetitions": 1,
+        "task_batch_size": 4,
+        "tau_max": 12,
+        "eval_interval": 1000,  # no evaluation inside the timed iterations
+        "num_steps_sampled_before_learning_starts": 100,
+        "updates_per_env_step": 1.0,
+        "cost_model.init_euclidean": 500,
+        "cost_model.fit_steps": 5,
+        "planner_warm_start": 3,
+        "planner_task_batch_size": 8,
+    },
+    "searcher": {"type": "grid"},
+    "stop": {"iterations": 1000},
+    "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},
+}
+
+
+def _spec_file(directory: Path, seeds: list[int]) -> str:
+    data = {
+        **SPEC,
+        "seeds": seeds,
+        "seeds_per_trial": max(1, len(seeds)),
+        "tracking": {"storage": str(directory)},
+    }
+    path = directory / f"stack_{len(seeds)}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return str(path)
+
+
+def _one_seed_trial(spec_path: str):
+    from copilot_ray.algorithms.copilot.trial import CoPilotTrial
+
+    return CoPilotTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEED_PARAM: 0})
+
+
+def _stacked_trial(spec_path: str, seeds: list[int]):
+    from copilot_ray.trials.seed_stack_trial import SeedStackTrial
+
+    return SeedStackTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEEDS_KEY: seeds})
+
+
+def _env_steps(result: dict) -> float:
+    """Env steps of every seed in a result (a stacked trial's seeds, or the one trial's)."""
+    per_seed = result.get(keys.SEED_RESULTS)
+    if per_seed:
+        return sum(m[keys.ENV_STEPS] for m in per_seed.values())
+    return float(result["env_runners"]["num_env_steps_sampled_lifetime"])
+
+
+def measure(trial, iterations: int) -> float:
+    """Env steps/s of all the trial's seeds over `iterations` iterations after one to warm up."""
+    before = _env_steps(trial.train())
+    start = time.perf_counter()
+    for _ in range(iterations):
+        after = _env_steps(trial.train())
+    seconds = time.perf_counter() - start
+    trial.stop()
+    return (after - before) / seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--stacks", type=int, nargs="+", default=[2, 4], help="seeds per stacked trial")
+    parser.add_argument("--iterations", type=int, default=4, help="timed iterations per row")
+    parser.add_argument("--rounds", type=int, default=2, help="times every row runs, alternating")
+    parser.add_argument(
+        "--threads", type=int, default=1, help="torch threads (a trial's process has one core)"
+    )
+    args = parser.parse_args()
+    if any(n < 2 for n in args.stacks):
+        raise SystemExit(f"--stacks: every stack needs >= 2 seeds, got {args.stacks}")
+    torch.set_num_threads(args.threads)
+    directory = Path(tempfile.mkdtemp(prefix="stacked_trial_"))
+    rows: dict[str, list[float]] = {}
+    for round_ in range(args.rounds):
+        name = "one seed, its own trial"
+        rows.setdefault(name, []).append(
+            measure(_one_seed_trial(_spec_file(directory, [0])), args.iterations)
+        )
+        print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
+        for n in args.stacks:
+            seeds = list(range(n))
+            name = f"{n} seeds stacked"
+            rows.setdefault(name, []).append(
+                measure(_stacked_trial(_spec_file(directory, seeds), seeds), args.iterations)
+            )
+            print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
+    print("\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial |")
+    print("|---|---|---|---|")
+    base = sum(rows["one seed, its own trial"]) / args.rounds
+    for name, values in rows.items():
+        n = 1 if name.startswith("one") else int(name.split()[0])
+        mean = sum(values) / len(values)
+        runs = ", ".join(f"{v:.1f}" for v in values)
+        print(f"| {name} | {mean:.1f} ({runs}) | {mean / n:.1f} | {mean / base:.2f}x |")
+
+
+if __name__ == "__main__":
+    main()
