@@ -119,3 +119,32 @@ def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alon
     for part in success.split("/"):
         top = top[part]
     assert math.isclose(top, third[keys.SEED_RESULTS]["0"][success])
+
+
+def test_a_stacked_her_seed_relabels_as_it_would_alone(tmp_path):
+    """HER's relabelling buffer stacked: seed 1's hindsight goals, rewards and updates in a pair are its
+    own (drawn from its generators), as in a stack of seed 1 alone."""
+    her = {
+        "name": "stack_her",
+        "algorithm": "her",
+        "config": {
+            "tau_max": 12,
+            "task_batch_size": 2,
+            "eval_interval": 1,
+            "eval_num_tasks": 3,
+            "num_steps_sampled_before_learning_starts": 30,
+            "train_batch_size_per_learner": 16,
+            "updates_per_env_step": 0.25,
+        },
+    }
+    path = tmp_path / "her.yaml"
+    path.write_text(yaml.safe_dump({**SPEC, **her, "tracking": {"storage": str(tmp_path / "results")}}))
+    pair, alone = _trial(str(path), [0, 1]), _trial(str(path), [1])
+    assert pair.stack.hindsight
+    for _ in range(2):
+        together, own = pair.train(), alone.train()
+        _assert_same(_figures(together, 1), _figures(own, 1), "HER seed 1 in a pair vs alone")
+    assert own[keys.SEED_RESULTS]["1"][keys.AGENT_SAC_UPDATES] > 0
+    assert _figures(together, 0) != _figures(together, 1)
+    pair.stop()
+    alone.stop()

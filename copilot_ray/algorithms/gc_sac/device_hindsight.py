@@ -114,17 +114,20 @@ def relabelled_columns(
     rows: torch.Tensor,
     take: Callable[[str, torch.Tensor], torch.Tensor],
     columns: Iterable[str] = TRAIN_COLUMNS,
+    uniform: Callable[[torch.Size], torch.Tensor] | None = None,
 ) -> dict[str, torch.Tensor]:
     """The agent's flat columns for storage rows `rows` ([..., B]: a batch, or a batch per seed), the
     first her_ratio of each batch with hindsight goals; `take(name, rows)` gathers a stored column at
     rows of that shape. `buffer` gives her_ratio, goal_selection, reward_fn, layout and capacity (a
-    `DeviceHindsightBuffer`, or `seed_replay.StackedHindsightBuffer` for its seeds)."""
+    `DeviceHindsightBuffer`, or `seed_replay.StackedHindsightBuffer` for its seeds). `uniform(shape)`:
+    the float64 uniforms that pick hindsight goals (default: the device's generator; a stacked trial
+    draws each seed's from its own)."""
     axis = rows.dim() - 1  # the batch axis of rows; a column's rows carry its width after it
     goals, rewards, terminateds = take("goal", rows), take(REWARDS, rows), take(TERMINATEDS, rows)
     n_her = int(round(buffer.her_ratio * rows.shape[axis]))
     if n_her:
         her = rows.narrow(axis, 0, n_her)
-        new_goals = _hindsight_goals(buffer, her, take)
+        new_goals = _hindsight_goals(buffer, her, take, uniform)
         width = new_goals.shape[-1]
         r, t = buffer.reward_fn(
             take("next_achieved", her).reshape(-1, width),
@@ -149,7 +152,7 @@ def relabelled_columns(
     return {k: out[k] for k in columns}
 
 
-def _hindsight_goals(buffer: Any, rows: torch.Tensor, take) -> torch.Tensor:
+def _hindsight_goals(buffer: Any, rows: torch.Tensor, take, uniform=None) -> torch.Tensor:
     """A next achieved goal of each row's own episode: its last (final), one from its step on (future)
     or one from anywhere in it (episode)."""
     start, length, step = (take(k, rows) for k in ("episode_start", "episode_length", "step"))
@@ -157,7 +160,11 @@ def _hindsight_goals(buffer: Any, rows: torch.Tensor, take) -> torch.Tensor:
         offset = length - 1
     else:
         low = step if buffer.goal_selection == "future" else torch.zeros_like(step)
-        u = torch.rand(rows.shape, device=rows.device, dtype=torch.float64)
+        u = (
+            torch.rand(rows.shape, device=rows.device, dtype=torch.float64)
+            if uniform is None
+            else uniform(rows.shape)
+        )
         offset = torch.minimum(low + (u * (length - low)).long(), length - 1)  # uniform in [low, length)
     return take("next_achieved", (start + offset) % buffer.capacity)
 

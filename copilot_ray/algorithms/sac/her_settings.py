@@ -7,6 +7,7 @@ from copilot_ray.algorithms.sac.settings import (
     HINDSIGHT,
     LEARNER_SEARCH_SPACE,
     METRICS,
+    SEED_STACK,
     combination_problems,
     max_iteration_env_steps,
 )
@@ -22,6 +23,7 @@ SEARCH_SPACE: dict[str, dict] = {
 
 __all__ = [
     "GPU_LEARNER",
+    "SEED_STACK",
     "METRICS",
     "SEARCH_SPACE",
     "SETTINGS",

@@ -1,20 +1,21 @@
 """The SAC updates of N seeds' agents (one `GoalSAC` each, in one process) as one stacked update.
 
 `StackedAgentUpdates(algos)` stacks the seeds' learner modules (`gc_sac.seed_stack.StackedSAC`) and
-their replay (`gc_sac.seed_replay.StackedTransitionBuffer`), and gives each algorithm an updater view,
-`SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the seed's rows of the
-stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep` rendezvous. When every
+their replay (`gc_sac.seed_replay`: flat transitions, or HER's relabelling buffer for her, sorb and
+sorb_map, relabelled on the device as the one-seed fused path relabels), and gives each algorithm an
+updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
+seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep` rendezvous. When every
 seed of the stack is parked (or done with its iteration), `run(requests)` runs max(n) stacked steps,
 seed i active in its first n_i, then writes every seed's weights back into its learner's module (the
 env runners sync from there, as after any update) and logs each seed's figures on its own learner.
 
-Random streams: each seed samples its replay rows and its SAC noise from two generators of its own,
-seeded from its seed, and an inactive seed draws nothing; so seed i's updates in a stack of any size are
+Random streams: each seed samples its replay rows (and HER's goals) and its SAC noise from two
+generators of its own, seeded from its seed, and an inactive seed draws nothing; so seed i's updates in a stack of any size are
 its updates in a stack of one (tested). They are not the draws of a one-seed trial's fused update,
 which samples from the device's default generator.
 
 What the stacked path refuses (named, before anything runs): the numpy or stock update paths
-(`fused_update=False`, `fast_learner=False`), HER's relabelling buffer, learning-rate schedules,
+(`fused_update=False`, `fast_learner=False`), learning-rate schedules,
 gradient clipping, and algorithms whose configurations differ in anything but the seed.
 """
 
@@ -27,11 +28,17 @@ import numpy as np
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
+from copilot_ray.algorithms.gc_sac.device_hindsight import relabelled_columns
 from copilot_ray.algorithms.gc_sac.fused_step import FINITE
 from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
-from copilot_ray.algorithms.gc_sac.seed_replay import StackedTransitionBuffer, gather_rows
+from copilot_ray.algorithms.gc_sac.seed_replay import (
+    StackedHindsightBuffer,
+    StackedTransitionBuffer,
+    gather_rows,
+)
 from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
+from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
 # The streams a seed's stacked updates draw from: SeedSequence([seed, STREAM]) (distinct from the
 # algorithm's own numpy and torch streams, which it seeds with its seed alone).
@@ -51,10 +58,6 @@ def stacking_problems(algos: Sequence[Any]) -> list[str]:
     for name, ok in (
         ("fast_learner", bool(first.fast_learner)),
         ("learner_config_dict['gc_sac']['fused_update']", fused_update(first)),
-        (
-            "her.n_sampled_goal (HER's relabelling buffer is not stacked yet)",
-            not first.uses_hindsight_buffer(),
-        ),
         ("grad_clip", first.grad_clip is None),
         ("twin_q", bool(first.twin_q)),
     ):
@@ -99,11 +102,8 @@ class StackedAgentUpdates:
             generators=[stream_generator(s, NOISE_STREAM, self.device) for s in self.seeds],
         )
         self.samplers = [stream_generator(s, SAMPLE_STREAM, self.device) for s in self.seeds]
-        obs_dim = int(np.prod(modules[0].observation_space.shape))
-        action_dim = int(np.prod(modules[0].action_space.shape))
-        self.replay = StackedTransitionBuffer(
-            len(algos), replay_capacity(cfg), self.device, obs_dim, action_dim
-        )
+        self.replay = _stacked_replay(algos, modules[0], self.device)
+        self.hindsight = isinstance(self.replay, StackedHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
 
     def view(self, index: int, lockstep) -> SeedUpdater:
@@ -132,19 +132,31 @@ class StackedAgentUpdates:
         return out
 
     def _sample(self, drawing: Sequence[bool]) -> dict[str, torch.Tensor]:
-        """A [N, B] batch: seed i's rows drawn from its own generator where `drawing[i]`, row 0 else."""
+        """A [N, B] batch: seed i's rows (and HER's goal picks) drawn from its own generator where
+        `drawing[i]`, row 0 else (its stream untouched)."""
         rows = []
         for i, draw in enumerate(drawing):
             size = len(self.replay.seeds[i])
             if draw and size > 0:
-                u = torch.rand(
-                    self.batch_size, generator=self.samplers[i], dtype=torch.float64, device=self.device
-                )
-                rows.append(torch.clamp((u * size).long(), max=size - 1))
+                rows.append(torch.clamp((self._uniform(i, self.batch_size) * size).long(), max=size - 1))
             else:
                 rows.append(torch.zeros(self.batch_size, dtype=torch.int64, device=self.device))
         index = torch.stack(rows)
-        return {key: gather_rows(self.replay.storage[key], index) for key in TRAIN_COLUMNS}
+        storage = self.replay.storage
+        if not self.hindsight:
+            return {key: gather_rows(storage[key], index) for key in TRAIN_COLUMNS}
+
+        def goal_picks(shape: torch.Size) -> torch.Tensor:  # [N, n_her]: each drawing seed's own
+            zeros = torch.zeros(shape[1:], dtype=torch.float64, device=self.device)
+            return torch.stack([self._uniform(i, shape[1]) if d else zeros for i, d in enumerate(drawing)])
+
+        def take(name: str, at: torch.Tensor) -> torch.Tensor:
+            return gather_rows(storage[name], at)
+
+        return relabelled_columns(self.replay, index, take, TRAIN_COLUMNS, uniform=goal_picks)
+
+    def _uniform(self, seed_index: int, n: int) -> torch.Tensor:
+        return torch.rand(n, generator=self.samplers[seed_index], dtype=torch.float64, device=self.device)
 
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, Any]:
@@ -158,6 +170,27 @@ class StackedAgentUpdates:
         for g, g_state in zip(self.samplers, state["samplers"], strict=True):
             g.set_state(g_state)
         self.agents.write_to(self.modules, self.log_alphas)
+
+
+def _stacked_replay(algos: Sequence[Any], module, device: torch.device):
+    """The seeds' replay as one stacked buffer: HER's relabelling buffer where the agent uses one (its
+    reward on the device, as the one-seed fused path relabels), else flat transitions."""
+    cfg = algos[0].config
+    action_dim = int(np.prod(module.action_space.shape))
+    if not cfg.uses_hindsight_buffer():
+        obs_dim = int(np.prod(module.observation_space.shape))
+        return StackedTransitionBuffer(len(algos), replay_capacity(cfg), device, obs_dim, action_dim)
+    first = algos[0]
+    return StackedHindsightBuffer(
+        len(algos),
+        replay_capacity(cfg),
+        first.goal_layout(),
+        DeviceRelabelledReward(first.goal_env.unwrapped, first.rules, device),
+        action_dim,
+        n_sampled_goal=cfg.her["n_sampled_goal"],
+        goal_selection=cfg.her["goal_selection"],
+        device=device,
+    )
 
 
 class SeedUpdater:

@@ -18,6 +18,7 @@ from copilot_ray.algorithms.sac.settings import (  # GPU_LEARNER: HER's agent, o
     AGENT,
     GPU_LEARNER,
     HINDSIGHT,
+    SEED_STACK,
     combination_problems,
     max_iteration_env_steps,
 )
@@ -99,6 +100,7 @@ SEARCH_SPACE: dict[str, dict] = {
 
 __all__ = [
     "GPU_LEARNER",
+    "SEED_STACK",
     "METRICS",
     "SEARCH_SPACE",
     "SETTINGS",

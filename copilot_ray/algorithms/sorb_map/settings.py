@@ -14,6 +14,7 @@ from copilot_ray.algorithms.sorb.settings import (
     GPU_LEARNER,
     METRICS,
     SEARCH_SPACE,
+    SEED_STACK,
     combination_problems,
     max_iteration_env_steps,
 )
@@ -26,6 +27,7 @@ SETTINGS = {
 
 __all__ = [
     "GPU_LEARNER",
+    "SEED_STACK",
     "METRICS",
     "SEARCH_SPACE",
     "SETTINGS",
