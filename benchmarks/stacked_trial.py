@@ -1,7 +1,7 @@
 """Env steps/s of a stacked-seeds trial (`SeedStackTrial`, a spec's `seeds_per_trial`) against one seed's
 own trial, both in this process, CO-PILOT on the u-maze with one SAC update per env step.
 
-    PYTHONPATH=. python benchmarks/stacked_trial.py [--stacks 2 4] [--iterations 4] [--rounds 2]
+    PYTHONPATH=. python benchmarks/stacked_trial.py [--stacks 2 4] [--iterations 4] [--rounds 2] [--gpu]
 
 Each row builds its trial (not timed), runs one iteration to warm up (the planner's warm start, SAC's
 learning start), then times `--iterations` iterations; rows alternate over `--rounds` so that a machine
@@ -10,7 +10,8 @@ whose load drifts affects both alike. Printed per row: aggregate env steps/s (al
 What it answers on a CPU: a two-core machine runs either seeds as trials two at a time (two one-seed
 processes side by side) or stacks side by side; a stack of N is not slower in aggregate when its row is
 at least the one-seed row (each process then gets one core either way). On a GPU the stack's one update
-for N seeds is the point (benchmarks/stacked_update.py measures the update alone).
+for N seeds is the point (benchmarks/stacked_update.py measures the update alone); `--gpu` puts every
+trial's learner, and so the stack, on the GPU (`resources.gpus_per_trial: 1`; refused without one).
 """
 
 from __future__ import annotations
@@ -48,13 +49,10 @@ SPEC = {
 }
 
 
-def _spec_file(directory: Path, seeds: list[int]) -> str:
-    data = {
-        **SPEC,
-        "seeds": seeds,
-        "seeds_per_trial": max(1, len(seeds)),
-        "tracking": {"storage": str(directory)},
-    }
+def _spec_file(directory: Path, seeds: list[int], gpu: bool) -> str:
+    data = {**SPEC, "seeds": seeds, "seeds_per_trial": len(seeds), "tracking": {"storage": str(directory)}}
+    if gpu:  # the learner, and so the stack, on the GPU
+        data["resources"] = {**SPEC["resources"], "gpus_per_trial": 1}
     path = directory / f"stack_{len(seeds)}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return str(path)
@@ -99,23 +97,26 @@ def main() -> None:
     parser.add_argument(
         "--threads", type=int, default=1, help="torch threads (a trial's process has one core)"
     )
+    parser.add_argument("--gpu", action="store_true", help="every trial's learner on the GPU")
     args = parser.parse_args()
     if any(n < 2 for n in args.stacks):
         raise SystemExit(f"--stacks: every stack needs >= 2 seeds, got {args.stacks}")
+    if args.gpu and not torch.cuda.is_available():
+        raise SystemExit("--gpu: torch sees no CUDA device on this machine")
     torch.set_num_threads(args.threads)
     directory = Path(tempfile.mkdtemp(prefix="stacked_trial_"))
     rows: dict[str, list[float]] = {}
     for round_ in range(args.rounds):
         name = "one seed, its own trial"
         rows.setdefault(name, []).append(
-            measure(_one_seed_trial(_spec_file(directory, [0])), args.iterations)
+            measure(_one_seed_trial(_spec_file(directory, [0], args.gpu)), args.iterations)
         )
         print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
         for n in args.stacks:
             seeds = list(range(n))
             name = f"{n} seeds stacked"
             rows.setdefault(name, []).append(
-                measure(_stacked_trial(_spec_file(directory, seeds), seeds), args.iterations)
+                measure(_stacked_trial(_spec_file(directory, seeds, args.gpu), seeds), args.iterations)
             )
             print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
     print("\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial |")

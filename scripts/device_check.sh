@@ -4,7 +4,9 @@
 # then runs `benchmarks/device_throughput.py --suite` (the update alone per device and path, a lone
 # CO-PILOT trial with its learner on the GPU beside its CPU twin and a CPU trial on the paths before
 # the fused update and the lean traversal loop; about 6 minutes), then `benchmarks/stacked_update.py`
-# (N = 1, 4, 16, 64 seeds stacked in one update, eager and captured; under a minute), writing its
+# (N = 1, 4, 16, 64 seeds stacked in one update, eager and captured; under a minute), then
+# `benchmarks/stacked_trial.py --gpu` (one seed's trial against 4 and 16 seeds stacked in one trial, the
+# learner on the GPU; a few minutes), writing its
 # output, with the machine, commit and command, to OUT_DIR/device_check.txt and every trial iteration
 # to OUT_DIR/trials.jsonl.
 #
@@ -36,3 +38,6 @@ PYTHONPATH=.:/tmp/site RAY_AUTH_MODE=disabled "$python_bin" -u "${command[@]}" 2
 stacked=(benchmarks/stacked_update.py --seeds 1 4 16 64 --seconds 3)
 echo "# PYTHONPATH=.:/tmp/site $python_bin ${stacked[*]}" >>"$out/device_check.txt"
 PYTHONPATH=.:/tmp/site RAY_AUTH_MODE=disabled "$python_bin" -u "${stacked[@]}" 2>&1 | tee -a "$out/device_check.txt"
+stacked_trials=(benchmarks/stacked_trial.py --gpu --stacks 4 16 --iterations 3 --rounds 1)
+echo "# PYTHONPATH=.:/tmp/site $python_bin ${stacked_trials[*]}" >>"$out/device_check.txt"
+PYTHONPATH=.:/tmp/site RAY_AUTH_MODE=disabled "$python_bin" -u "${stacked_trials[@]}" 2>&1 | tee -a "$out/device_check.txt"
