@@ -37,6 +37,7 @@ from copilot_ray.sweep_spec import tune_stop
 from copilot_ray.tracking import result_metrics
 from copilot_ray.trials.description import load_spec_cached, seed_config
 from copilot_ray.trials.lockstep import Lockstep, RandomState
+from copilot_ray.trials.planning_trial import nested
 
 logger = logging.getLogger(__name__)
 _STATE_FILE = "seed_stack.pkl"
@@ -53,18 +54,6 @@ def _move_logdir(algo, logdir: Path) -> None:
     algo._logdir = str(logdir)  # noqa: SLF001 - Trainable has no other way to set it outside Tune
     if made != logdir and made.is_dir() and not any(made.iterdir()):
         made.rmdir()
-
-
-def _unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in flat.items():
-        *parents, leaf = key.split("/")
-        node = out
-        for part in parents:
-            node = node.setdefault(part, {})
-        if isinstance(node, dict):
-            node[leaf] = value
-    return out
 
 
 def _reached(metrics: Mapping[str, float], stop: Mapping[str, int]) -> bool:
@@ -136,7 +125,7 @@ class SeedStackTrial(tune.Trainable):
         }
         still = [i for i in alive if i not in self.finished] or alive
         mean[keys.ENV_STEPS] = min(self.metrics[i].get(keys.ENV_STEPS, 0.0) for i in still)
-        result = _unflatten(mean)
+        result = nested(mean)
         result[keys.SEED_RESULTS] = {str(self.seeds[i]): dict(self.metrics[i]) for i in sorted(self.metrics)}
         result[keys.SEED_ERRORS] = {str(self.seeds[i]): e for i, e in sorted(self.errors.items())}
         if ray.is_initialized():
