@@ -71,7 +71,8 @@ class SpecTrial:
         for key in PRIVILEGE_COUNTS:
             if not _is_number(result_value(result, key)):
                 _set_nested(result, key, 0.0)
-        result[NODE_ID] = ray.get_runtime_context().get_node_id()
+        if ray.is_initialized():  # (a trial built outside Tune, as a stacked seed's, starts no Ray)
+            result[NODE_ID] = ray.get_runtime_context().get_node_id()
         return result
 
     def get_state(self, *args, **kwargs):
