@@ -76,10 +76,16 @@ def _weights(trial, index):
 
 
 def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alone(tmp_path, monkeypatch):
+    from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
+
     monkeypatch.setenv("COPILOT_RAY_FAULT", "planner_nan@3:seed=1")  # seed 1's planner breaks at iteration 3
+    acting = []  # the seeds of every batched forward pass
+    act = StackedAgentUpdates.act
+    monkeypatch.setattr(StackedAgentUpdates, "act", lambda self, r: acting.append(sorted(r)) or act(self, r))
     spec = _spec(tmp_path)
     pair = _trial(spec, [0, 1])
     first = pair.train()
+    assert [0, 1] in acting  # both seeds' env steps went through one forward pass
     checkpoint = pair.save(str(tmp_path / "checkpoint"))
     second = pair.train()
     pair_weights = _weights(pair, 1)

@@ -58,9 +58,11 @@ class Lockstep:
 
     `states`: each job's global random state to start from (kept across `run` calls: a job's next
     run continues its own streams). `on_round(requests)`: {job: request} of every job parked at a
-    rendezvous -> {job: answer}; it runs on the coordinator's thread while every job is parked, so it
-    must draw from generators of its own, not the global ones. If it raises, every parked job raises
-    that error from `meet`."""
+    rendezvous -> {job: answer} for some of them (at least one): a job left without an answer stays
+    parked, its request in the next round (the stack answers its seeds' actions step by step and their
+    updates only once no seed is acting). It runs on the coordinator's thread while every job is
+    parked, so it must draw from generators of its own, not the global ones. If it raises, every parked
+    job raises that error from `meet`."""
 
     def __init__(
         self, states: Sequence[RandomState], on_round: Callable[[Mapping[int, Any]], Mapping[int, Any]]
@@ -114,21 +116,29 @@ class Lockstep:
             thread.start()
             threads.append(thread)
         pending = sorted(jobs)  # the jobs to hand the baton to, in order, this pass
-        while pending:
+        parked: dict[int, Any] = {}  # requests not answered yet
+        while pending or parked:
             for job in pending:
                 self._hand(job)
             with self._cond:
-                requests = dict(sorted(self._requests.items()))
+                parked.update(self._requests)
                 self._requests.clear()
-            if not requests:
+            if not parked:
                 break
+            requests = dict(sorted(parked.items()))
             try:
                 answers = dict(self.on_round(requests))
+                if not answers.keys() & requests.keys():
+                    raise RuntimeError(
+                        f"lockstep: a round answered none of the parked jobs {sorted(requests)}"
+                    )
             except Exception as err:  # noqa: BLE001 - handed to every parked job, which raises it
                 answers = dict.fromkeys(requests, err)
+            pending = [job for job in requests if job in answers]
             with self._cond:
-                self._answers.update({job: answers[job] for job in requests})
-            pending = sorted(requests)
+                self._answers.update({job: answers[job] for job in pending})
+            for job in pending:
+                del parked[job]
         for thread in threads:
             thread.join()
         return outcomes

@@ -91,6 +91,8 @@ class SeedStackTrial(tune.Trainable):
         self.lockstep = Lockstep(states, self.stack.run)
         for i, algo in enumerate(self.algos):
             algo.agent_updater = self.stack.view(i, self.lockstep)
+            # every env step of every seed: one batched forward pass of the stacked actors
+            algo.env_runner_group.local_env_runner.act_hook = algo.agent_updater.act
         self.metrics: dict[int, dict[str, float]] = {}  # seed index -> its last metrics
         self.errors: dict[int, str] = {}  # seed index -> why it stopped
         self.finished: set[int] = set()  # seed indices that reached the stop criterion

@@ -4,8 +4,12 @@
 their replay (`gc_sac.seed_replay`: flat transitions, or HER's relabelling buffer for her, sorb and
 sorb_map, relabelled on the device as the one-seed fused path relabels), and gives each algorithm an
 updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
-seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep` rendezvous. When every
-seed of the stack is parked (or done with its iteration), `run(requests)` runs max(n) stacked steps,
+seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep`
+rendezvous, and so does `act(obs)`, its env runner's hook for every env step. A round with seeds asking
+for actions answers them with one batched forward pass of the stacked actors (`StackedSAC.act`; each
+seed's exploration noise drawn in its own turn from its own stream) and leaves the seeds parked at their
+updates waiting. When every seed of the stack is parked at its update (or done with its iteration),
+`run(requests)` runs max(n) stacked steps,
 seed i active in its first n_i, then writes every seed's weights back into its learner's module (the
 env runners sync from there, as after any update) and logs each seed's figures on its own learner.
 
@@ -40,6 +44,7 @@ from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
+ACT, UPDATE = "act", "update"  # what a seed asks the stack for at a rendezvous
 # The streams a seed's stacked updates draw from: SeedSequence([seed, STREAM]) (distinct from the
 # algorithm's own numpy and torch streams, which it seeds with its seed alone).
 SAMPLE_STREAM, NOISE_STREAM = 1_001, 1_002
@@ -102,6 +107,7 @@ class StackedAgentUpdates:
             generators=[stream_generator(s, NOISE_STREAM, self.device) for s in self.seeds],
         )
         self.samplers = [stream_generator(s, SAMPLE_STREAM, self.device) for s in self.seeds]
+        self.action_dim = int(np.prod(modules[0].action_space.shape))
         self.replay = _stacked_replay(algos, modules[0], self.device)
         self.hindsight = isinstance(self.replay, StackedHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
@@ -111,7 +117,37 @@ class StackedAgentUpdates:
         return SeedUpdater(self, index, lockstep)
 
     # ------------------------------------------------------------------ one round
-    def run(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
+    def run(self, requests: Mapping[int, tuple]) -> dict[int, Any]:
+        """One lockstep round: the actions of every seed that asks for one, in one batched forward pass;
+        else (every seed parked at its update, or done) the stacked update."""
+        acting = {i: r[1:] for i, r in requests.items() if r[0] == ACT}
+        if acting:
+            return self.act(acting)
+        return self.update({i: r[1:] for i, r in requests.items()})
+
+    @torch.no_grad()
+    def act(self, requests: Mapping[int, tuple[Any, torch.Tensor | None]]) -> dict[int, Any]:
+        """{seed index: (observation, its standard-normal noise [1, A] or None for the deterministic
+        action)} -> {seed index: its action (numpy)}, as its module would act on that noise."""
+        n = len(self.algos)
+        dims = self.agents.shapes["pi"][0][0][1]  # the actor's input width
+        obs = torch.zeros(n, 1, dims, device=self.device)
+        for i, (observation, _) in requests.items():
+            obs[i, 0] = torch.as_tensor(np.asarray(observation, np.float32), device=self.device)
+        out = {}
+        noisy = {i: noise for i, (_, noise) in requests.items() if noise is not None}
+        if noisy:
+            noise = torch.zeros(n, 1, self.action_dim, device=self.device)
+            for i, draw in noisy.items():
+                noise[i] = draw.to(self.device)
+            actions = self.agents.act(obs, noise).cpu().numpy()
+            out.update({i: actions[i, 0] for i in noisy})
+        if len(noisy) < len(requests):
+            actions = self.agents.act(obs).cpu().numpy()
+            out.update({i: actions[i, 0] for i in requests if i not in noisy})
+        return out
+
+    def update(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
         """{seed index: (gradient steps, timesteps)} -> {seed index: [its learner's results]}."""
         owed = [int(requests[i][0]) if i in requests else 0 for i in range(len(self.algos))]
         last: dict[int, dict[str, torch.Tensor]] = {}
@@ -207,7 +243,13 @@ class SeedUpdater:
         """Waits for the stack's next round and returns this seed's results ([] for no step)."""
         if num_updates <= 0 or len(self.buffer) == 0:
             return []
-        return self.lockstep.meet(self.index, (int(num_updates), dict(timesteps)))
+        return self.lockstep.meet(self.index, (UPDATE, int(num_updates), dict(timesteps)))
+
+    def act(self, observation, explore: bool):
+        """The seed's action for `observation` from the stack's batched forward pass (its env runner's
+        `act_hook`): the exploration noise is drawn here, in the seed's turn, from its own stream."""
+        noise = torch.randn(1, self.stack.action_dim) if explore else None
+        return self.lockstep.meet(self.index, (ACT, observation, noise))
 
     def get_state(self) -> dict[str, Any]:
         return {"buffer": self.buffer.get_state()}

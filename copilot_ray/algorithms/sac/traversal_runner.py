@@ -36,7 +36,13 @@ from ray.rllib.utils.spaces.space_utils import clip_action, unsquash_action
 
 
 class TraversalEnvRunner(SingleAgentEnvRunner):
-    """`SingleAgentEnvRunner` whose episode sampling is one lean loop (module docstring)."""
+    """`SingleAgentEnvRunner` whose episode sampling is one lean loop (module docstring).
+
+    `act_hook(obs, explore) -> action` (default None: the module acts): where a stacked trial's seed
+    gets its actions instead, from one batched forward pass for all seeds of the stack
+    (`stacked_updates.SeedUpdater.act`)."""
+
+    act_hook = None
 
     @override(SingleAgentEnvRunner)
     def _sample(
@@ -78,12 +84,16 @@ class TraversalEnvRunner(SingleAgentEnvRunner):
             observations, infos, actions, rewards = [obs], [info], [], []
             terminated = truncated = False
             while not (terminated or truncated):
-                with torch.no_grad():
-                    batch = torch.from_numpy(np.asarray(obs, np.float32)[None]).to(self._device)
-                    dist = dist_class.from_logits(forward({Columns.OBS: batch})[Columns.ACTION_DIST_INPUTS])
-                    if not explore:
-                        dist = dist.to_deterministic()
-                    action = dist.sample()[0].cpu().numpy()
+                if self.act_hook is not None:
+                    action = self.act_hook(obs, explore)
+                else:
+                    with torch.no_grad():
+                        batch = torch.from_numpy(np.asarray(obs, np.float32)[None]).to(self._device)
+                        inputs = forward({Columns.OBS: batch})[Columns.ACTION_DIST_INPUTS]
+                        dist = dist_class.from_logits(inputs)
+                        if not explore:
+                            dist = dist.to_deterministic()
+                        action = dist.sample()[0].cpu().numpy()
                 obs, reward, terminated, truncated, info = env.step(for_env(action, space))
                 observations.append(obs)
                 infos.append(info)
