@@ -81,7 +81,12 @@ def test_each_job_draws_what_it_would_draw_alone():
         return dict.fromkeys(requests)
 
     together = Lockstep(_states(3), rounds)
+    torch.manual_seed(99)
+    callers = torch.rand(2)  # the caller's own stream goes on as if no job had run in between
+    torch.manual_seed(99)
+    torch.rand(1)
     out = together.run({i: _draws(together, i, meets=2 + i) for i in range(3)})
+    assert torch.rand(1).item() == callers[1].item()
     for i in range(3):
         alone = Lockstep([_states(3)[i]], rounds)
         assert alone.run({0: _draws(alone, 0, meets=2 + i)})[0].value == out[i].value

@@ -1,9 +1,11 @@
 """`SeedStackTrial`: seeds of one configuration trained together in one trial (spec `seeds_per_trial`).
 
-In-process (no Tune, no Ray cluster): a stack of seeds {0, 1} gives seed 1 exactly what a stack of seed
-1 alone gives it (its planner, traversal, evaluation and SAC updates: no draw of seed 0 leaks into it); a
-stack restored from its checkpoint continues as the stack that wrote it; a seed whose planner goes
-non-finite stops alone, named, while the other goes on.
+In-process (no Tune, no Ray cluster). With the updates stacked (a GPU's way, forced here on the CPU): a
+stack of seeds {0, 1} gives seed 1 exactly what a stack of seed 1 alone gives it (its planner,
+traversal, evaluation, actions and SAC updates: no draw of seed 0 leaks into it); a stack restored from
+its checkpoint continues as the stack that wrote it; a seed whose planner goes non-finite stops alone,
+named, while the other goes on. With each seed's own update (a CPU's way): seed 1 of a stack trains
+exactly as its one-seed trial.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import yaml
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray import keys
+from copilot_ray.tracking import result_metrics
 from copilot_ray.trials.seed_stack_trial import SeedStackTrial
 
 SPEC = {
@@ -58,10 +61,19 @@ def _trial(spec_path, seeds):
     return SeedStackTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEEDS_KEY: list(seeds)})
 
 
+@pytest.fixture
+def stacked_updates(monkeypatch):
+    """The stacked update and batched acting on this CPU (where a stack otherwise updates per seed)."""
+    monkeypatch.setattr(SeedStackTrial, "stack_updates", True)
+
+
+def _timing(key):
+    return any(t in key for t in TIMING) or key == keys.TIME_TOTAL_S
+
+
 def _figures(result, seed):
     """A seed's metrics that do not depend on the clock."""
-    metrics = result[keys.SEED_RESULTS][str(seed)]
-    return {k: v for k, v in metrics.items() if not any(t in k for t in TIMING) and k != keys.TIME_TOTAL_S}
+    return {k: v for k, v in result[keys.SEED_RESULTS][str(seed)].items() if not _timing(k)}
 
 
 def _assert_same(a, b, what):
@@ -75,7 +87,9 @@ def _weights(trial, index):
     return {k: v.detach().clone() for k, v in module.state_dict().items()}
 
 
-def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alone(tmp_path, monkeypatch):
+def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alone(
+    tmp_path, monkeypatch, stacked_updates
+):
     from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
 
     monkeypatch.setenv("COPILOT_RAY_FAULT", "planner_nan@3:seed=1")  # seed 1's planner breaks at iteration 3
@@ -127,7 +141,7 @@ def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alon
     assert math.isclose(top, third[keys.SEED_RESULTS]["0"][success])
 
 
-def test_a_stacked_her_seed_relabels_as_it_would_alone(tmp_path):
+def test_a_stacked_her_seed_relabels_as_it_would_alone(tmp_path, stacked_updates):
     """HER's relabelling buffer stacked: seed 1's hindsight goals, rewards and updates in a pair are its
     own (drawn from its generators), as in a stack of seed 1 alone."""
     her = {
@@ -154,3 +168,21 @@ def test_a_stacked_her_seed_relabels_as_it_would_alone(tmp_path):
     assert _figures(together, 0) != _figures(together, 1)
     pair.stop()
     alone.stop()
+
+
+def test_on_a_cpu_a_stacked_seed_trains_exactly_as_its_one_seed_trial(tmp_path):
+    """The CPU's default: no stacked update, each seed its own (in its turn, its own random state), so
+    seed 1 of a pair is its one-seed trial, figure for figure."""
+    from copilot_ray.algorithms.copilot.trial import CoPilotTrial
+
+    spec = _spec(tmp_path)
+    pair = _trial(spec, [0, 1])
+    assert pair.stack is None
+    own = CoPilotTrial(config={keys.SPEC_PATH_KEY: spec, keys.SEED_PARAM: 1})
+    for _ in range(2):
+        together, alone = pair.train(), own.train()
+        figures = {k: v for k, v in result_metrics(alone, rllib_timers=True).items() if not _timing(k)}
+        _assert_same(_figures(together, 1), figures, "seed 1 of a pair vs its one-seed trial")
+    assert together[keys.SEED_RESULTS]["1"][keys.AGENT_SAC_UPDATES] > 0
+    pair.stop()
+    own.stop()

@@ -94,7 +94,15 @@ class Lockstep:
 
     # ------------------------------------------------------------------ the coordinator
     def run(self, jobs: Mapping[int, Callable[[], Any]]) -> dict[int, Outcome]:
-        """Runs every job to its end, in turns; {job: Outcome}."""
+        """Runs every job to its end, in turns; {job: Outcome}. The caller's global random state is as
+        it was before (the jobs draw from theirs)."""
+        callers = RandomState.capture()
+        try:
+            return self._run(jobs)
+        finally:
+            callers.restore()
+
+    def _run(self, jobs: Mapping[int, Callable[[], Any]]) -> dict[int, Outcome]:
         outcomes: dict[int, Outcome] = {}
         threads = []
 

@@ -1,11 +1,14 @@
 """SeedStackTrial: one Tune trial that trains several seeds of one configuration together (a spec's
-`seeds_per_trial`), their SAC updates stacked into one (`algorithms.sac.stacked_updates`).
+`seeds_per_trial`), on a GPU their SAC updates stacked into one (`algorithms.sac.stacked_updates`).
 
 The trial's Tune config is a one-seed trial's with `_seeds: [s0, s1, ...]` in place of `seed`. It builds
 the algorithm's own trial class once per seed (its config with `seed: s`, its files under `seed_<s>/`),
 so each seed plans, traverses, evaluates and checkpoints exactly as a one-seed trial does; each
-iteration runs every seed's `train()` in turns (`trials.lockstep.Lockstep`), meeting for the stacked
-update.
+iteration runs every seed's `train()` in turns (`trials.lockstep.Lockstep`), each with its own global
+random state. Where the learner is on a GPU the seeds meet there at every env step (one batched forward
+pass for their actions) and at every update (one stacked update); on a CPU, where the stacked update
+measured slower than one seed's own, each seed updates and acts as its own trial would, so a stacked
+seed there trains exactly as its one-seed trial (tested).
 
 What it reports (`step`):
 * `keys.SEED_RESULTS`: {seed: that seed's metrics, as a one-seed trial logs them} (the MLflow callback
@@ -56,13 +59,33 @@ def _move_logdir(algo, logdir: Path) -> None:
         made.rmdir()
 
 
+def stacks_updates(algo, wanted: bool | None) -> bool:
+    """Whether a stack shares one stacked update: `wanted`, else where the learner is on a GPU."""
+    from copilot_ray.algorithms.sac.agent_updates import local_learner
+
+    if wanted is not None:
+        return bool(wanted)
+    return local_learner(algo.config, algo.learner_group).device.type == "cuda"
+
+
+def _no_rendezvous(requests):
+    raise RuntimeError(f"seeds {sorted(requests)} met though their updates are not stacked")
+
+
 def _reached(metrics: Mapping[str, float], stop: Mapping[str, int]) -> bool:
     """Whether a seed's metrics meet any of the stop criteria (Tune's rule: either one ends a trial)."""
     return any(metrics.get(key, -math.inf) >= value for key, value in stop.items())
 
 
 class SeedStackTrial(tune.Trainable):
-    """Several seeds of one configuration in one trial (module docstring)."""
+    """Several seeds of one configuration in one trial (module docstring).
+
+    `stack_updates`: whether the seeds share the stacked update and batched acting (True), or each
+    seed updates and acts as its own trial would, in its turn (False); None (default): stacked where
+    the learner is on a GPU, each its own on a CPU, where stacking measured slower
+    (docs/throughput/stacked_trial.md)."""
+
+    stack_updates: bool | None = None
 
     @classmethod
     def default_resource_request(cls, config):
@@ -87,9 +110,11 @@ class SeedStackTrial(tune.Trainable):
             self.algos.append(algo)
             # Seed i's global random state as its own setup left it: it continues from there.
             states.append(RandomState.capture())
-        self.stack = StackedAgentUpdates(self.algos)
-        self.lockstep = Lockstep(states, self.stack.run)
-        for i, algo in enumerate(self.algos):
+        self.stack = None
+        if stacks_updates(self.algos[0], self.stack_updates):
+            self.stack = StackedAgentUpdates(self.algos)
+        self.lockstep = Lockstep(states, self.stack.run if self.stack else _no_rendezvous)
+        for i, algo in enumerate(self.algos if self.stack else ()):
             algo.agent_updater = self.stack.view(i, self.lockstep)
             # every env step of every seed: one batched forward pass of the stacked actors
             algo.env_runner_group.local_env_runner.act_hook = algo.agent_updater.act
@@ -137,11 +162,13 @@ class SeedStackTrial(tune.Trainable):
 
     # ------------------------------------------------------------------ checkpoints
     def save_checkpoint(self, checkpoint_dir: str) -> None:
+        """Every seed's algorithm in `seed_<s>/`, and the stack's state (its weights and optimizer
+        state when its updates are stacked, the seeds' random states, their last metrics and errors)."""
         for seed, algo in zip(self.seeds, self.algos, strict=True):
             algo.save_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
         state = {
             "seeds": self.seeds,
-            "stack": self.stack.get_state(),
+            "stack": None if self.stack is None else self.stack.get_state(),
             "random": self.lockstep.states,
             "metrics": self.metrics,
             "errors": self.errors,
@@ -159,7 +186,15 @@ class SeedStackTrial(tune.Trainable):
             )
         for seed, algo in zip(self.seeds, self.algos, strict=True):
             algo.load_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
-        self.stack.set_state(state["stack"])  # after the algorithms: the stack's weights are the live ones
+        if (state["stack"] is None) != (self.stack is None):
+            raise ValueError(
+                "a checkpoint written with the seeds' updates "
+                + ("stacked" if state["stack"] is not None else "each its own")
+                + " cannot restore a stack that runs them "
+                + ("stacked" if self.stack is not None else "each its own")
+            )
+        if self.stack is not None:  # after the algorithms: the stack's weights are the live ones
+            self.stack.set_state(state["stack"])
         self.lockstep.states = list(state["random"])
         self.metrics = dict(state["metrics"])
         self.errors = dict(state["errors"])
