@@ -3,7 +3,9 @@ own trial, both in this process, CO-PILOT on the u-maze with one SAC update per 
 
     PYTHONPATH=. python benchmarks/stacked_trial.py [--stacks 2 4] [--iterations 4] [--rounds 2] [--gpu]
 
-Each row builds its trial (not timed), runs one iteration to warm up (the planner's warm start, SAC's
+Rows: one seed's own trial; then per stack size N, N seeds in one trial with each seed's own update (a
+CPU's default) and with one stacked update and batched acting (a GPU's default). Each row builds its
+trial (not timed), runs one iteration to warm up (the planner's warm start, SAC's
 learning start), then times `--iterations` iterations; rows alternate over `--rounds` so that a machine
 whose load drifts affects both alike. Printed per row: aggregate env steps/s (all its seeds) and per seed.
 
@@ -64,9 +66,10 @@ def _one_seed_trial(spec_path: str):
     return CoPilotTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEED_PARAM: 0})
 
 
-def _stacked_trial(spec_path: str, seeds: list[int]):
+def _stacked_trial(spec_path: str, seeds: list[int], stacked_update: bool):
     from copilot_ray.trials.seed_stack_trial import SeedStackTrial
 
+    SeedStackTrial.stack_updates = stacked_update
     return SeedStackTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEEDS_KEY: seeds})
 
 
@@ -114,11 +117,13 @@ def main() -> None:
         print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
         for n in args.stacks:
             seeds = list(range(n))
-            name = f"{n} seeds stacked"
-            rows.setdefault(name, []).append(
-                measure(_stacked_trial(_spec_file(directory, seeds, args.gpu), seeds), args.iterations)
-            )
-            print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
+            for stacked_update, how in ((False, "each its own update"), (True, "one stacked update")):
+                name = f"{n} seeds in one trial, {how}"
+                spec = _spec_file(directory, seeds, args.gpu)
+                rows.setdefault(name, []).append(
+                    measure(_stacked_trial(spec, seeds, stacked_update), args.iterations)
+                )
+                print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
     print("\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial |")
     print("|---|---|---|---|")
     base = sum(rows["one seed, its own trial"]) / args.rounds
