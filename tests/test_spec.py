@@ -805,7 +805,7 @@ def test_stacked_seeds_make_a_trial_per_group_and_say_so_in_the_plan():
     ]
     assert spec.budget()["trials"] == 4 and spec.budget()["env_steps"] == 4 * 2 * 10000  # every seed's budget
     plan = format_plan(spec)
-    assert "2 seeds per trial: each trial trains its seeds together" in plan
+    assert "2 seeds per trial: each trial trains its seeds in turns in one process" in plan
     assert "0, 1 | 2, 3" in plan
     if _has("ray"):
         space = to_tune_search_space(spec)

@@ -15,9 +15,9 @@
     search:                             # parameter -> one domain (same dotted keys as `config`)
       tree_depth: {grid: [1, 2, 3, 4, 5, 6]}
     seeds: [0, 1, 2]                    # every configuration runs once per seed
-    seeds_per_trial: 3                  # optional (default 1): seeds trained together in one trial, their
-                                        #   SAC updates stacked into one (grid, num_env_runners 0; the
-                                        #   SAC-agent methods); each seed is still its own MLflow run
+    seeds_per_trial: 3                  # optional (default 1): seeds trained together in one trial (grid,
+                                        #   num_env_runners 0; the SAC-agent methods), on a GPU their SAC
+                                        #   updates stacked into one; each seed is still its own MLflow run
     searcher: {type: grid}              # or {type: optuna, sampler: tpe, metric: ..., mode: max, ...}
     scheduler: {type: asha, max_t: 200000, grace_period: 20000, reduction_factor: 3}   # optional
     stop: {env_steps: 200000}           # and/or iterations
@@ -28,7 +28,9 @@
 
 Stacked seeds (``seeds_per_trial`` > 1): ``seeds`` is cut into consecutive groups of that size, one Tune
 trial per group and configuration (``copilot_ray.trials.seed_stack_trial``). The seeds take turns at their
-env steps and share one stacked SAC update; each seed's figures, MLflow run, tags, checkpoint folder and
+env steps; where the learner is on a GPU they share one stacked SAC update and one batched forward pass
+per env step, on a CPU each updates as its own trial would (so there it trains exactly as its one-seed
+trial). Each seed's figures, MLflow run, tags, checkpoint folder and
 failure are its own, so ``stages``, ``best_of``, ``progress``, ``carry`` and the report read a stacked
 sweep as an unstacked one. What Tune's scheduler and a stop criterion see of a stacked trial: the mean
 over its live seeds of every metric, except env steps, the fewest of any seed still running. A seed whose

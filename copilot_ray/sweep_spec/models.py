@@ -64,6 +64,9 @@ class BestOfSpec(_Model):
     chosen_from: str | None = None
 
 
+PLAN_SEEDS = "seeds"  # a stacked trial's seeds in `trial_plan()`
+
+
 class SweepSpec(_Model):
     name: str
     experiment: str | None = None
@@ -75,7 +78,7 @@ class SweepSpec(_Model):
     search: dict[str, ParamSearch] = Field(default_factory=dict)
     best_of: BestOfSpec | None = None
     seeds: list[int] = Field(default_factory=lambda: [0])
-    # Seeds trained together in one trial, their SAC updates stacked (consecutive groups of `seeds`);
+    # Seeds trained together in one trial, on a GPU their SAC updates stacked (consecutive groups of `seeds`);
     # 1: a trial per seed (copilot_ray.trials.seed_stack_trial).
     seeds_per_trial: int = 1
     searcher: SearcherSpec = Field(default_factory=SearcherSpec)
@@ -490,7 +493,9 @@ class SweepSpec(_Model):
         are drawn by Optuna while the sweep runs (one study per seed).
         """
         if self.searcher.type == "grid" and self.seeds_per_trial > 1:
-            return [{**point, "seeds": group} for point in self.grid_points() for group in self.seed_groups()]
+            return [
+                {**point, PLAN_SEEDS: group} for point in self.grid_points() for group in self.seed_groups()
+            ]
         if self.searcher.type == "grid":
             return [{**point, "seed": seed} for point in self.grid_points() for seed in self.seeds]
         return [
@@ -665,7 +670,9 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
         raise SpecError(
             [f"trial.{keys.ENV_PARAM}: {env_id!r} is invalid: the spec's envs are {spec.env.ids}"]
         )
-    trial = {k: v for k, v in flat.items() if k not in (keys.SEED_PARAM, keys.VARIANT_PARAM, keys.ENV_PARAM)}
+    # (a stacked trial's plan names its seeds, `seeds`: its config is its first seed's)
+    not_settings = (keys.SEED_PARAM, PLAN_SEEDS, keys.VARIANT_PARAM, keys.ENV_PARAM)
+    trial = {k: v for k, v in flat.items() if k not in not_settings}
     problems = [
         Issue(
             f"trial.{key}",
@@ -679,13 +686,13 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
     run = RunContext(
         env_id=env_id,
         env_config=dict(spec.env.config),
-        seed=flat.get(keys.SEED_PARAM, spec.seeds[0]),
+        seed=flat.get(keys.SEED_PARAM, (flat.get(PLAN_SEEDS) or spec.seeds)[0]),
         num_env_runners=spec.resources.num_env_runners,
         num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners,
         num_gpus=spec.resources.gpus_per_trial,
         env_step_budget=spec.stop.env_steps,
     )
-    return entry.build_config(spec.merged(flat), run)
+    return entry.build_config(spec.merged({k: v for k, v in flat.items() if k != PLAN_SEEDS}), run)
 
 
 def _test_metric_problem(metric: str, scheduler: SchedulerSpec | None) -> str:

@@ -78,8 +78,8 @@ def _what_runs(spec: SweepSpec) -> list[str]:
         lines.append(f"  grid: {len(points)} configuration(s) x {len(spec.seeds)} seed(s)")
         if spec.seeds_per_trial > 1:
             lines.append(
-                f"  {spec.seeds_per_trial} seeds per trial: each trial trains its seeds together, their SAC "
-                "updates stacked into one (each seed still its own MLflow run)"
+                f"  {spec.seeds_per_trial} seeds per trial: each trial trains its seeds in turns in one "
+                "process, on a GPU with one stacked SAC update (each seed still its own MLflow run)"
             )
         for row in [header, *rows]:
             lines.append(
