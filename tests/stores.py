@@ -115,7 +115,7 @@ class _OnImport(importlib.abc.MetaPathFinder):
 def copy_a_migrated_store_into_new_stores(directory: str) -> None:
     """From now on in this process a new SQLite store is a copy of one migrated store kept in
     ``directory`` (made on first use)."""
-    os.environ.setdefault(TEMPLATE_ENV, os.path.join(directory, "migrated-mlflow.db"))
+    os.environ[TEMPLATE_ENV] = os.path.join(directory, "migrated-mlflow.db")
     if _UTILS in sys.modules:
         _copy_migrated_template(sys.modules[_UTILS])
     elif not any(isinstance(f, _OnImport) for f in sys.meta_path):
