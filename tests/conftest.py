@@ -5,11 +5,17 @@ import tempfile
 
 import pytest
 
+from tests import stores
+
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 # The RRT* reference cache (copilot_ray.planning.path_metrics) of this test session, set before Ray starts
 # so that trial workers see it too; never the user's ~/.cache.
 os.environ["COPILOT_RAY_CACHE"] = tempfile.mkdtemp(prefix="copilot_ray_test_cache_")
 atexit.register(shutil.rmtree, os.environ["COPILOT_RAY_CACHE"], True)
+# MLflow's new SQLite stores in this process: copies of one store migrated once (tests/stores.py)
+_STORE_TEMPLATE = tempfile.mkdtemp(prefix="copilot_ray_test_mlflow_")
+atexit.register(shutil.rmtree, _STORE_TEMPLATE, True)
+stores.copy_a_migrated_store_into_new_stores(_STORE_TEMPLATE)
 
 
 @pytest.fixture(scope="session")

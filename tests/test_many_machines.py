@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -29,6 +30,7 @@ from copilot_ray.keys import (
     ROLE_TRIAL,
     TREES_DIR,
 )
+from tests import stores
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.ray
@@ -61,6 +63,8 @@ def _free_port() -> int:
 def mlflow_server(tmp_path):
     port = _free_port()
     artifacts = tmp_path / "server_artifacts"
+    # the session's migrated empty store: the server opens it instead of migrating one of its own
+    shutil.copy(stores.migrated_store(), tmp_path / "server.db")
     mlflow = Path(sys.executable).with_name("mlflow")
     proc = subprocess.Popen(
         [str(mlflow), "server", "--backend-store-uri", f"sqlite:///{tmp_path / 'server.db'}",
