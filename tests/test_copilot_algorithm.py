@@ -180,7 +180,7 @@ def test_the_last_iteration_ends_at_the_repetition_that_reaches_the_budget(ray_s
     first of b = 2): a method with long iterations does not run far past a shared budget. The budget
     comes from the run (a sweep's stop.env_steps, train's --stop-env-steps)."""
     from copilot_ray.registry import RunContext
-    from copilot_ray.sweep_spec.models import build_algorithm_config, parse_spec
+    from copilot_ray.sweep_spec import build_algorithm_config, parse_spec
 
     assert CoPilotConfig.from_settings({}, RunContext("maze-point", env_step_budget=7)).env_step_budget == 7
     spec = parse_spec(

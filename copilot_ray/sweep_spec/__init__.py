@@ -89,14 +89,8 @@ objects).
 """
 
 from copilot_ray.sweep_spec.errors import SpecError
-from copilot_ray.sweep_spec.models import (
-    SweepSpec,
-    build_algorithm_config,
-    load_spec,
-    load_specs,
-    metric_known,
-    parse_spec,
-)
+from copilot_ray.sweep_spec.loading import load_spec, load_specs, parse_spec
+from copilot_ray.sweep_spec.models import SweepSpec, build_algorithm_config, metric_known
 from copilot_ray.sweep_spec.plan import default_point, format_plan
 from copilot_ray.sweep_spec.sections import ParamSearch
 from copilot_ray.sweep_spec.tune_translation import (
