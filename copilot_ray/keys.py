@@ -203,6 +203,7 @@ SEED_PARAM = "seed"  # also the MLflow param
 # each seed's metrics under SEED_RESULTS ({seed: {metric: value}}) and its failed seeds' errors under
 # SEED_ERRORS ({seed: error}); copilot_ray.trials.seed_stack_trial.
 SEEDS_KEY = "_seeds"
+PLAN_SEEDS = "seeds"  # a stacked trial's seeds in a spec's `trial_plan()` (not a setting)
 SEED_RESULTS = "seed_results"
 SEED_ERRORS = "seed_errors"
 VARIANT_PARAM = "variant"

@@ -74,9 +74,12 @@ def flatten(d: Mapping[str, Any], prefix: str = "", sep: str = "/") -> dict[str,
     return out
 
 
-def metrics_from_result(result: Mapping[str, Any], rllib_timers: bool = False) -> dict[str, float]:
+def metrics_from_result(
+    result: Mapping[str, Any], rllib_timers: bool = False, keep_nan: bool = False
+) -> dict[str, float]:
     """The numeric metrics worth tracking from an RLlib result dict (flattened with '/'); RLlib's own
-    timers and throughputs only with `rllib_timers`."""
+    timers and throughputs only with `rllib_timers`; NaN values (a figure not measured yet) only with
+    `keep_nan`."""
     flat = flatten(result)
     out = {}
     for key, value in flat.items():
@@ -84,7 +87,7 @@ def metrics_from_result(result: Mapping[str, Any], rllib_timers: bool = False) -
             continue
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue
-        if value != value:  # NaN: MLflow accepts it, but it breaks comparisons in the UI
+        if value != value and not keep_nan:  # NaN: MLflow accepts it, but it breaks the UI's comparisons
             continue
         out[key] = float(value)
     return out
@@ -361,9 +364,11 @@ def _log_params(client, run_id: str, params: Mapping[str, str]) -> None:
 
 
 # ------------------------------------------------------------------------------- a sweep's child runs
-def result_metrics(result: Mapping[str, Any], rllib_timers: bool = False) -> dict[str, float]:
+def result_metrics(
+    result: Mapping[str, Any], rllib_timers: bool = False, keep_nan: bool = False
+) -> dict[str, float]:
     """What a trial logs per result: ``metrics_from_result`` plus Tune's wall time and iteration."""
-    metrics = metrics_from_result(result, rllib_timers)
+    metrics = metrics_from_result(result, rllib_timers, keep_nan)
     for key in (TIME_TOTAL_S, TRAINING_ITERATION):
         if isinstance(result.get(key), int | float):
             metrics[key] = float(result[key])

@@ -150,6 +150,15 @@ def test_parts_that_tune_get_the_same_tuning_budget(tmp_path):
     assert "c search nothing while other parts tune" in text
 
 
+def test_a_part_whose_seeds_share_trials_has_the_tuning_budget_of_one_whose_seeds_do_not(tmp_path):
+    """Two grids of 2 configurations x 2 seeds: 4 trials, or 2 trials of 2 stacked seeds; the same
+    budget per seed either way."""
+    grid = {"search": {"actor_lr": {"grid": [1e-4, 1e-3]}}, "seeds": [0, 1]}
+    stacked = {**grid, "seeds_per_trial": 2, "resources": {"num_env_runners": 0}}
+    specs = load_specs(write(tmp_path, part("a", **grid), part("b", "sac", **stacked)))
+    assert [len(s.trial_plan()) for s in specs] == [4, 2]
+
+
 def test_another_env_config_is_another_comparison_refused_in_one_experiment(tmp_path):
     other = {"id": "maze-point", "config": {"layout": "empty", "goal_reward": 2.0}}
     text = problems(write(tmp_path, part("a"), part("b", "sac", env=other)))

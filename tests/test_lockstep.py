@@ -1,6 +1,9 @@
 """`trials.lockstep.Lockstep`: jobs in turns, one round per rendezvous, per-job random streams, a failing
 job stopping alone. No Ray."""
 
+import random
+import threading
+
 import numpy as np
 import pytest
 import torch
@@ -13,6 +16,7 @@ def _states(n, base=7):
     for i in range(n):
         torch.manual_seed(base + i)
         np.random.seed(base + i)
+        random.seed(base + i)
         states.append(RandomState.capture())
     return states
 
@@ -64,20 +68,21 @@ def _draws(lockstep, index, meets):
     def run():
         out = []
         for k in range(meets):
-            out.append((torch.rand(3).tolist(), np.random.rand(2).tolist()))
+            out.append((torch.rand(3).tolist(), np.random.rand(2).tolist(), random.random()))
             lockstep.meet(index, k)
-        out.append((torch.rand(3).tolist(), np.random.rand(2).tolist()))
+        out.append((torch.rand(3).tolist(), np.random.rand(2).tolist(), random.random()))
         return out
 
     return run
 
 
 def test_each_job_draws_what_it_would_draw_alone():
-    """Global torch and numpy draws of job i in a lockstep of three equal its draws running alone
+    """Global torch, numpy and Python `random` draws of job i in a lockstep of three equal its draws running alone
     from the same state, however the others draw in between."""
 
     def rounds(requests):
         torch.rand(5)  # a round that (wrongly) draws from the globals does not move a job's streams
+        random.random()
         return dict.fromkeys(requests)
 
     together = Lockstep(_states(3), rounds)
@@ -115,3 +120,25 @@ def test_a_job_that_raises_stops_alone_and_a_failing_round_reaches_every_parked_
     for i in range(2):
         with pytest.raises(RuntimeError, match="the stacked update failed"):
             raise outcomes[i].error
+    # each job raised its own copy (one object raised in two threads would carry both tracebacks)
+    first, second = outcomes[0].error, outcomes[1].error
+    assert first is not second and first.__cause__ is second.__cause__
+    assert str(first.__cause__) == "the stacked update failed"
+
+
+def test_a_job_whose_random_state_cannot_be_restored_fails_alone_without_a_hang():
+    states = _states(2)
+    states[1].torch_state = torch.zeros(3, dtype=torch.uint8)  # not a generator state
+    lockstep = Lockstep(states, lambda requests: dict.fromkeys(requests, "ok"))
+    outcomes = {}
+    runner = threading.Thread(
+        target=lambda: outcomes.update(
+            lockstep.run({i: _job(lockstep, i, {0: 2, 1: 2}, []) for i in range(2)})
+        ),
+        daemon=True,
+    )
+    runner.start()
+    runner.join(timeout=30)
+    assert not runner.is_alive(), "the lockstep hung on a job that could not start"
+    assert outcomes[0].value == ["ok", "ok"]
+    assert isinstance(outcomes[1].error, RuntimeError)

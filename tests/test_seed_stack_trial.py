@@ -1,6 +1,7 @@
 """`SeedStackTrial`: seeds of one configuration trained together in one trial (spec `seeds_per_trial`).
 
-In-process (no Tune, no Ray cluster). With the updates stacked (a GPU's way, forced here on the CPU): a
+In-process, without Tune (on the session's Ray: building an RLlib algorithm puts its config there, and
+would otherwise start a Ray of its own). With the updates stacked (a GPU's way, forced here on the CPU): a
 stack of seeds {0, 1} gives seed 1 exactly what a stack of seed 1 alone gives it (its planner,
 traversal, evaluation, actions and SAC updates: no draw of seed 0 leaks into it); a stack restored from
 its checkpoint continues as the stack that wrote it; a seed whose planner goes non-finite stops alone,
@@ -88,7 +89,7 @@ def _weights(trial, index):
 
 
 def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alone(
-    tmp_path, monkeypatch, stacked_updates
+    ray_session, tmp_path, monkeypatch, stacked_updates
 ):
     from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
 
@@ -100,6 +101,10 @@ def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alon
     pair = _trial(spec, [0, 1])
     first = pair.train()
     assert [0, 1] in acting  # both seeds' env steps went through one forward pass
+    # seed 0 as if 3 of its steps had gone non-finite, counted by the stack and logged by its learner:
+    # a restored stack must not log them again (its learner's count starts anew)
+    pair.stack.step.skipped[0] += 3
+    pair.stack.learners[0].note_skipped_logged(int(pair.stack.step.skipped[0]))
     checkpoint = pair.save(str(tmp_path / "checkpoint"))
     second = pair.train()
     pair_weights = _weights(pair, 1)
@@ -141,7 +146,7 @@ def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alon
     assert math.isclose(top, third[keys.SEED_RESULTS]["0"][success])
 
 
-def test_a_stacked_her_seed_relabels_as_it_would_alone(tmp_path, stacked_updates):
+def test_a_stacked_her_seed_relabels_as_it_would_alone(ray_session, tmp_path, stacked_updates):
     """HER's relabelling buffer stacked: seed 1's hindsight goals, rewards and updates in a pair are its
     own (drawn from its generators), as in a stack of seed 1 alone."""
     her = {
@@ -170,7 +175,7 @@ def test_a_stacked_her_seed_relabels_as_it_would_alone(tmp_path, stacked_updates
     alone.stop()
 
 
-def test_on_a_cpu_a_stacked_seed_trains_exactly_as_its_one_seed_trial(tmp_path):
+def test_on_a_cpu_a_stacked_seed_trains_exactly_as_its_one_seed_trial(ray_session, tmp_path):
     """The CPU's default: no stacked update, each seed its own (in its turn, its own random state), so
     seed 1 of a pair is its one-seed trial, figure for figure."""
     from copilot_ray.algorithms.copilot.trial import CoPilotTrial

@@ -27,6 +27,7 @@ from copilot_ray.sweep_spec import (
     to_tune_search_space,
     tune_stop,
 )
+from copilot_ray.trials.description import config_key
 
 ROOT = Path(__file__).resolve().parents[1]
 SWEEPS = sorted((ROOT / "sweeps").glob("*.yaml"))
@@ -783,6 +784,15 @@ def test_a_spec_with_mistakes_in_several_sections_gets_them_all_in_one_report():
             {"seeds_per_trial": 2, "resources": {"num_env_runners": 1}},
             "needs resources.num_env_runners 0, got 1",
         ),
+        (  # the GPU's stacked update is the fast learner's step (on a CPU each seed updates on its own)
+            {
+                "seeds_per_trial": 2,
+                "config": {"tree_depth": 2, "fast_learner": False},
+                "resources": {"num_env_runners": 0, "gpus_per_trial": 1},
+            },
+            "on a GPU (resources.gpus_per_trial 1) the stacked update needs fast_learner: true, and it is "
+            "false in: repetitions=1, repetitions=2",
+        ),
     ],
 )
 def test_stacked_seeds_are_refused_where_a_stack_cannot_run(changes, expected):
@@ -790,6 +800,8 @@ def test_stacked_seeds_are_refused_where_a_stack_cannot_run(changes, expected):
     if "searcher" in changes:
         data["search"] = {"repetitions": {"int": [1, 2]}}
     assert expected in rejected(data)
+    if "gpus_per_trial" in str(changes):
+        parse_spec({**data, "resources": {"num_env_runners": 0}}, "x.yaml")  # on a CPU it runs
 
 
 def test_stacked_seeds_make_a_trial_per_group_and_say_so_in_the_plan():
@@ -804,6 +816,8 @@ def test_stacked_seeds_make_a_trial_per_group_and_say_so_in_the_plan():
         {"repetitions": 2, "seeds": [2, 3]},
     ]
     assert spec.budget()["trials"] == 4 and spec.budget()["env_steps"] == 4 * 2 * 10000  # every seed's budget
+    # a trial's configuration is its searched values; its seeds are not part of it
+    assert sorted({config_key(point) for point in spec.trial_plan()}) == ["repetitions=1", "repetitions=2"]
     plan = format_plan(spec)
     assert "2 seeds per trial: each trial trains its seeds in turns in one process" in plan
     assert "0, 1 | 2, 3" in plan

@@ -33,7 +33,8 @@ per env step, on a CPU each updates as its own trial would (so there it trains e
 trial). Each seed's figures, MLflow run, tags, checkpoint folder and
 failure are its own, so ``stages``, ``best_of``, ``progress``, ``carry`` and the report read a stacked
 sweep as an unstacked one. What Tune's scheduler and a stop criterion see of a stacked trial: the mean
-over its live seeds of every metric, except env steps, the fewest of any seed still running. A seed whose
+over its live seeds of every metric (NaN while none has measured it, as a one-seed trial reports a
+figure before its first evaluation), except env steps, the fewest of any seed still running. A seed whose
 iteration raises stops alone (its run FAILED with the error) and is not retried.
 
 ``env.id`` may be a list: every configuration runs on each env (trial param ``env.id``, grid only). A file

@@ -167,6 +167,10 @@ def _differences(experiment: str, parts: list[SweepSpec]) -> list[str]:
     if len(searching) > 1:
         parts = searching
         differ("searcher.type", lambda p: p.searcher.type, "every method gets the same tuning budget")
-        differ("trials per seed", lambda p: len(p.trial_plan()) // len(p.seeds), "the same tuning budget")
+        differ(
+            "trials per seed",
+            lambda p: len(p.trial_plan()) * p.seeds_per_trial // len(p.seeds),
+            "the same tuning budget",
+        )
         differ("seeds", lambda p: list(p.seeds), "every method is tuned on the same seeds")
     return out

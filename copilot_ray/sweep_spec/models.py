@@ -62,7 +62,8 @@ class BestOfSpec(_Model):
     chosen_from: str | None = None
 
 
-PLAN_SEEDS = "seeds"  # a stacked trial's seeds in `trial_plan()`
+PLAN_SEEDS = keys.PLAN_SEEDS
+FAST_LEARNER = "fast_learner"  # the agent setting a GPU stack's update needs (algorithms/sac/settings.py)
 
 
 class SweepSpec(_Model):
@@ -333,6 +334,19 @@ class SweepSpec(_Model):
                     "seeds step their envs in the trial's own process)",
                 )
             ]
+        # On a GPU the seeds share one stacked update, which is the fast learner's step (on a CPU each
+        # seed updates as its own trial would, so any learner runs there).
+        slow = [p for p in self.grid_points() if self.merged(p).get(FAST_LEARNER) is False]
+        if self.resources.gpus_per_trial > 0 and slow:
+            named = ", ".join(sorted({_point_label(p) for p in slow}))
+            return [
+                Issue(
+                    where,
+                    n,
+                    f"on a GPU (resources.gpus_per_trial {_number(self.resources.gpus_per_trial)}) the "
+                    f"stacked update needs {FAST_LEARNER}: true, and it is false in: {named}",
+                )
+            ]
         return []
 
     def seed_groups(self) -> list[list[int]]:
@@ -515,6 +529,11 @@ class SweepSpec(_Model):
 
 
 ParamSearch.model_rebuild()
+
+
+def _point_label(point: Mapping[str, Any]) -> str:
+    """A grid point as `key=value,...`, or `config` for the spec's fixed configuration alone."""
+    return ",".join(f"{k}={v}" for k, v in sorted(point.items())) or "config"
 
 
 def _all_params(params: Mapping[str, ParamSearch]) -> list[tuple[str, ParamSearch]]:

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from copilot_ray.keys import ENV_PARAM, SEED_PARAM, SEEDS_KEY, SPEC_PATH_KEY, VARIANT_PARAM
+from copilot_ray.keys import ENV_PARAM, PLAN_SEEDS, SEED_PARAM, SEEDS_KEY, SPEC_PATH_KEY, VARIANT_PARAM
 from copilot_ray.registry import get_algorithm
 from copilot_ray.sweep_spec import build_algorithm_config, load_spec
 
@@ -65,8 +65,8 @@ def _fmt_value(value: Any) -> str:
 
 
 def config_key(flat: Mapping[str, Any]) -> str:
-    """Names a configuration without its seed: sorted ``key=value`` of the searched params, or ``default``."""
-    items = sorted((k, v) for k, v in flat.items() if k != SEED_PARAM)
+    """Names a configuration without its seed (or a stack's seeds): sorted ``key=value`` of the searched params, or ``default``."""
+    items = sorted((k, v) for k, v in flat.items() if k not in (SEED_PARAM, PLAN_SEEDS))
     return ",".join(f"{k}={_fmt_value(v)}" for k, v in items) or "default"
 
 

@@ -7,12 +7,13 @@ finishes or raises. Once every unfinished job is parked at a rendezvous, the coo
 `on_round(requests)` once for all of them (the stacked SAC update) and hands each job its answer on its
 next turn. So the interleaving is the same on every run, whatever the threads' timing.
 
-Global random state is per job: torch's CPU generator and numpy's legacy global state are saved when a
-job gives the baton back and restored when it takes it again (each job starts from the state it was
+Global random state is per job: torch's CPU generator (and its CUDA ones, once CUDA is in use), numpy's
+legacy global state and Python's `random` are saved when a job gives the baton back and restored when it takes it again (each job starts from the state it was
 built with, `states[i]`). A job therefore draws exactly what it would draw running alone, whatever the
 other jobs draw in between: seed i of a stack acts as seed i alone.
 
-A job that raises is finished with its exception (`Outcome.error`); the others go on.
+A job that raises is finished with its exception (`Outcome.error`); the others go on. A round that
+raises fails every job parked at it, each with its own copy of the error (its cause the original).
 
 Why turns rather than parallel threads: a CPU has no parallelism to gain here (the update is one
 stacked call, and the env stepping is Python under one lock), and turns make a stack reproducible.
@@ -20,6 +21,8 @@ stacked call, and the env stepping is Python under one lock), and turns make a s
 
 from __future__ import annotations
 
+import copy
+import random
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -39,18 +42,26 @@ class Outcome:
 
 @dataclass
 class RandomState:
-    """The process-global random state a job draws from (torch's CPU generator, numpy's legacy one)."""
+    """The process-global random state a job draws from: torch's CPU generator and, where CUDA has been
+    initialised, its CUDA generators; numpy's legacy global state; Python's `random`."""
 
     torch_state: torch.Tensor
     numpy_state: tuple
+    python_state: tuple | None = None
+    cuda_states: list[torch.Tensor] | None = None
 
     @classmethod
     def capture(cls) -> RandomState:
-        return cls(torch.get_rng_state(), np.random.get_state())
+        cuda = torch.cuda.get_rng_state_all() if torch.cuda.is_initialized() else None
+        return cls(torch.get_rng_state(), np.random.get_state(), random.getstate(), cuda)
 
     def restore(self) -> None:
         torch.set_rng_state(self.torch_state)
         np.random.set_state(self.numpy_state)
+        if self.python_state is not None:
+            random.setstate(self.python_state)
+        if self.cuda_states is not None and torch.cuda.is_initialized():
+            torch.cuda.set_rng_state_all(self.cuda_states)
 
 
 class Lockstep:
@@ -84,7 +95,7 @@ class Lockstep:
             self.states[job].restore()
             answer = self._answers.pop(job)
         if isinstance(answer, Exception):
-            raise answer
+            raise _own_copy(answer) from answer
         return answer
 
     def _give_back(self, job: int) -> None:
@@ -109,9 +120,9 @@ class Lockstep:
         def body(job: int, fn: Callable[[], Any]) -> None:
             with self._cond:
                 self._cond.wait_for(lambda: self._turn == job)
-                self.states[job].restore()
             outcome = Outcome()
-            try:
+            try:  # (a state that cannot be restored fails this job, which still gives the baton back)
+                self.states[job].restore()
                 outcome.value = fn()
             except BaseException as err:  # noqa: BLE001 - a job's failure is its outcome, not the trial's
                 outcome.error = err
@@ -157,3 +168,12 @@ class Lockstep:
             self._turn = job
             self._cond.notify_all()
             self._cond.wait_for(lambda: self._turn is None)
+
+
+def _own_copy(error: Exception) -> Exception:
+    """A copy of a round's error for one parked job to raise: the jobs share the error, and raising one
+    object from several threads would pile their tracebacks onto it."""
+    try:
+        return copy.copy(error)
+    except Exception:  # noqa: BLE001 - an exception type that cannot be copied: the text, its type named
+        return RuntimeError(f"{type(error).__name__}: {error}")

@@ -68,6 +68,9 @@ def stacks_updates(algo, wanted: bool | None) -> bool:
     return local_learner(algo.config, algo.learner_group).device.type == "cuda"
 
 
+_COUNTERS = ("_iteration", "_time_total", "_timesteps_total", "_episodes_total")
+
+
 def _no_rendezvous(requests):
     raise RuntimeError(f"seeds {sorted(requests)} met though their updates are not stacked")
 
@@ -118,7 +121,11 @@ class SeedStackTrial(tune.Trainable):
             algo.agent_updater = self.stack.view(i, self.lockstep)
             # every env step of every seed: one batched forward pass of the stacked actors
             algo.env_runner_group.local_env_runner.act_hook = algo.agent_updater.act
-        self.metrics: dict[int, dict[str, float]] = {}  # seed index -> its last metrics
+        self.metrics: dict[int, dict[str, float]] = {}  # seed index -> its last metrics (no NaN)
+        # Every metric a seed has reported, NaN ones included: a one-seed trial reports its evaluation
+        # figures as NaN before its first evaluation so that Tune's strict metric check (a scheduler's
+        # metric) finds them in every result; the stack's result must too.
+        self.reported: set[str] = set()
         self.errors: dict[int, str] = {}  # seed index -> why it stopped
         self.finished: set[int] = set()  # seed indices that reached the stop criterion
 
@@ -130,7 +137,9 @@ class SeedStackTrial(tune.Trainable):
                 self.errors[i] = f"{type(outcome.error).__name__}: {outcome.error}"
                 logger.error("seed %d stopped: %s", self.seeds[i], self.errors[i], exc_info=outcome.error)
                 continue
-            self.metrics[i] = result_metrics(outcome.value, rllib_timers=True)
+            reported = result_metrics(outcome.value, rllib_timers=True, keep_nan=True)
+            self.reported.update(reported)
+            self.metrics[i] = {k: v for k, v in reported.items() if not math.isnan(v)}
             if _reached(self.metrics[i], self.stop_at):
                 self.finished.add(i)
         if len(self.errors) == len(self.seeds):
@@ -142,14 +151,13 @@ class SeedStackTrial(tune.Trainable):
 
     def _result(self) -> dict[str, Any]:
         alive = [i for i in self.metrics if i not in self.errors]
-        keys_seen = sorted({k for i in alive for k in self.metrics[i]})
+        keys_seen = sorted(self.reported | {k for i in alive for k in self.metrics[i]})
         skip = (keys.TRAINING_ITERATION, keys.TIME_TOTAL_S)
-        mean = {
-            k: sum(self.metrics[i][k] for i in alive if k in self.metrics[i])
-            / sum(1 for i in alive if k in self.metrics[i])
-            for k in keys_seen
-            if k not in skip
-        }
+        mean = {}
+        for k in keys_seen:
+            values = [self.metrics[i][k] for i in alive if k in self.metrics[i]]
+            if k not in skip:  # NaN where no live seed has measured it yet, as a one-seed trial reports it
+                mean[k] = sum(values) / len(values) if values else math.nan
         still = [i for i in alive if i not in self.finished] or alive
         mean[keys.ENV_STEPS] = min(self.metrics[i].get(keys.ENV_STEPS, 0.0) for i in still)
         result = nested(mean)
@@ -171,8 +179,12 @@ class SeedStackTrial(tune.Trainable):
             "stack": None if self.stack is None else self.stack.get_state(),
             "random": self.lockstep.states,
             "metrics": self.metrics,
+            "reported": sorted(self.reported),
             "errors": self.errors,
             "finished": sorted(self.finished),
+            # what `Trainable.restore` would restore of each seed's own counters (its iteration comes
+            # back with RLlib's state, its wall time would restart at 0)
+            "counters": [{name: getattr(algo, name) for name in _COUNTERS} for algo in self.algos],
         }
         with open(Path(checkpoint_dir) / _STATE_FILE, "wb") as f:
             pickle.dump(state, f)
@@ -184,8 +196,6 @@ class SeedStackTrial(tune.Trainable):
             raise ValueError(
                 f"a checkpoint of seeds {state['seeds']} cannot restore a stack of seeds {self.seeds}"
             )
-        for seed, algo in zip(self.seeds, self.algos, strict=True):
-            algo.load_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
         if (state["stack"] is None) != (self.stack is None):
             raise ValueError(
                 "a checkpoint written with the seeds' updates "
@@ -193,13 +203,28 @@ class SeedStackTrial(tune.Trainable):
                 + " cannot restore a stack that runs them "
                 + ("stacked" if self.stack is not None else "each its own")
             )
+        for seed, algo in zip(self.seeds, self.algos, strict=True):
+            algo.load_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
+        for algo, counters in zip(self.algos, state.get("counters") or (), strict=False):
+            for name, value in counters.items():
+                setattr(algo, name, value)
         if self.stack is not None:  # after the algorithms: the stack's weights are the live ones
             self.stack.set_state(state["stack"])
         self.lockstep.states = list(state["random"])
         self.metrics = dict(state["metrics"])
+        self.reported = set(state.get("reported", ()))
         self.errors = dict(state["errors"])
         self.finished = set(state["finished"])
 
     def cleanup(self) -> None:
+        """Stops every seed's algorithm, each even if another's stop raises (the first error is raised
+        once all have stopped)."""
+        failed = None
         for algo in self.algos:
-            algo.stop()
+            try:
+                algo.stop()
+            except Exception as err:  # noqa: BLE001 - the other seeds' env runners must still stop
+                failed = failed or err
+        self.stack = None
+        if failed is not None:
+            raise failed

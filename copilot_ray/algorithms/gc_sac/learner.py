@@ -313,6 +313,11 @@ class GCSACTorchLearner(SACTorchLearner):
         self.after_gradient_based_update(timesteps=timesteps or {})
         return self.metrics.reduce()
 
+    def note_skipped_logged(self, skipped_total: int, module_id: str = DEFAULT_MODULE_ID) -> None:
+        """The non-finite steps skipped outside this learner so far (`log_outside_update`'s
+        `skipped_total`) are already logged: a stack restored from a checkpoint says so."""
+        self._skipped_read[module_id] = int(skipped_total)
+
     def _log_step_figures(
         self, module_id: str, figures: dict[str, float], skipped_total: int, steps: int, batch: int
     ) -> None:

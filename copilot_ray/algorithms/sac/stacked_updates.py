@@ -206,6 +206,10 @@ class StackedAgentUpdates:
         for g, g_state in zip(self.samplers, state["samplers"], strict=True):
             g.set_state(g_state)
         self.agents.write_to(self.modules, self.log_alphas)
+        # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint,
+        # so a learner counts only the steps skipped from here on (its own count restarts with it).
+        for learner, skipped in zip(self.learners, self.step.skipped.cpu().tolist(), strict=True):
+            learner.note_skipped_logged(int(skipped))
 
 
 def _stacked_replay(algos: Sequence[Any], module, device: torch.device):
