@@ -457,7 +457,9 @@ class TrialRuns:
         if not found:
             return None
         run_id = found[0].info.run_id
-        if found[0].info.status != "RUNNING":
+        if seed is not None and found[0].info.status == "FAILED":
+            self._failed.add(run_id)  # a stacked seed that failed stays ended (its trial goes on)
+        elif found[0].info.status != "RUNNING":
             self.client.update_run(run_id, status="RUNNING")
         history = self.client.get_metric_history(run_id, TRAINING_ITERATION)
         self._last_step[run_id] = max((m.step for m in history), default=-1)

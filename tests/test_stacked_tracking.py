@@ -69,12 +69,17 @@ def test_each_stacked_seed_is_its_own_run_and_a_failed_seed_ends_alone(tmp_path)
     # a new driver (--resume) finds both runs again; the replayed iteration 2 adds no row
     resumed = tracking.TrialRuns(uri, exp_id, spec.name, parent)
     resumed.open(trial)
+    client = tracking._client(uri)
+    assert client.get_run(resumed.run_id(trial, 5)).info.status == "FAILED"  # not reopened
+    resumed.kill_unfinished([trial])  # an interrupt now: seed 3's run waits KILLED, seed 5's stays FAILED
+    assert client.get_run(resumed.run_id(trial, 5)).info.status == "FAILED"
+    resumed = tracking.TrialRuns(uri, exp_id, spec.name, parent)
+    resumed.open(trial)
     resumed.log_result(trial, _result(2, errors=("5",)))
     resumed.log_result(trial, _result(3, errors=("5",)))
     trial.last_result = {**_result(3, errors=("5",)), "done": True}
     resumed.finish(trial, "FINISHED")
 
-    client = tracking._client(uri)
     children = [r for r in client.search_runs([exp_id]) if r.data.tags.get(keys.ROLE_TAG) == keys.ROLE_TRIAL]
     by_seed = {r.data.tags[keys.SEED_TAG]: r for r in children}
     assert sorted(by_seed) == ["3", "5"] and len(children) == 2  # one run per seed, none twice

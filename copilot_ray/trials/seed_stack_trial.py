@@ -171,7 +171,12 @@ class SeedStackTrial(tune.Trainable):
     # ------------------------------------------------------------------ checkpoints
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         """Every seed's algorithm in `seed_<s>/`, and the stack's state (its weights and optimizer
-        state when its updates are stacked, the seeds' random states, their last metrics and errors)."""
+        state when its updates are stacked, the seeds' random states, their last metrics and errors).
+
+        A seed's folder alone is not that seed's whole state: its global random state is in the stack's
+        file, and with stacked updates so are its optimizer's moments (its learner's are never
+        stepped). A stack restores from the whole checkpoint; its seeds' folders are what MLflow keeps
+        of each run for reading its weights."""
         for seed, algo in zip(self.seeds, self.algos, strict=True):
             algo.save_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
         state = {
