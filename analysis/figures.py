@@ -36,8 +36,9 @@ from . import stats  # noqa: E402
 from .aggregate import ConfigSummary, CurveSummary  # noqa: E402
 
 TITLES = {
-    EVAL_SUCCESS: "each method's headline (CO-PILOT, SoRB: along their plans; SAC, HER, PPO: agent alone)",
-    SUCCESS_PLANNED: "agent following the planner's finest path",
+    EVAL_SUCCESS: "each method's headline (CO-PILOT, SoRB, RRT* curriculum: along their plans; SAC, HER, PPO: "
+    "agent alone)",
+    SUCCESS_PLANNED: "agent following its plan's finest path (SoRB: its graph's waypoints; HER: = agent alone)",
     SUCCESS_DIRECT: "agent alone (no planner)",
     EVAL_RETURN: "task reward R for reaching the goal, same rollouts as success",
     EVAL_MASTERED: "track distributions whose mean walker return exceeds 230",

@@ -443,22 +443,38 @@ def _comparison_figures(
 
 
 def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
-    """One line per configuration reported on the test tasks with fewer than `MIN_SEEDS_FOR_CI` seeds,
-    read off its final success on the validation tasks (the same runs' evaluations, mean over seeds):
-    above `MORE_SEEDS_ABOVE` the comparison's rule asks for more seeds, and the line says which to run;
-    at or below it the line says the rule allows the few (else "lacks seeds" reads as a defect). [] for
-    validation reports and runs that logged no validation success."""
+    """One line per configuration reported on the test tasks with fewer than `MIN_SEEDS_FOR_CI` seeds.
+    One short because runs of it ended unfinished (FAILED or KILLED) is told so: it does not meet the
+    seed rule, and no seed is suggested in their place (running seeds until enough finish would choose
+    by outcome). One run with few seeds on purpose is read off its final success on the validation tasks
+    (the same runs' evaluations, mean over seeds): above `MORE_SEEDS_ABOVE` the comparison's rule asks for
+    more seeds, and the line says which to run; at or below it the line says the rule allows the few
+    (else "lacks seeds" reads as a defect). [] for validation reports and runs that logged no validation
+    success."""
     short = [c for c in configs if 0 < c.n_seeds < stats.MIN_SEEDS_FOR_CI]
     if sweep.tasks != TEST or not short or one_seed_each(configs):
         return []  # (one seed each: a demo's look at its runs, not a comparison the rule is about)
+    out = []
+    for c in short:
+        ended = sorted({str(t.seed) for t in c.all_trials if not t.usable}, key=_seed_order)
+        if ended:
+            out.append(
+                f"{c.label}: {c.n_seeds} seed(s) behind its figures; seed(s) {', '.join(ended)} ended "
+                "unfinished (FAILED or KILLED, named above) and are left out: its cells show the seeds' "
+                f"range, not a CI, and the row does not meet the comparison's {stats.MIN_SEEDS_FOR_CI}-seed "
+                "rule. No seed is suggested in their place (running seeds until enough finish would "
+                "choose by outcome)."
+            )
+    short = [c for c in short if all(t.usable for t in c.all_trials)]
+    if not short:
+        return out
     try:
         validation = load_sweep(sweep.tracking_uri, sweep.experiment, args.parent_run, tasks=VALIDATION)
         join_other_stores(validation, args)
     except AnalysisError:
-        return []
+        return out
     on_validation = {c.key: c for c in summarise(validation, reps=10, seed=args.seed)[0]}
     metric = headline_metric(configs)
-    out = []
     for c in short:
         v = on_validation.get(c.key)
         finals = v.metrics[metric].finals if v is not None and metric in v.metrics else np.array([])
@@ -482,9 +498,15 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
 
 
 def _unused_seeds(config: ConfigSummary, count: int) -> list[int]:
-    """The `count` smallest seeds no run of `config` used (a repeated seed would not be a new draw)."""
-    used = {str(t.seed) for t in config.all_trials}
-    return [s for s in range(count + len(used)) if str(s) not in used][:count]
+    """`count` seeds after the largest any run of `config` used: a repeated seed would not be a new
+    draw, and a smaller unused one may be the seed its stage 1 tuned on (privilege_matched's 0)."""
+    used = [int(t.seed) for t in config.all_trials if str(t.seed).lstrip("-").isdigit()]
+    start = max(used) + 1 if used else 0
+    return list(range(start, start + count))
+
+
+def _seed_order(seed: str) -> tuple[int, str]:
+    return (int(seed), "") if seed.lstrip("-").isdigit() else (1 << 62, seed)
 
 
 # ---------------------------------------------------------------------------------------------- planners

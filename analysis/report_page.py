@@ -204,8 +204,11 @@ def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str) -> st
 
 DETAILS_TEXT = (
     "Details: one row per configuration and success metric it logged. success = what every method "
-    "reports (CO-PILOT and SoRB: the agent following its plan; SAC, HER, PPO: the agent alone); planned = "
-    "the agent following the planner's finest path; direct = the agent alone. A row named 'success = "
+    "reports (CO-PILOT, SoRB and the RRT* curriculum: the agent following its plan; SAC, HER, PPO: the agent "
+    "alone); planned = the agent following the planner's finest path (SoRB: its graph's waypoints); direct = "
+    "the agent alone. The RRT* curriculum (rrt_curriculum) and SoRB with the map (sorb_map) ask the map on "
+    "the evaluation tasks themselves (RRT* plans each task; SoRB checks each task's start and goal edges), "
+    "counted in their collision checks; CO-PILOT's plans come from its learned planner. A row named 'success = "
     "planned' (or '= direct') stands for metrics that agree in every figure. Steps to a threshold and "
     "wall time as above; final at = the env step the final success is read at (mean over seeds)."
 )

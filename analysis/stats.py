@@ -280,8 +280,10 @@ class Improvement:
         return has_ci(self.nx) and has_ci(self.ny)
 
     def text(self, fmt: str = ".2f") -> str:
-        if not self.available:
-            return f"n/a (needs >= {MIN_SEEDS_FOR_CI} seeds each; here {self.nx} and {self.ny})"
+        if not (self.nx and self.ny):
+            return f"n/a (no seeds on a side; here {self.nx} and {self.ny})"
+        if not self.available:  # the point estimate still says something; its interval needs the seeds
+            return f"{format(self.p, fmt)} (no CI: n = {self.nx} and {self.ny}; a CI needs {MIN_SEEDS_FOR_CI} each)"
         p, lo, hi = (format(v, fmt) for v in (self.p, self.low, self.high))
         return f"{p} [{100 * self.confidence:g}% CI {lo}, {hi}]"
 

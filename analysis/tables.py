@@ -164,16 +164,41 @@ def headline_table(frame: pd.DataFrame) -> Table:
         "map queries",
     ]
     tasks = frame.attrs.get("tasks", "test")
+    # the agent alone beside a method that plans (the paper's "agent only" reading), once any row has one
+    alone = success and short == "success" and _plans_somewhere(frame)
     table = Table(
-        header + ([f"final {tasks} success{what}", f"{tasks} success AUC{what}"] if success else [])
+        header
+        + ([f"final {tasks} success{what}", f"{tasks} success AUC{what}"] if success else [])
+        + ([f"final {tasks} success, agent alone"] if alone else [])
     )
     for _, r in frame.iterrows():
         cells = [str(r["configuration"]), str(r["n_seeds"]), str(r["privileges"]), _steps(r["env_steps"])]
         cells += [_steps(r[name]) for name in COUNTS.values()]
         if success:
             cells += [_estimate(r, f"{short}_final"), _estimate(r, f"{short}_auc")]
+        if alone:
+            cells.append(_agent_alone(r))
         table.rows.append(cells)
     return table
+
+
+def _same_figure(r: pd.Series, a: str, b: str) -> bool:
+    """Whether two metrics' final figures of a row are one and the same (a method without a plan reports
+    its agent's success as its success)."""
+    return all(r.get(f"{a}_final{s}") == r.get(f"{b}_final{s}") for s in ("", "_low", "_high"))
+
+
+def _plans_somewhere(frame: pd.DataFrame) -> bool:
+    return any(
+        r.get("direct_n_seeds", 0) > 0 and not _same_figure(r, "direct", "success")
+        for _, r in frame.iterrows()
+    )
+
+
+def _agent_alone(r: pd.Series) -> str:
+    if not r.get("direct_n_seeds", 0) > 0:
+        return "-"
+    return "= its success (no plan)" if _same_figure(r, "direct", "success") else _estimate(r, "direct_final")
 
 
 def details_table(frame: pd.DataFrame) -> Table:
@@ -263,7 +288,7 @@ def improvement_frame(
         row["copilot_privileges"], row["other_privileges"] = x.privileges, y.privileges
         for what, a, b in (("final", mx.finals, my.finals), ("auc", mx.aucs, my.aucs)):
             imp = stats.improvement(a, b, reps=reps, seed=seed)
-            row[f"p_{what}"] = imp.p if imp.available else math.nan
+            row[f"p_{what}"] = imp.p  # (its interval only from MIN_SEEDS_FOR_CI seeds a side: NaN below)
             row[f"p_{what}_low"], row[f"p_{what}_high"] = imp.low, imp.high
             row[f"p_{what}_text"] = imp.text()
         row["final_ci_apart"] = ci_apart(mx.final, my.final)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 import subprocess
 import sys
@@ -793,7 +794,9 @@ def test_probability_of_improvement_on_hand_made_scores():
     same = stats.improvement(x, x)
     assert same.p == 0.5 and same.low < 0.5 < same.high
     few = stats.improvement(x, y[:2])
-    assert not few.available and few.text() == "n/a (needs >= 5 seeds each; here 5 and 2)"
+    # below 5 seeds a side: the point estimate without an interval; no seeds: nothing
+    assert not few.available and few.text() == "1.00 (no CI: n = 5 and 2; a CI needs 5 each)"
+    assert stats.improvement(x, y[:0]).text() == "n/a (no seeds on a side; here 5 and 0)"
 
 
 def test_auc_over_the_common_window():
@@ -1236,19 +1239,21 @@ def test_two_presets_run_under_one_config_key_in_joined_sweeps_are_labelled_by_p
 
 
 def test_headline_table_is_compact_and_success_is_shown_once(layouts):
-    """The headline: configuration, seeds, privileges, env steps and counts, final test success and its
-    AUC (nine columns); the per-metric details in a second table, where CO-PILOT's success (= planned) is
-    one row, not two."""
+    """The headline: configuration, seeds, privileges, env steps and counts, final test success, its AUC
+    and the agent alone (ten columns: CO-PILOT plans); the per-metric details in a second table, where
+    CO-PILOT's success (= planned) is one row, not two, and its direct row is the headline's agent alone."""
     md = (layouts["out"] / "summary.md").read_text()
     headline, details = md.split("\n\n")
     header = headline.splitlines()[0]
     assert header == (
         "| configuration | seeds | privileges | env steps | collision checks | resets | map queries "
-        "| final test success | test success AUC |"
+        "| final test success | test success AUC | final test success, agent alone |"
     )
     assert "planned" not in headline and "steps to" not in headline
     rows = [r for r in details.splitlines()[2:] if r.startswith("| layout=u-maze, variant=continue |")]
     assert [r.split(" | ")[1] for r in rows] == ["success = planned", "direct"]
+    (row,) = [r for r in headline.splitlines()[2:] if r.startswith("| layout=u-maze, variant=continue |")]
+    assert row.rstrip(" |").split(" | ")[-1] == rows[1].split(" | ")[2]  # the direct row's final
     assert "| env steps to 0.5 (seeds) |" in details.splitlines()[0]
 
 
@@ -1387,7 +1392,8 @@ def test_a_crowded_figure_keeps_every_methods_best_configuration():
 def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_seeds(tmp_path, capsys):
     """The comparison's rule (5 seeds for a method above 0.1, 2 may do below) is read off the validation
     tasks: a 2-seed configuration at 0.30 validation success is told which seeds to add, one at 0.05 that
-    its two are the rule's, whatever their test figures say; a validation report gives no such note."""
+    its two are the rule's, whatever their test figures say; a validation report gives no such note. A
+    configuration short because a run FAILED is told it misses the rule, and no seed is offered instead."""
     import mlflow
     from mlflow.entities import Metric
 
@@ -1400,8 +1406,9 @@ def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_s
     pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "comparison"}).info.run_id
     client.log_param(pid, "searcher", "grid")
     # (algorithm, test success, validation success): sac is low on test but above the bar on validation
-    for algorithm, test, validation in (("sac", 0.02, 0.30), ("ppo", 0.40, 0.05)):
-        for seed in ("0", "1"):
+    seeds = {"sac": ("0", "1"), "ppo": ("0", "1"), "her": ("1", "2", "3", "4", "5")}
+    for algorithm, test, validation in (("sac", 0.02, 0.30), ("ppo", 0.40, 0.05), ("her", 0.2, 0.4)):
+        for seed in seeds[algorithm]:
             tags = {PARENT_TAG: pid, ROLE_TAG: ROLE_TRIAL, SWEEP_TAG: "comparison", SEED_TAG: seed}
             tags |= {CONFIG_KEY_TAG: algorithm, ALGORITHM_TAG: algorithm, ENV_TAG: "maze-point"}
             rid = client.create_run(exp_id, tags=tags).info.run_id
@@ -1410,7 +1417,7 @@ def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_s
             ms += [Metric(validation_key(EVAL_SUCCESS), validation, now, s) for s in STEPS[:3]]
             ms += [Metric(ENV_STEPS, s, now, s) for s in STEPS[:3]]
             client.log_batch(rid, metrics=ms)
-            client.set_terminated(rid, "FINISHED")
+            client.set_terminated(rid, "FAILED" if (algorithm, seed) == ("her", "3") else "FINISHED")
 
     out = tmp_path / "test_report"
     assert main(["comparison", "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
@@ -1426,6 +1433,9 @@ def test_a_short_configuration_above_the_bar_on_validation_is_told_to_get_more_s
     assert "Run seeds [2, 3, 4] as a part of their own" in notes[0] and "`seeds: [2, 3, 4]`" in notes[0]
     assert "algorithm=sac: 2 seed(s)" in (out / "report.md").read_text()
     assert "algorithm=ppo: 2 seed(s), within the comparison's seed rule" in (out / "report.md").read_text()
+    (failed,) = [line for line in printed.splitlines() if line.startswith("note: algorithm=her:")]
+    assert "4 seed(s) behind its figures; seed(s) 3 ended unfinished" in failed
+    assert "does not meet the comparison's 5-seed rule" in failed and "Run seeds" not in failed
     out = tmp_path / "validation_report"
     assert (
         main(["comparison", "--tracking-uri", uri, "--out", str(out), "--no-log", "--tasks", "validation"])
@@ -1670,3 +1680,32 @@ def test_a_one_seed_look_gets_a_short_report_and_flat_panels_are_named_not_drawn
         in text
     )
     assert not (out / "planners_paths.png").exists()
+
+
+def test_the_headline_shows_the_agent_alone_beside_a_method_that_plans():
+    """CO-PILOT's agent alone is its direct success; HER, which has no plan, reports its agent's success
+    as its success, said so instead of the figure twice; a method with no direct figure gets a dash."""
+    from analysis.tables import headline_table
+
+    def row(name, success, direct):
+        r = {"configuration": name, "n_seeds": 5, "privileges": "none", "env_steps": 2e5}
+        r |= {"collision_checks": 0.0, "resets": 0.0, "map_queries": 0.0, "planned_n_seeds": 0}
+        for short, value in (("success", success), ("direct", direct)):
+            n = 0 if value is None else 5
+            value = math.nan if value is None else value
+            for what in ("final", "auc"):
+                r |= {f"{short}_{what}": value, f"{short}_{what}_low": value - 0.1}
+                r |= {f"{short}_{what}_high": value + 0.1, f"{short}_{what}_n_seeds": n}
+            r[f"{short}_n_seeds"] = n
+        return r
+
+    frame = pd.DataFrame([row("copilot", 0.7, 0.3), row("her", 0.2, 0.2), row("rrt_star", 0.9, None)])
+    table = headline_table(frame)
+    assert table.header[-1] == "final test success, agent alone"
+    assert [r[-1] for r in table.rows] == [
+        "IQM 0.300 [95% CI 0.200, 0.400]",
+        "= its success (no plan)",
+        "-",
+    ]
+    # no method plans: no such column
+    assert headline_table(frame.iloc[1:2]).header[-1] == "test success AUC"
