@@ -202,11 +202,16 @@ def summarise(
                 missing.running.append(t)
 
     included = [t for t in sweep.trials if t.usable and t.has_eval]
-    grids = {m: stats.common_grid([t.curves[m][0] for t in included if m in t.curves]) for m in CURVE_METRICS}
+    budget = common_budget(included)
+    # Curves end at the budget, where the finals are read: a method whose last iteration ran past it
+    # (by up to one iteration) is not drawn further than the others.
+    grids = {
+        m: _grid_to(stats.common_grid([t.curves[m][0] for t in included if m in t.curves]), budget)
+        for m in CURVE_METRICS
+    }
     # The AUC window is set by the finished seeds (they ran to the budget): a running one must not cut
     # everyone's window short; it gets an AUC once it covers the window.
     finished = [t for t in included if t.status == "FINISHED"] or included
-    budget = common_budget(included)
     windows = {
         m: _capped(stats.auc_window([t.curves[m][0] for t in finished if m in t.curves]), budget)
         for m in CURVE_METRICS
@@ -240,7 +245,7 @@ def summarise(
                 metrics=metrics,
                 wall_time_s=float(np.mean(walls)) if walls else float("nan"),
                 env_steps=_mean([t.env_steps for t in use]),
-                privilege_counts={k: _mean([t.latest.get(k, np.nan) for t in use]) for k in PRIVILEGE_COUNTS},
+                privilege_counts={k: _mean([_count_at(t, k, budget) for t in use]) for k in PRIVILEGE_COUNTS},
                 privileges=privileges_label(trials),
                 env=env_label(trials[0], axes),
                 method=method_label(trials[0], axes),
@@ -347,6 +352,24 @@ def _metric_summary(trials, metric: str, grid: np.ndarray, window, budget: float
         to_threshold=to_thr,
         curve=_curve(trials, metric, grid, reps, seed),
     )
+
+
+def _grid_to(grid: np.ndarray, budget: float) -> np.ndarray:
+    """`grid` up to `budget`, the budget itself its last point where the grid passed it."""
+    if not np.isfinite(budget) or grid.size == 0 or grid[-1] <= budget:
+        return grid
+    kept = grid[grid <= budget]
+    return np.append(kept, budget) if kept.size else grid[:1]
+
+
+def _count_at(t: Trial, key: str, budget: float) -> float:
+    """A privilege count (cumulative) at the budget: interpolated on its curve where the run went past
+    the budget, its last value otherwise."""
+    if key in t.curves and np.isfinite(budget):
+        steps, values = t.curves[key]
+        if len(steps) and steps[-1] > budget:
+            return float(np.interp(budget, steps, values))
+    return t.latest.get(key, np.nan)
 
 
 def common_budget(trials: list[Trial]) -> float:

@@ -1709,3 +1709,21 @@ def test_the_headline_shows_the_agent_alone_beside_a_method_that_plans():
     ]
     # no method plans: no such column
     assert headline_table(frame.iloc[1:2]).header[-1] == "test success AUC"
+
+
+def test_curves_and_collision_checks_end_at_the_budget():
+    """Runs evaluated at 1000 and 3000 env steps with a budget of 2000 (an iteration past it): the curves
+    are drawn to the budget, not past it, and the collision checks shown are those spent by the budget."""
+    from analysis.aggregate import summarise
+    from copilot_ray.keys import EVAL_SUCCESS, PRIVILEGE_COLLISION_CHECKS
+
+    sweep = _target_sweep([0.4, 0.45, 0.5, 0.55, 0.6], [0.1, 0.12, 0.14, 0.16, 0.18])
+    for t in sweep.trials:
+        if t.tags[ALGORITHM_TAG] == "copilot":
+            t.curves[PRIVILEGE_COLLISION_CHECKS] = (np.array([1000.0, 3000.0]), np.array([100.0, 300.0]))
+            t.latest[PRIVILEGE_COLLISION_CHECKS] = 300.0
+    configs, _ = summarise(sweep, reps=50)
+    copilot = next(c for c in configs if c.algorithm == "copilot")
+    assert copilot.metrics[EVAL_SUCCESS].curve.grid[-1] == 2000.0
+    assert copilot.metrics[EVAL_SUCCESS].curve.center[-1] == pytest.approx(0.5)  # the final, at the budget
+    assert copilot.privilege_counts[PRIVILEGE_COLLISION_CHECKS] == pytest.approx(200.0)
