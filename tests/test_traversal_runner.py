@@ -93,3 +93,23 @@ def test_one_call_runs_its_sub_tasks_in_order(plan):
     assert runner.env.unwrapped.call("remaining")[0] == 2 * 7 - 4
     steps = sum(len(e) for e in episodes)
     assert runner.get_metrics()[NUM_ENV_STEPS_SAMPLED_LIFETIME].peek() == steps
+
+
+def test_a_call_ends_when_the_plan_runs_out_instead_of_stepping_placeholder_episodes(plan):
+    """With after_failure="abort_layer" a failed sub-task drops the rest of its layer, so the plan can
+    run out before the call's episodes do: the lean loop stops there, and every env step it counts is a
+    planned sub-task's (RLlib's loop would step placeholder episodes toward a training goal)."""
+    from copilot_ray.algorithms.sac.traversal_channel import INFO_PREFIX, is_idle
+
+    config = _config()
+    config.after_failure = "abort_layer"  # (a traversal rule, set on CO-PILOT's config by .copilot())
+    config.validate()  # (the rules reach the env through its config, written here)
+    runner = _runner(config, TraversalEnvRunner, plan)
+    planned = runner.env.unwrapped.call("remaining")[0]
+    episodes = runner.sample(num_episodes=planned, explore=True)
+    assert runner.env.unwrapped.call("remaining")[0] == 0
+    assert episodes and not any(is_idle(e.get_infos(-1)) for e in episodes)
+    missed = sum(not e.get_infos(-1)[INFO_PREFIX + "reached"] for e in episodes)
+    assert missed and len(episodes) < planned  # (a failure dropped sub-tasks: what the test is about)
+    steps = runner.get_metrics()[NUM_ENV_STEPS_SAMPLED_LIFETIME].peek()
+    assert steps == sum(len(e) for e in episodes)

@@ -162,7 +162,9 @@ _TRAVERSAL = [
         "four-rooms and u-maze, 2 seeds each, 60k env steps: continue 0.095, abort_layer 0.030; final "
         "validation success 0.16 vs 0.08. Weak: continue's lead is one u-maze seed (AUC 0.34, final 0.59; "
         "its other three runs <= 0.03), the median AUC favours abort_layer (0.026 vs 0.020) "
-        "(`bash scripts/run_at_commit.sh --commit 4166145 sweeps/choose_defaults.yaml`)",
+        "(`bash scripts/run_at_commit.sh --commit 4166145 sweeps/choose_defaults.yaml`). Biased against "
+        "abort_layer: at that commit a call that ran out of plan after a dropped layer stepped placeholder "
+        "episodes, counted against its budget (fixed on 2026-11-28; not rerun)",
     ),
     replace(
         _A_TREE["subtask_reward"],

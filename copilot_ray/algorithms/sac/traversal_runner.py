@@ -77,7 +77,12 @@ class TraversalEnvRunner(SingleAgentEnvRunner):
         self._ongoing_episodes_for_metrics.clear()
         episodes, steps = [], 0
         seed = self._seed  # RLlib seeds the first reset of every episode-mode call
-        for _ in range(int(num_episodes)):
+        planned = getattr(env.unwrapped, "remaining", None)
+        for k in range(int(num_episodes)):
+            if k and planned is not None and planned() == 0:
+                # The plan ran out inside this call (after_failure="abort_layer" drops the rest of a
+                # layer): no placeholder episodes, whose env steps would count against the budget.
+                break
             started = time.perf_counter()
             obs, info = env.reset(seed=seed)
             seed = None
