@@ -200,3 +200,20 @@ def test_either_kind_restores_the_others_state():
     host_states = host.sample_states(10, np.random.default_rng(0))
     for got, want in zip(device_states, host_states, strict=True):
         np.testing.assert_array_equal(got, want)
+
+
+def test_episode_goals_stay_in_the_episode_when_the_ring_has_overwritten_its_start(kind):
+    """Three episodes (6, 6 and 5 steps) into 10 rows: the third overwrites the second's first rows, so
+    a goal drawn from anywhere in the second must come from its rows still stored, not the third's."""
+    buf = make(kind, n_sampled_goal=4, capacity=10, goal_selection="episode")
+    for start in (0, 100, 200):  # episodes 100 apart on the x axis
+        line_episode(buf, start, {0: 6, 100: 6, 200: 5}[start])
+    batch = draw(buf, 5000, 4)
+    obs, goal = LAYOUT.split(batch[OBS])
+    relabelled = goal[:, 1] != 9.0
+    episode_of = lambda x: np.floor_divide(x, 100)  # noqa: E731
+    assert relabelled.sum() > 1000
+    assert (episode_of(goal[relabelled, 0]) == episode_of(obs[relabelled, 0])).all()
+    # and the second episode's goals still reach back past its sampled steps (not "future" in disguise)
+    second = relabelled & (episode_of(obs[:, 0]) == 1)
+    assert (goal[second, 0] <= obs[second, 0]).any()

@@ -185,3 +185,21 @@ def test_a_stacked_her_seeds_state_is_the_one_seed_format_and_bad_input_is_named
         _her_stack(1, goal_selection="best")
     with pytest.raises(ValueError, match="capacity must be > 0, got 0"):
         _her_stack(1, capacity=0)
+
+
+def test_a_stacked_seeds_episode_goals_stay_in_its_episode_after_its_ring_wraps():
+    """goal_selection "episode", each seed's 10 rows overwritten at the start of its second episode by
+    its third (6, 6, then 5 steps; seed 1 one step longer each, so the seeds' rings differ): a goal is
+    from the sampled row's own episode, per seed's own write pointer."""
+    stack = _her_stack(2, capacity=10, goal_selection="episode")
+    for seed in range(2):
+        for x0, steps in ((0, 6), (100, 6), (200, 5)):
+            _line(stack.seeds[seed], 1000 * seed + x0, steps + seed)
+    assert stack.pointers.tolist() == [7, 0]
+    torch.manual_seed(0)
+    batch = stack.sample(3000)
+    for seed in range(2):
+        obs, goal = (t.numpy() for t in LAYOUT.split(batch[OBS][seed]))
+        relabelled = goal[:, 1] != 9.0
+        episode = lambda x: np.floor_divide(x - 1000 * seed, 100)  # noqa: B023, E731
+        assert (episode(goal[relabelled, 0]) == episode(obs[relabelled, 0])).all()

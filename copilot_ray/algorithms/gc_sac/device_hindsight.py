@@ -18,7 +18,12 @@ import numpy as np
 import torch
 
 from copilot_ray.algorithms.gc_sac.device_replay import uniform_rows
-from copilot_ray.algorithms.gc_sac.hindsight_buffer import STORED_COLUMNS, GoalLayout, HindsightReplayBuffer
+from copilot_ray.algorithms.gc_sac.hindsight_buffer import (
+    STORED_COLUMNS,
+    GoalLayout,
+    HindsightReplayBuffer,
+    overwritten_prefix,
+)
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
     NEXT_OBS,
@@ -62,6 +67,7 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         super().__init__(capacity, layout, reward_fn, n_sampled_goal, goal_selection)
         self.device = torch.device(device)
         self._size_t = torch.zeros((), dtype=torch.int64, device=self.device)
+        self._ptr_t = torch.zeros((), dtype=torch.int64, device=self.device)  # the ring's, for "episode"
         self.storage_version = 0
 
     # ------------------------------------------------------------------------- storage on the device
@@ -88,12 +94,18 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         """`HindsightReplayBuffer.add_episode`, then the device's copy of the size."""
         added = super().add_episode(*args, **kwargs)
         self._size_t.fill_(self._size)
+        self._ptr_t.fill_(self._ptr)
         return added
 
     def set_state(self, state: Mapping[str, object]) -> None:
         """`HindsightReplayBuffer.set_state` (either buffer's state), then the device's copy of the size."""
         super().set_state(state)
         self._size_t.fill_(self._size)
+        self._ptr_t.fill_(self._ptr)
+
+    def write_pointers(self) -> torch.Tensor:
+        """The ring's next row, on the device (a captured step reads it as the buffer fills)."""
+        return self._ptr_t
 
     # ------------------------------------------------------------------------------------ sampling
     def _take(self, name: str, rows: torch.Tensor) -> torch.Tensor:
@@ -159,7 +171,10 @@ def _hindsight_goals(buffer: Any, rows: torch.Tensor, take, uniform=None) -> tor
     if buffer.goal_selection == "final":
         offset = length - 1
     else:
-        low = step if buffer.goal_selection == "future" else torch.zeros_like(step)
+        if buffer.goal_selection == "future":
+            low = step
+        else:  # anywhere in the episode that is still its own
+            low = overwritten_prefix(buffer.write_pointers(), start, length, buffer.capacity)
         u = (
             torch.rand(rows.shape, device=rows.device, dtype=torch.float64)
             if uniform is None

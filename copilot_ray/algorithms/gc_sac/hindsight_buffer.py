@@ -224,6 +224,10 @@ class HindsightReplayBuffer:
         return added
 
     # ---------------------------------------------------------------------------------- sampling
+    def write_pointers(self) -> int:
+        """The next row the ring writes (where its oldest episode is being overwritten)."""
+        return self._ptr
+
     def _hindsight_goals(self, rows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         d = self._data
         start, length, step = d["episode_start"][rows], d["episode_length"][rows], d["step"][rows]
@@ -231,8 +235,8 @@ class HindsightReplayBuffer:
             offset = rng.integers(step, length)  # SB3: this step or a later one
         elif self.goal_selection == "final":
             offset = length - 1
-        else:
-            offset = rng.integers(0, length)
+        else:  # anywhere in it still its own
+            offset = rng.integers(overwritten_prefix(self._ptr, start, length, self.capacity), length)
         return d["next_achieved"][(start + offset) % self.capacity]
 
     def sample(
@@ -303,3 +307,13 @@ class HindsightReplayBuffer:
             size = int(state["size"])
             self._write_rows(np.arange(size), {k: np.asarray(v)[:size] for k, v in state["data"].items()})
             self._size, self._ptr = size, int(state["ptr"])
+
+
+def overwritten_prefix(pointer, start, length, capacity):
+    """How many of an episode's first rows newer episodes have overwritten (numpy or torch): the ring
+    writes on from `pointer`, so once it has come round to an episode (`start`, `length` rows) the rows
+    from its start up to the pointer are another's. An episode's later rows outlive its earlier ones, so
+    a goal from its sampled step on ("future", "final") is always its own; one from before ("episode")
+    must start here."""
+    behind = (pointer - start) % capacity
+    return behind * (behind < length)

