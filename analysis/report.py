@@ -88,6 +88,7 @@ from .load import (
     load_sweep,
     load_tree_snapshots,
     log_report_artifacts,
+    natural_key,
     resolve_tracking_uri,
 )
 from .report_page import command_line, one_seed_each  # noqa: F401 (command_line: this module's, where callers look)
@@ -456,7 +457,7 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
         return []  # (one seed each: a demo's look at its runs, not a comparison the rule is about)
     out = []
     for c in short:
-        ended = sorted({str(t.seed) for t in c.all_trials if not t.usable}, key=_seed_order)
+        ended = sorted({str(t.seed) for t in c.all_trials if not t.usable}, key=natural_key)
         if ended:
             out.append(
                 f"{c.label}: {c.n_seeds} seed(s) behind its figures; seed(s) {', '.join(ended)} ended "
@@ -503,10 +504,6 @@ def _unused_seeds(config: ConfigSummary, count: int) -> list[int]:
     used = [int(t.seed) for t in config.all_trials if str(t.seed).lstrip("-").isdigit()]
     start = max(used) + 1 if used else 0
     return list(range(start, start + count))
-
-
-def _seed_order(seed: str) -> tuple[int, str]:
-    return (int(seed), "") if seed.lstrip("-").isdigit() else (1 << 62, seed)
 
 
 # ---------------------------------------------------------------------------------------------- planners

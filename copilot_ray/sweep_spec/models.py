@@ -62,7 +62,6 @@ class BestOfSpec(_Model):
     chosen_from: str | None = None
 
 
-PLAN_SEEDS = keys.PLAN_SEEDS
 FAST_LEARNER = "fast_learner"  # the agent setting a GPU stack's update needs (algorithms/sac/settings.py)
 
 
@@ -336,8 +335,10 @@ class SweepSpec(_Model):
             ]
         # On a GPU the seeds share one stacked update, which is the fast learner's step (on a CPU each
         # seed updates as its own trial would, so any learner runs there).
-        slow = [p for p in self.grid_points() if self.merged(p).get(FAST_LEARNER) is False]
-        if self.resources.gpus_per_trial > 0 and slow:
+        slow = self.resources.gpus_per_trial > 0 and [
+            p for p in self.grid_points() if self.merged(p).get(FAST_LEARNER) is False
+        ]
+        if slow:
             named = ", ".join(sorted({_point_label(p) for p in slow}))
             return [
                 Issue(
@@ -506,7 +507,9 @@ class SweepSpec(_Model):
         """
         if self.searcher.type == "grid" and self.seeds_per_trial > 1:
             return [
-                {**point, PLAN_SEEDS: group} for point in self.grid_points() for group in self.seed_groups()
+                {**point, keys.PLAN_SEEDS: group}
+                for point in self.grid_points()
+                for group in self.seed_groups()
             ]
         if self.searcher.type == "grid":
             return [{**point, "seed": seed} for point in self.grid_points() for seed in self.seeds]
@@ -601,7 +604,7 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
             [f"trial.{keys.ENV_PARAM}: {env_id!r} is invalid: the spec's envs are {spec.env.ids}"]
         )
     # (a stacked trial's plan names its seeds, `seeds`: its config is its first seed's)
-    not_settings = (keys.SEED_PARAM, PLAN_SEEDS, keys.VARIANT_PARAM, keys.ENV_PARAM)
+    not_settings = (keys.SEED_PARAM, keys.PLAN_SEEDS, keys.VARIANT_PARAM, keys.ENV_PARAM)
     trial = {k: v for k, v in flat.items() if k not in not_settings}
     problems = [
         Issue(
@@ -616,13 +619,13 @@ def build_algorithm_config(flat: Mapping[str, Any], spec: SweepSpec) -> Any:
     run = RunContext(
         env_id=env_id,
         env_config=dict(spec.env.config),
-        seed=flat.get(keys.SEED_PARAM, (flat.get(PLAN_SEEDS) or spec.seeds)[0]),
+        seed=flat.get(keys.SEED_PARAM, (flat.get(keys.PLAN_SEEDS) or spec.seeds)[0]),
         num_env_runners=spec.resources.num_env_runners,
         num_cpus_for_main_process=spec.resources.cpus_per_trial - spec.resources.num_env_runners,
         num_gpus=spec.resources.gpus_per_trial,
         env_step_budget=spec.stop.env_steps,
     )
-    return entry.build_config(spec.merged({k: v for k, v in flat.items() if k != PLAN_SEEDS}), run)
+    return entry.build_config(spec.merged({k: v for k, v in flat.items() if k != keys.PLAN_SEEDS}), run)
 
 
 def _test_metric_problem(metric: str, scheduler: SchedulerSpec | None) -> str:

@@ -151,13 +151,12 @@ class SeedStackTrial(tune.Trainable):
 
     def _result(self) -> dict[str, Any]:
         alive = [i for i in self.metrics if i not in self.errors]
-        keys_seen = sorted(self.reported | {k for i in alive for k in self.metrics[i]})
-        skip = (keys.TRAINING_ITERATION, keys.TIME_TOTAL_S)
+        keys_seen = self.reported | {k for i in alive for k in self.metrics[i]}
         mean = {}
-        for k in keys_seen:
+        for k in sorted(keys_seen - {keys.TRAINING_ITERATION, keys.TIME_TOTAL_S}):
             values = [self.metrics[i][k] for i in alive if k in self.metrics[i]]
-            if k not in skip:  # NaN where no live seed has measured it yet, as a one-seed trial reports it
-                mean[k] = sum(values) / len(values) if values else math.nan
+            # NaN where no live seed has measured it yet, as a one-seed trial reports it
+            mean[k] = sum(values) / len(values) if values else math.nan
         still = [i for i in alive if i not in self.finished] or alive
         mean[keys.ENV_STEPS] = min(self.metrics[i].get(keys.ENV_STEPS, 0.0) for i in still)
         result = nested(mean)

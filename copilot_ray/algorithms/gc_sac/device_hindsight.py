@@ -170,11 +170,12 @@ def _hindsight_goals(buffer: Any, rows: torch.Tensor, take, uniform=None) -> tor
     start, length, step = (take(k, rows) for k in ("episode_start", "episode_length", "step"))
     if buffer.goal_selection == "final":
         offset = length - 1
-    else:
-        if buffer.goal_selection == "future":
-            low = step
-        else:  # anywhere in the episode that is still its own
-            low = overwritten_prefix(buffer.write_pointers(), start, length, buffer.capacity)
+    else:  # from its step on (future), or from anywhere in it that is still its own (episode)
+        low = (
+            step
+            if buffer.goal_selection == "future"
+            else overwritten_prefix(buffer.write_pointers(), start, length, buffer.capacity)
+        )
         u = (
             torch.rand(rows.shape, device=rows.device, dtype=torch.float64)
             if uniform is None

@@ -224,10 +224,6 @@ class HindsightReplayBuffer:
         return added
 
     # ---------------------------------------------------------------------------------- sampling
-    def write_pointers(self) -> int:
-        """The next row the ring writes (where its oldest episode is being overwritten)."""
-        return self._ptr
-
     def _hindsight_goals(self, rows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         d = self._data
         start, length, step = d["episode_start"][rows], d["episode_length"][rows], d["step"][rows]
