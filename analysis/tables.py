@@ -28,6 +28,7 @@ from copilot_ray.keys import (
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
 )
+from copilot_ray.registry import UnknownAlgorithmError, get_algorithm
 
 from . import stats
 from .aggregate import THRESHOLDS, ConfigSummary, MetricSummary, headline_metric, improvement_pairs
@@ -51,6 +52,7 @@ def summary_frame(configs: list[ConfigSummary], tasks: str = "test") -> pd.DataF
             "configuration": c.label,
             "config_key": c.key,
             "algorithm": c.algorithm,
+            "follows_plan": follows_plan(c.algorithm),
             "n_seeds": c.n_seeds,
             "privileges": c.privileges,
             "env_steps": c.env_steps,
@@ -63,6 +65,15 @@ def summary_frame(configs: list[ConfigSummary], tasks: str = "test") -> pd.DataF
     frame = pd.DataFrame(rows)
     frame.attrs["tasks"] = tasks
     return frame
+
+
+def follows_plan(algorithm: str) -> bool | None:
+    """Whether `algorithm`'s evaluation follows a plan, its agent alone logged apart: it declares the
+    planned success among its metrics. None for an algorithm this checkout does not have."""
+    try:
+        return SUCCESS_PLANNED in get_algorithm(algorithm).metrics
+    except UnknownAlgorithmError:
+        return None
 
 
 def _metric_columns(m: MetricSummary | None, short: str) -> dict[str, object]:
@@ -188,17 +199,24 @@ def _same_figure(r: pd.Series, a: str, b: str) -> bool:
     return all(r.get(f"{a}_final{s}") == r.get(f"{b}_final{s}") for s in ("", "_low", "_high"))
 
 
+def _without_plan(r: pd.Series) -> bool:
+    """Whether a row's success is its agent alone: by what its algorithm declares, not by its figures
+    (a planning method whose plans and agent alone end level, e.g. both at 0, still plans); by the
+    figures only for an algorithm this checkout does not have."""
+    plans = r.get("follows_plan")
+    if plans is None or (isinstance(plans, float) and math.isnan(plans)):
+        return _same_figure(r, "direct", "success")
+    return not plans
+
+
 def _plans_somewhere(frame: pd.DataFrame) -> bool:
-    return any(
-        r.get("direct_n_seeds", 0) > 0 and not _same_figure(r, "direct", "success")
-        for _, r in frame.iterrows()
-    )
+    return any(r.get("direct_n_seeds", 0) > 0 and not _without_plan(r) for _, r in frame.iterrows())
 
 
 def _agent_alone(r: pd.Series) -> str:
     if not r.get("direct_n_seeds", 0) > 0:
         return "-"
-    return "= its success (no plan)" if _same_figure(r, "direct", "success") else _estimate(r, "direct_final")
+    return "= its success (no plan)" if _without_plan(r) else _estimate(r, "direct_final")
 
 
 def details_table(frame: pd.DataFrame) -> Table:

@@ -1685,7 +1685,7 @@ def test_a_one_seed_look_gets_a_short_report_and_flat_panels_are_named_not_drawn
 def test_the_headline_shows_the_agent_alone_beside_a_method_that_plans():
     """CO-PILOT's agent alone is its direct success; HER, which has no plan, reports its agent's success
     as its success, said so instead of the figure twice; a method with no direct figure gets a dash."""
-    from analysis.tables import headline_table
+    from analysis.tables import follows_plan, headline_table
 
     def row(name, success, direct):
         r = {"configuration": name, "n_seeds": 5, "privileges": "none", "env_steps": 2e5}
@@ -1709,6 +1709,17 @@ def test_the_headline_shows_the_agent_alone_beside_a_method_that_plans():
     ]
     # no method plans: no such column
     assert headline_table(frame.iloc[1:2]).header[-1] == "test success AUC"
+
+    # Known algorithms say themselves whether they plan: an RRT* curriculum whose plans and agent alone
+    # end level (as a stage-1 trial did, 0.046 both) still plans, and HER still does not.
+    level = pd.DataFrame([row("rrt_curriculum", 0.2, 0.2), row("her", 0.2, 0.2)])
+    level["follows_plan"] = [follows_plan("rrt_curriculum"), follows_plan("her")]
+    assert [r[-1] for r in headline_table(level).rows] == [
+        "IQM 0.200 [95% CI 0.100, 0.300]",
+        "= its success (no plan)",
+    ]
+    assert (follows_plan("copilot"), follows_plan("sorb_map"), follows_plan("sac")) == (True, True, False)
+    assert follows_plan("not_an_algorithm") is None
 
 
 def test_curves_and_collision_checks_end_at_the_budget():
