@@ -27,6 +27,7 @@ from copilot_ray.keys import (
     VARIANT_TAG,
 )
 from copilot_ray.privileges import from_tag
+from copilot_ray.registry import UnknownAlgorithmError, get_algorithm
 
 from . import stats
 from .load import (
@@ -82,6 +83,15 @@ class MetricSummary:
     # seeds that reached it)
     to_threshold: dict[float, tuple[float, int]]
     curve: CurveSummary | None
+
+
+def follows_plan(algorithm: str) -> bool | None:
+    """Whether `algorithm`'s evaluation follows a plan, its agent alone logged apart: it declares the
+    planned success among its metrics. None for an algorithm this checkout does not have."""
+    try:
+        return SUCCESS_PLANNED in get_algorithm(algorithm).metrics
+    except UnknownAlgorithmError:
+        return None
 
 
 @dataclass

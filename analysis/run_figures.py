@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 
 from copilot_ray.keys import (  # noqa: E402
     AGENT_SUBTASK_SUCCESS_LAYER,
+    ALGORITHM_TAG,
     DIAG_Q_MEAN,
     DIAG_SEGMENT_LENGTH_LAYER,
     DIAG_SEGMENT_UNREACHABLE_LAYER,
@@ -28,7 +29,7 @@ from copilot_ray.keys import (  # noqa: E402
     eval_by_action,
 )
 
-from .aggregate import ConfigSummary  # noqa: E402
+from .aggregate import ConfigSummary, follows_plan  # noqa: E402
 from .figures import DPI, _colors, _select, _suptitle, constant_value, steps_axis, wrap  # noqa: E402
 from .load import TreeSnapshot  # noqa: E402
 
@@ -192,8 +193,11 @@ def depth_of(trial) -> int:
 
 
 def plans_of_its_own(trial) -> bool:
-    """A sub-goal tree, or a planned success that differs from the agent alone's somewhere (SoRB's
-    graph); HER's and SAC's planned success is their direct one."""
+    """What its algorithm declares (`follows_plan`: CO-PILOT's tree, SoRB's graph; HER's and SAC's planned
+    success is their direct one); for an algorithm this checkout lacks, a sub-goal tree, or a planned
+    success that differs from the agent alone's somewhere."""
+    if (declared := follows_plan(trial.tags.get(ALGORITHM_TAG, ""))) is not None:
+        return declared
     if depth_of(trial) > 0:
         return True
     logged = SUCCESS_PLANNED in trial.curves and SUCCESS_DIRECT in trial.curves

@@ -28,10 +28,16 @@ from copilot_ray.keys import (
     SUCCESS_DIRECT,
     SUCCESS_PLANNED,
 )
-from copilot_ray.registry import UnknownAlgorithmError, get_algorithm
 
 from . import stats
-from .aggregate import THRESHOLDS, ConfigSummary, MetricSummary, headline_metric, improvement_pairs
+from .aggregate import (
+    THRESHOLDS,
+    ConfigSummary,
+    MetricSummary,
+    follows_plan,
+    headline_metric,
+    improvement_pairs,
+)
 
 # success: what every algorithm reports (copilot/eval/success); planned / direct: where an algorithm has them
 SHORT = {EVAL_SUCCESS: "success", SUCCESS_PLANNED: "planned", SUCCESS_DIRECT: "direct"}
@@ -65,15 +71,6 @@ def summary_frame(configs: list[ConfigSummary], tasks: str = "test") -> pd.DataF
     frame = pd.DataFrame(rows)
     frame.attrs["tasks"] = tasks
     return frame
-
-
-def follows_plan(algorithm: str) -> bool | None:
-    """Whether `algorithm`'s evaluation follows a plan, its agent alone logged apart: it declares the
-    planned success among its metrics. None for an algorithm this checkout does not have."""
-    try:
-        return SUCCESS_PLANNED in get_algorithm(algorithm).metrics
-    except UnknownAlgorithmError:
-        return None
 
 
 def _metric_columns(m: MetricSummary | None, short: str) -> dict[str, object]:

@@ -1685,7 +1685,8 @@ def test_a_one_seed_look_gets_a_short_report_and_flat_panels_are_named_not_drawn
 def test_the_headline_shows_the_agent_alone_beside_a_method_that_plans():
     """CO-PILOT's agent alone is its direct success; HER, which has no plan, reports its agent's success
     as its success, said so instead of the figure twice; a method with no direct figure gets a dash."""
-    from analysis.tables import follows_plan, headline_table
+    from analysis.aggregate import follows_plan
+    from analysis.tables import headline_table
 
     def row(name, success, direct):
         r = {"configuration": name, "n_seeds": 5, "privileges": "none", "env_steps": 2e5}
@@ -1738,3 +1739,23 @@ def test_curves_and_collision_checks_end_at_the_budget():
     assert copilot.metrics[EVAL_SUCCESS].curve.grid[-1] == 2000.0
     assert copilot.metrics[EVAL_SUCCESS].curve.center[-1] == pytest.approx(0.5)  # the final, at the budget
     assert copilot.privilege_counts[PRIVILEGE_COLLISION_CHECKS] == pytest.approx(200.0)
+
+
+def test_a_plan_of_its_own_is_what_the_algorithm_declares():
+    """The diagnostics' plan panels: SoRB with the map plans even where its plans and its agent alone
+    ended level at every evaluation (both 0), HER does not; an algorithm this checkout lacks is judged by
+    its curves, as before."""
+    from analysis.load import Trial
+    from analysis.run_figures import plans_of_its_own
+    from copilot_ray.keys import ALGORITHM_TAG, SUCCESS_DIRECT, SUCCESS_PLANNED
+
+    steps, zeros, some = np.array([1e4, 2e4]), np.zeros(2), np.array([0.1, 0.3])
+
+    def trial(algorithm, planned, direct):
+        curves = {SUCCESS_PLANNED: (steps, planned), SUCCESS_DIRECT: (steps, direct)}
+        return Trial("r", "r", "FINISHED", "k", "0", {ALGORITHM_TAG: algorithm}, curves)
+
+    assert plans_of_its_own(trial("sorb_map", zeros, zeros))
+    assert not plans_of_its_own(trial("her", zeros, zeros))
+    assert plans_of_its_own(trial("retired_method", some, zeros))
+    assert not plans_of_its_own(trial("retired_method", zeros, zeros))
