@@ -315,10 +315,16 @@ def success_vs_checks(
             ax.fill_between(checks, cv.low, cv.high, where=some, color=color, alpha=0.18, linewidth=0)
         ax.plot(checks, np.where(some, cv.center, np.nan), color=color, linewidth=2, label=label)
         ax.plot(checks[some][-1:], cv.center[some][-1:], "o", color=color)  # where the budget ends
-    from matplotlib.ticker import FuncFormatter, NullFormatter
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
     ax.set_xscale("symlog", linthresh=CHECKS_LINEAR_BELOW)
     ax.set_xlim(left=-CHECKS_LINEAR_BELOW * 0.3)
+    # 0 (no map), then the powers of ten from the linear threshold on: symlog's own ticks put a "100" on
+    # top of the "0" in the narrow linear stretch
+    decades = int(np.ceil(np.log10(max(CHECKS_LINEAR_BELOW, *(c.max() for _, _, c in drawn)))))
+    ax.xaxis.set_major_locator(
+        FixedLocator([0.0] + [10.0**k for k in range(int(np.log10(CHECKS_LINEAR_BELOW)), decades + 1)])
+    )
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos=None: _steps_label(x) if x >= 0 else ""))
     ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("ground-truth collision checks spent so far (log scale above 1,000; 0: no map)")
@@ -333,7 +339,10 @@ def success_vs_checks(
         fontsize=8,
         title=axis_name,
     )
-    note = INTERVAL_NOTE + "; x: the seeds' mean checks at each env step; a dot: the last evaluation"
+    note = (
+        f"n >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM, shaded 95% stratified bootstrap CI; fewer: the mean, no "
+        "CI; x: the seeds' mean checks at each env step; a dot: the last evaluation"
+    )
     if dropped:
         note += f"; {dropped} more configurations not drawn"
     _suptitle(fig, f"{title}, by {axis_name}\n{note}")
