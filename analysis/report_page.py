@@ -117,7 +117,9 @@ def improvement_blocks(configs, frame, several: bool, over: str = "best") -> lis
         f"its own, its privileges beside it) scores higher than a seed of {whom}, "
         "ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
         f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
-        "seeds on each side. The last column says whether CO-PILOT's CI of final success lies wholly above "
+        "seeds on each side. The reading holds the CI against 0.5: ahead (wholly above), behind (wholly "
+        "below), not separated (it holds 0.5); with 5 seeds a side and no ties the CI clears 0.5 only from "
+        "P >= 0.84. The last column says whether CO-PILOT's CI of final success lies wholly above "
         "the other method's (a CI on both sides needs as many seeds)."
     )
     if frame.empty:

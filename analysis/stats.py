@@ -287,6 +287,17 @@ class Improvement:
         p, lo, hi = (format(v, fmt) for v in (self.p, self.low, self.high))
         return f"{p} [{100 * self.confidence:g}% CI {lo}, {hi}]"
 
+    def reading(self) -> str:
+        """The CI against 0.5, the comparison's fixed rule: "ahead" (wholly above), "behind" (wholly below),
+        "not separated" (it holds 0.5); without a CI (under 5 seeds a side) there is no reading, said so."""
+        if not self.available:
+            return f"no reading (n = {self.nx} and {self.ny}; a CI needs {MIN_SEEDS_FOR_CI} each)"
+        if self.low > 0.5:
+            return "ahead"
+        if self.high < 0.5:
+            return "behind"
+        return "not separated"
+
 
 def improvement(
     x: np.ndarray,

@@ -306,6 +306,7 @@ def improvement_frame(
             row[f"p_{what}"] = imp.p  # (its interval only from MIN_SEEDS_FOR_CI seeds a side: NaN below)
             row[f"p_{what}_low"], row[f"p_{what}_high"] = imp.low, imp.high
             row[f"p_{what}_text"] = imp.text()
+            row[f"p_{what}_reading"] = imp.reading()
         row["final_ci_apart"] = ci_apart(mx.final, my.final)
         rows.append(row)
     return pd.DataFrame(rows)
@@ -329,7 +330,9 @@ def improvement_table(frame: pd.DataFrame) -> Table:
             "CO-PILOT (default preset; privileges)",
             "other (privileges)",
             "P(final success higher)",
+            "reading (final)",
             "P(AUC higher)",
+            "reading (AUC)",
             "final success CIs apart (CO-PILOT's above)",
         ]
     )
@@ -339,7 +342,9 @@ def improvement_table(frame: pd.DataFrame) -> Table:
                 f"{r['copilot']} ({r['copilot_privileges']})",
                 f"{r['other']} ({r['other_privileges']})",
                 str(r["p_final_text"]),
+                str(r["p_final_reading"]),
                 str(r["p_auc_text"]),
+                str(r["p_auc_reading"]),
                 str(r["final_ci_apart"]),
             ]
         )

@@ -797,6 +797,10 @@ def test_probability_of_improvement_on_hand_made_scores():
     # below 5 seeds a side: the point estimate without an interval; no seeds: nothing
     assert not few.available and few.text() == "1.00 (no CI: n = 5 and 2; a CI needs 5 each)"
     assert stats.improvement(x, y[:0]).text() == "n/a (no seeds on a side; here 5 and 0)"
+    # the reading holds the CI against 0.5
+    assert imp.reading() == "ahead" and stats.improvement(y, x).reading() == "behind"
+    assert same.reading() == "not separated"
+    assert few.reading() == "no reading (n = 5 and 2; a CI needs 5 each)"
 
 
 def test_auc_over_the_common_window():
@@ -947,11 +951,12 @@ def test_probability_of_improvement_in_the_report(honest):
     section = report.split("## Probability of improvement over the best other method")[1].split("## ")[0]
     assert (
         "| algorithm=copilot (collision_checks, map_queries, reset_to_state) | algorithm=sac (none) "
-        "| 1.00 [95% CI 1.00, 1.00] | 1.00 [95% CI 1.00, 1.00] | yes: " in section
+        "| 1.00 [95% CI 1.00, 1.00] | ahead | 1.00 [95% CI 1.00, 1.00] | ahead | yes: " in section
     )
     assert report.index("## Summary") < report.index("## Probability of improvement")
     imp = pd.read_csv(honest["out"] / "improvement.csv")
     assert imp.loc[0, "p_final"] == 1.0 and imp.loc[0, "p_auc"] == 1.0
+    assert imp.loc[0, "p_final_reading"] == "ahead" and imp.loc[0, "p_auc_reading"] == "ahead"
 
 
 def test_success_against_collision_checks_draws_each_method_at_the_checks_it_spent(honest):
