@@ -334,7 +334,9 @@ def end_sweep_run(
     summary_metrics: Mapping[str, float] | None = None,
 ) -> None:
     """Closes the sweep's parent run with its summary: the table as an artifact, and per configuration
-    its figures as metrics (so the parent row in MLflow's runs list shows the sweep's outcome)."""
+    its figures as metrics (so the parent row in MLflow's runs list shows the sweep's outcome). A figure
+    the run already holds with the same value is not logged again: --resume closes a finished part once
+    more, and its history should keep one entry."""
     client = _client(tracking_uri)
     if summary_md is not None:
         client.log_text(run_id, summary_md, SUMMARY_ARTIFACT)
@@ -342,7 +344,8 @@ def end_sweep_run(
         from mlflow.entities import Metric
 
         now = int(time.time() * 1000)
-        items = [Metric(k, float(v), now, 0) for k, v in summary_metrics.items()]
+        held = client.get_run(run_id).data.metrics
+        items = [Metric(k, float(v), now, 0) for k, v in summary_metrics.items() if held.get(k) != float(v)]
         for i in range(0, len(items), 500):
             client.log_batch(run_id, metrics=items[i : i + 500])
     client.set_terminated(run_id, status=status)

@@ -467,3 +467,25 @@ def test_a_sweep_without_address_starts_its_own_ray_whatever_ray_address_says():
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
     assert int(out.stdout.split()[-1]) == os.cpu_count()
+
+
+def test_closing_a_finished_part_again_keeps_one_entry_per_summary_figure(tmp_path):
+    """--resume walks through finished parts and closes each once more: an unchanged summary figure is
+    not logged twice (its history keeps one entry); a changed one is, and the latest value is the new."""
+    from copilot_ray import tracking
+
+    uri = f"sqlite:///{tmp_path}/store.db"
+    _, parent, _ = tracking.open_sweep_run(uri, "exp", "part", resume=False)
+    figures = {"summary/best/validation_success": 0.5, "summary/a/validation_success": 0.25}
+    tracking.end_sweep_run(uri, parent, "FINISHED", "# table", figures)
+    tracking.end_sweep_run(uri, parent, "FINISHED", "# table", figures)
+    client = tracking._client(uri)
+    for key in figures:
+        assert len(client.get_metric_history(parent, key)) == 1
+    tracking.end_sweep_run(
+        uri, parent, "FINISHED", "# table", {**figures, "summary/a/validation_success": 0.75}
+    )
+    history = client.get_metric_history(parent, "summary/a/validation_success")
+    assert [m.value for m in history] == [0.25, 0.75]
+    assert client.get_run(parent).data.metrics["summary/a/validation_success"] == 0.75
+    assert len(client.get_metric_history(parent, "summary/best/validation_success")) == 1
