@@ -51,8 +51,10 @@ SPEC = {
 }
 
 
-def _spec_file(directory: Path, seeds: list[int], gpu: bool) -> str:
+def _spec_file(directory: Path, seeds: list[int], gpu: bool, layout: str = "u-maze", values=None) -> str:
     data = {**SPEC, "seeds": seeds, "seeds_per_trial": len(seeds), "tracking": {"storage": str(directory)}}
+    data["env"] = {**SPEC["env"], "config": {"layout": layout}}
+    data["config"] = {**SPEC["config"], **(values or {})}
     if gpu:  # the learner, and so the stack, on the GPU
         data["resources"] = {**SPEC["resources"], "gpus_per_trial": 1}
     path = directory / f"stack_{len(seeds)}.yaml"
@@ -82,12 +84,16 @@ def _env_steps(result: dict) -> float:
 
 
 def measure(trial, iterations: int) -> float:
-    """Env steps/s of all the trial's seeds over `iterations` iterations after one to warm up."""
-    before = _env_steps(trial.train())
+    """Env steps/s of all the trial's seeds over `iterations` iterations after one to warm up; each
+    iteration prints its running rate, so a run cut off (a lent machine's minutes) keeps a figure."""
     start = time.perf_counter()
-    for _ in range(iterations):
+    before = _env_steps(trial.train())
+    print(f"   warm-up iteration: {before:.0f} env steps in {time.perf_counter() - start:.0f} s", flush=True)
+    start = time.perf_counter()
+    for i in range(iterations):
         after = _env_steps(trial.train())
-    seconds = time.perf_counter() - start
+        seconds = time.perf_counter() - start
+        print(f"   iteration {i + 1}: {(after - before) / seconds:.1f} env steps/s so far", flush=True)
     trial.stop()
     return (after - before) / seconds
 
@@ -101,7 +107,28 @@ def main() -> None:
         "--threads", type=int, default=1, help="torch threads (a trial's process has one core)"
     )
     parser.add_argument("--gpu", action="store_true", help="every trial's learner on the GPU")
+    parser.add_argument(
+        "--updates",
+        choices=("both", "stacked", "own"),
+        default="both",
+        help="the stacked rows to run: one stacked update, each seed's own, or both (default both); a lent "
+        "GPU's minutes go further without the own-update rows, which a GPU trial never takes",
+    )
+    parser.add_argument("--layout", default="u-maze", help="the maze-point layout (default u-maze)")
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="CO-PILOT settings over the benchmark's own, e.g. tree_depth=5 repetitions=5 (YAML values)",
+    )
     args = parser.parse_args()
+    values = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"--set: {item!r} is invalid: must be KEY=VALUE")
+        values[key] = yaml.safe_load(value)
     if any(n < 2 for n in args.stacks):
         raise SystemExit(f"--stacks: every stack needs >= 2 seeds, got {args.stacks}")
     if args.gpu and not torch.cuda.is_available():
@@ -112,14 +139,18 @@ def main() -> None:
     for round_ in range(args.rounds):
         name = "one seed, its own trial"
         rows.setdefault(name, []).append(
-            measure(_one_seed_trial(_spec_file(directory, [0], args.gpu)), args.iterations)
+            measure(
+                _one_seed_trial(_spec_file(directory, [0], args.gpu, args.layout, values)), args.iterations
+            )
         )
         print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
         for n in args.stacks:
             seeds = list(range(n))
             for stacked_update, how in ((False, "each its own update"), (True, "one stacked update")):
+                if args.updates != "both" and stacked_update != (args.updates == "stacked"):
+                    continue
                 name = f"{n} seeds in one trial, {how}"
-                spec = _spec_file(directory, seeds, args.gpu)
+                spec = _spec_file(directory, seeds, args.gpu, args.layout, values)
                 rows.setdefault(name, []).append(
                     measure(_stacked_trial(spec, seeds, stacked_update), args.iterations)
                 )
