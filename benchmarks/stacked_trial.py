@@ -1,7 +1,8 @@
 """Env steps/s of a stacked-seeds trial (`SeedStackTrial`, a spec's `seeds_per_trial`) against one seed's
-own trial, both in this process, CO-PILOT on the u-maze with one SAC update per env step.
+own trial, both in this process, CO-PILOT on the u-maze (`--layout`) with one SAC update per env step.
 
     PYTHONPATH=. python benchmarks/stacked_trial.py [--stacks 2 4] [--iterations 4] [--rounds 2] [--gpu]
+        [--updates both|stacked|own] [--layout u-maze]
 
 Rows: one seed's own trial; then per stack size N, N seeds in one trial with each seed's own update (a
 CPU's default) and with one stacked update and batched acting (a GPU's default). Each row builds its
@@ -51,10 +52,9 @@ SPEC = {
 }
 
 
-def _spec_file(directory: Path, seeds: list[int], gpu: bool, layout: str = "u-maze", values=None) -> str:
+def _spec_file(directory: Path, seeds: list[int], gpu: bool, layout: str = "u-maze") -> str:
     data = {**SPEC, "seeds": seeds, "seeds_per_trial": len(seeds), "tracking": {"storage": str(directory)}}
     data["env"] = {**SPEC["env"], "config": {"layout": layout}}
-    data["config"] = {**SPEC["config"], **(values or {})}
     if gpu:  # the learner, and so the stack, on the GPU
         data["resources"] = {**SPEC["resources"], "gpus_per_trial": 1}
     path = directory / f"stack_{len(seeds)}.yaml"
@@ -115,20 +115,7 @@ def main() -> None:
         "GPU's minutes go further without the own-update rows, which a GPU trial never takes",
     )
     parser.add_argument("--layout", default="u-maze", help="the maze-point layout (default u-maze)")
-    parser.add_argument(
-        "--set",
-        nargs="+",
-        default=[],
-        metavar="KEY=VALUE",
-        help="CO-PILOT settings over the benchmark's own, e.g. tree_depth=5 repetitions=5 (YAML values)",
-    )
     args = parser.parse_args()
-    values = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise SystemExit(f"--set: {item!r} is invalid: must be KEY=VALUE")
-        values[key] = yaml.safe_load(value)
     if any(n < 2 for n in args.stacks):
         raise SystemExit(f"--stacks: every stack needs >= 2 seeds, got {args.stacks}")
     if args.gpu and not torch.cuda.is_available():
@@ -139,9 +126,7 @@ def main() -> None:
     for round_ in range(args.rounds):
         name = "one seed, its own trial"
         rows.setdefault(name, []).append(
-            measure(
-                _one_seed_trial(_spec_file(directory, [0], args.gpu, args.layout, values)), args.iterations
-            )
+            measure(_one_seed_trial(_spec_file(directory, [0], args.gpu, args.layout)), args.iterations)
         )
         print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
         for n in args.stacks:
@@ -150,7 +135,7 @@ def main() -> None:
                 if args.updates != "both" and stacked_update != (args.updates == "stacked"):
                     continue
                 name = f"{n} seeds in one trial, {how}"
-                spec = _spec_file(directory, seeds, args.gpu, args.layout, values)
+                spec = _spec_file(directory, seeds, args.gpu, args.layout)
                 rows.setdefault(name, []).append(
                     measure(_stacked_trial(spec, seeds, stacked_update), args.iterations)
                 )

@@ -52,7 +52,9 @@ echo "# $(date -u '+%Y-%m-%d %H:%M UTC'), commit $commit, $(nproc) cores, $(nvid
 for step in "${steps[@]}"; do
   limit="${step%%|*}"
   command="${step#*|}"
-  echo "# PYTHONPATH=.:/tmp/site $python_bin $command${limit:+ (cut at $limit s)}" >>"$out/device_check.txt"
+  cut=""
+  [ "$limit" = 0 ] || cut=" (cut at $limit s)"  # timeout 0: no limit
+  echo "# PYTHONPATH=.:/tmp/site $python_bin $command$cut" >>"$out/device_check.txt"
   # A step that fails or is cut off says so and the next one still runs.
   # shellcheck disable=SC2086  # the command's words are split on purpose
   PYTHONPATH=.:/tmp/site RAY_AUTH_MODE=disabled timeout --signal INT --kill-after 10 "$limit" \
