@@ -77,12 +77,10 @@ def _config(
         values["eval_tree_tasks"] = 0  # no tree snapshots written to disk per evaluation
         if warm_start is not None:
             values["planner_warm_start"] = warm_start
-    config = get_algorithm(algorithm).build_config(values, run)
     if not current:
         # The paths before the fused update and the lean loop: RLlib's batches and env runner.
-        config.fast_learner_options = {"fused_update": False}
-        config.lean_traversal = False
-    return config
+        values.update(fused_update=False, lean_traversal=False)
+    return get_algorithm(algorithm).build_config(values, run)
 
 
 class Trial:

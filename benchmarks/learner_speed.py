@@ -313,7 +313,7 @@ def traversal_sampling(passes: int, depth: int, torch_threads: int) -> dict[str,
     return ms
 
 
-# A lone trial's paths: (fast_learner_options["fused_update"], lean_traversal). "before" is the commit
+# A lone trial's paths: (the settings fused_update, lean_traversal). "before" is the commit
 # before the fused update and the lean loop; "after" this checkout's default; the other two split the gain.
 E2E_PATHS = {
     "before": (False, False),
@@ -357,7 +357,7 @@ def copilot_end_to_end(
                     planner_warm_start=5,
                 )
             )
-            config.fast_learner_options = {"fused_update": fused}
+            config.fused_update = fused
             config.lean_traversal = lean
             algos[name] = config.build_algo()
         rates: dict[str, list[float]] = {name: [] for name in algos}

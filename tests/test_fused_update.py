@@ -221,11 +221,21 @@ def test_an_agents_learner_options_are_checked_by_name():
     config.fast_learner_options = {"fused": False}
     with pytest.raises(ValueError, match=r"fast_learner_options\['fused'\]=False is invalid: known keys"):
         config.validate()
-    config = GoalSACConfig().environment("maze-point")
-    config.fast_learner_options = {"fused_update": 0}
-    with pytest.raises(ValueError, match=r"\['fused_update'\] must be True or False, got 0"):
-        config.validate()
+    # The path itself is a setting (a sweep can run both), not one of these options.
     config = GoalSACConfig().environment("maze-point")
     config.fast_learner_options = {"fused_update": False}
+    with pytest.raises(ValueError, match=r"\['fused_update'\]=False is invalid.*config.agent\(fused_update"):
+        config.validate()
+    config = GoalSACConfig().environment("maze-point").agent(fused_update=0)
+    with pytest.raises(ValueError, match=r"fused_update=0 is invalid: must be true or false"):
+        config.validate()
+    config = GoalSACConfig().environment("maze-point")
+    config.fast_learner_options = {"cuda_graph": 1}
+    with pytest.raises(ValueError, match=r"\['cuda_graph'\] must be True or False, got 1"):
+        config.validate()
+    config = GoalSACConfig().environment("maze-point").agent(fused_update=False)
     config.validate()
     assert gc_sac_settings(config)["fused_update"] is False
+    default = GoalSACConfig().environment("maze-point")
+    default.validate()
+    assert gc_sac_settings(default)["fused_update"] is True

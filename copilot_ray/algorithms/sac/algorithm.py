@@ -137,11 +137,10 @@ class GoalSACConfig(SACConfig):
         self.train_episode_steps = agent_settings.SETTINGS["train_episode_steps"].default
         # n_sampled_goal 0: plain SAC on the flat buffer (no relabelling, no goal bookkeeping).
         self.her: dict[str, Any] = {"n_sampled_goal": 0, "goal_selection": "future"}
-        # How the fast learner runs its updates, not what it learns: `use_fast_learner`'s keyword
-        # arguments (fused_update, cuda_graph, compile_update), applied by validate().
+        # How the fast learner runs its updates on a GPU, not what it learns: `use_fast_learner`'s
+        # keyword arguments cuda_graph and compile_update, applied by validate(). (`fused_update` and
+        # `lean_traversal`, the paths on any device, are settings.)
         self.fast_learner_options: dict[str, Any] = {}
-        # Sample the traversal with TraversalEnvRunner's lean loop (False: RLlib's own env runner).
-        self.lean_traversal = True
         self._apply({key: s.default for key, s in self.SETTINGS.items() if self._is_value(s)}, defaults=True)
 
     # ------------------------------------------------------------------ settings by name
@@ -283,10 +282,6 @@ class GoalSACConfig(SACConfig):
                 f"{name}: fast_learner=False is invalid with hindsight relabelling: the relabelling buffer "
                 "feeds the fast learner"
             )
-        if not isinstance(self.lean_traversal, bool):
-            raise ValueError(
-                f"{name}: lean_traversal={self.lean_traversal!r} is invalid: must be True or False"
-            )
         if self.num_envs_per_env_runner != 1:
             raise ValueError(
                 f"{name}: num_envs_per_env_runner={self.num_envs_per_env_runner!r} is invalid: one sub-task "
@@ -301,16 +296,17 @@ class GoalSACConfig(SACConfig):
         return agent_settings.combination_problems(values)
 
     def _learner_options(self) -> dict[str, Any]:
-        """`fast_learner_options`, each key one `use_fast_learner` takes (a ValueError names one it
-        does not)."""
-        known = ("fused_update", "cuda_graph", "compile_update")
+        """`use_fast_learner`'s keyword arguments: the `fused_update` setting and `fast_learner_options`,
+        each key one it takes (a ValueError names one it does not)."""
+        known = ("cuda_graph", "compile_update")
         for key, value in self.fast_learner_options.items():
             if key not in known:
+                why = " (a setting: config.agent(fused_update=...))" if key == "fused_update" else ""
                 raise ValueError(
                     f"{type(self).__name__}: fast_learner_options[{key!r}]={value!r} is invalid: known keys are "
-                    f"{list(known)}"
+                    f"{list(known)}{why}"
                 )
-        return dict(self.fast_learner_options)
+        return {"fused_update": self.fused_update, **self.fast_learner_options}
 
     # ------------------------------------------------------------------ derived
     def traversal_rules(self) -> TraversalRules:

@@ -133,6 +133,22 @@ LEARNER = [
         True,
         "our flat-buffer SAC learner (false: RLlib's stock SAC module, learner and buffer, ~10x slower)",
     ),
+    # How fast, not what is learned: spec keys so that a sweep can run the paths side by side (the
+    # learning check of the fused update and the lean loop is such a sweep).
+    bool_setting(
+        "fused_update",
+        "agent",
+        True,
+        "the fast learner's whole SAC step, replay sampling included, as one function on the learner's "
+        "device (one CUDA graph on a GPU); false: the batch path before it, 16 steps per learner call",
+    ),
+    bool_setting(
+        "lean_traversal",
+        "agent",
+        True,
+        "sample sub-tasks with the lean env runner (TraversalEnvRunner: the same episodes without RLlib's "
+        "per-step connector pipelines); false: RLlib's own env runner",
+    ),
     float_setting(
         "updates_per_env_step",
         "agent",
