@@ -251,9 +251,11 @@ def checked_run(args: argparse.Namespace) -> tuple[dict[str, Any], RunContext]:
         env_config=env_config,
         seed=args.seed,
         num_env_runners=args.num_env_runners,
-        # Sampling (without runners) and the learner share this process: give it the cores the
-        # runners leave free; CoPilotConfig sizes torch's thread pool from this.
-        num_cpus_for_main_process=max(1, (os.cpu_count() or 1) - args.num_env_runners),
+        # Sampling (without runners) and the learner share this process, on one torch thread: for these
+        # small networks a second thread gains little on an idle machine and loses up to 10x when
+        # anything else uses the cores (docs/measured.md, "OpenMP"). CoPilotConfig sizes torch's thread
+        # pool from this.
+        num_cpus_for_main_process=1,
         env_step_budget=args.stop_env_steps,
     )
     return values, run

@@ -176,7 +176,9 @@ def start_ray(address: str | None) -> bool:
     if ray.is_initialized():
         return False
     if address:
-        ray.init(address=address, log_to_driver=False)
+        # A cluster's workers were started by `ray start`, not by this process: pass the waiting policy on.
+        env_vars = {"OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
+        ray.init(address=address, log_to_driver=False, runtime_env={"env_vars": env_vars})
     else:
         # "local": a Ray of our own even where RAY_ADDRESS is set or `ray start` left a cluster running on
         # this machine; Ray would attach to those and then refuse num_cpus (--address picks a cluster).

@@ -455,18 +455,22 @@ def test_resume_from_a_carried_store_skips_finished_parts_and_restarts_the_other
 
 def test_a_sweep_without_address_starts_its_own_ray_whatever_ray_address_says():
     """Without --address a sweep runs on a Ray of its own: a RAY_ADDRESS left in the shell (or a `ray
-    start` cluster on this machine) would otherwise capture it, and Ray then refuses its num_cpus."""
+    start` cluster on this machine) would otherwise capture it, and Ray then refuses its num_cpus. Its
+    worker processes wait passively (OpenMP), though the shell set no policy."""
     code = (
-        "import ray\n"
+        "import os, ray\n"
         "from copilot_ray import tune_runtime\n"
         "assert tune_runtime.start_ray(None)\n"
-        "print(int(ray.cluster_resources()['CPU']))\n"
+        "policy = ray.get(ray.remote(lambda: os.environ.get('OMP_WAIT_POLICY')).remote())\n"
+        "print(policy, int(ray.cluster_resources()['CPU']))\n"
         "ray.shutdown()\n"
     )
     env = {**os.environ, "RAY_ADDRESS": "127.0.0.1:9", "RAY_AUTH_MODE": "disabled"}
+    env.pop("OMP_WAIT_POLICY", None)
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
-    assert int(out.stdout.split()[-1]) == os.cpu_count()
+    policy, cpus = out.stdout.split()[-2:]
+    assert policy == "PASSIVE" and int(cpus) == os.cpu_count()
 
 
 def test_closing_a_finished_part_again_keeps_one_entry_per_summary_figure(tmp_path):

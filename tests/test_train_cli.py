@@ -20,6 +20,23 @@ def test_preset_flag_sets_the_readings_and_explicit_flags_override_it():
     assert default.preset is None and default.subtask_reward == "uniform" and default.tau_max == 25
 
 
+def test_a_run_uses_one_torch_thread_and_passive_openmp_threads():
+    """Two OpenMP threads on two cores that anything else uses run 10-70x slower than one (measured,
+    docs/measured.md): the main process gets one torch thread whatever the core count, and importing the
+    package (before torch loads) sets a passive waiting policy that Ray's workers inherit."""
+    _, run = train.checked_run(train.parse_args(["--num-env-runners", "0"]))
+    assert run.num_cpus_for_main_process == 1
+    code = "import os, copilot_ray, torch; print(os.environ['OMP_WAIT_POLICY'])"
+    env = {k: v for k, v in __import__("os").environ.items() if k != "OMP_WAIT_POLICY"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["PASSIVE"]
+    kept = subprocess.run(
+        [sys.executable, "-c", code], env={**env, "OMP_WAIT_POLICY": "ACTIVE"}, capture_output=True,
+        text=True, check=True,
+    )
+    assert kept.stdout.split() == ["ACTIVE"]  # a policy the user chose is kept
+
+
 def test_every_setting_but_the_schedule_fields_is_a_flag_with_its_rule_in_the_help():
     parser_help = subprocess.run(
         [sys.executable, "-m", "copilot_ray.train", "--help"], capture_output=True, text=True, check=True
