@@ -31,8 +31,11 @@ def test_a_run_uses_one_torch_thread_and_passive_openmp_threads():
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["PASSIVE"]
     kept = subprocess.run(
-        [sys.executable, "-c", code], env={**env, "OMP_WAIT_POLICY": "ACTIVE"}, capture_output=True,
-        text=True, check=True,
+        [sys.executable, "-c", code],
+        env={**env, "OMP_WAIT_POLICY": "ACTIVE"},
+        capture_output=True,
+        text=True,
+        check=True,
     )
     assert kept.stdout.split() == ["ACTIVE"]  # a policy the user chose is kept
 
