@@ -162,7 +162,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
     p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
-    p.add_argument("--bootstrap-reps", type=int, default=stats.DEFAULT_REPS)
+    p.add_argument(
+        "--bootstrap-reps",
+        type=int,
+        default=stats.DEFAULT_REPS,
+        help="resamples drawn for every interval (at least 20,000); default: exact (every resample "
+        "enumerated) up to 8 seeds, 20,000 drawn beyond",
+    )
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (the report is reproducible)")
     p.add_argument("--no-log", action="store_true", help="do not log the report to the parent MLflow run")
     p.add_argument(
@@ -174,6 +180,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "met or by how much it falls short (a success rate in (0, 1])",
     )
     args = p.parse_args(argv)
+    if args.bootstrap_reps is not None and args.bootstrap_reps < stats.MC_REPS:
+        p.error(
+            f"--bootstrap-reps {args.bootstrap_reps} is invalid: at least {stats.MC_REPS:,} (or leave it out: exact)"
+        )
     if args.target is not None and not 0 < args.target <= 1:
         p.error(f"--target: {args.target:g} is not a success rate in (0, 1]")
     if args.experiment and args.experiment_pos and args.experiment != args.experiment_pos:
@@ -264,6 +274,7 @@ def main(argv: list[str] | None = None) -> int:
         provenance,
         below,
         tasks_why,
+        args.bootstrap_reps,
     )
     (out / "report.md").write_text(report_page.to_markdown(doc))
     (out / "report.html").write_text(report_page.to_html(doc, sweep.experiment))
@@ -306,7 +317,9 @@ def _blocks_below_summary(
     below = (
         []
         if one_seed_each(configs)
-        else report_page.improvement_blocks(configs, improvement, several, args.improvement_over)
+        else report_page.improvement_blocks(
+            configs, improvement, several, args.improvement_over, args.bootstrap_reps
+        )
     )
     below += report_page.target_blocks(configs, tasks, args)
     settings_table = defaults.defaults_table(configs)

@@ -101,7 +101,9 @@ def _spec_lines(sweep: Sweep) -> list[str]:
     return out
 
 
-def improvement_blocks(configs, frame, several: bool, over: str = "best") -> list[tuple]:
+def improvement_blocks(
+    configs, frame, several: bool, over: str = "best", reps: int | None = None
+) -> list[tuple]:
     """Under the headline table: P(CO-PILOT's default beats the best other method, or each other row)."""
     if not several or not any(m in c.metrics for c in configs for m in SUCCESS_METRICS):
         return []  # one method, or planners alone (no success of an agent to compare)
@@ -116,7 +118,9 @@ def improvement_blocks(configs, frame, several: bool, over: str = "best") -> lis
         "(algorithm copilot, no preset; a variant such as the privileged after_failure restart is a row of "
         f"its own, its privileges beside it) scores higher than a seed of {whom}, "
         "ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
-        f"bootstrap CI with the seeds of both resampled independently. Only with >= {stats.MIN_SEEDS_FOR_CI} "
+        "bootstrap CI with the seeds of both resampled independently ("
+        + bootstrap_words(reps, pairs=True)
+        + f"). Only with >= {stats.MIN_SEEDS_FOR_CI} "
         "seeds on each side. The reading holds the CI against 0.5: ahead (wholly above), behind (wholly "
         "below), not separated (it holds 0.5); with 5 seeds a side and no ties the CI clears 0.5 only from "
         "P >= 0.84. The last column says whether CO-PILOT's CI of final success lies wholly above "
@@ -159,7 +163,7 @@ DIAGNOSTICS_TEXT = (
 )
 
 
-def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str) -> str:
+def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str, reps: int | None = None) -> str:
     windows = []
     for metric, short in tables.SHORT.items():
         m = next((c.metrics[metric] for c in configs if metric in c.metrics), None)
@@ -192,7 +196,9 @@ def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str) -> st
         + (", ".join(windows) or "none")
         + f". No best-over-evaluations figure. With >= {stats.MIN_SEEDS_FOR_CI} seeds: IQM over seeds "
         "(inter-quartile mean) and 95% CI = percentile bootstrap over seeds (one env per experiment, so "
-        "the stratified bootstrap resamples seeds within the configuration); with fewer: the mean and the "
+        "the stratified bootstrap resamples seeds within the configuration), "
+        + bootstrap_words(reps)
+        + "; with fewer: the mean and the "
         "range over the seeds, no CI. Steps to a threshold = first evaluation at or above it, IQM (mean "
         "with fewer than 5 seeds) over seeds counting a seed that never got there as infinitely late, so "
         "'not reached' means that figure is infinite; (k/n) = seeds that reached it. Env steps: mean over "
@@ -229,6 +235,7 @@ def document(
     provenance,
     below,
     tasks_why: str,
+    reps: int | None = None,
 ):
     statuses: dict[str, int] = {}
     for t in sweep.trials:
@@ -261,7 +268,7 @@ def document(
         doc.append(("h2", "Left out of the figures"))
         doc.append(("ul", left_out))
     doc.append(("h2", "Summary"))
-    doc.append(("p", summary_text(configs, sweep.tasks, tasks_why)))
+    doc.append(("p", summary_text(configs, sweep.tasks, tasks_why, reps)))
     doc.append(("table", tables.headline_table(frame)))
     details = tables.details_table(frame)
     if details.rows:
@@ -322,4 +329,15 @@ def to_html(doc, title: str) -> str:
     return (
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
         f"<style>{HTML_STYLE}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
+
+
+def bootstrap_words(reps: int | None, pairs: bool = False) -> str:
+    """How the report's intervals were resampled, in words."""
+    if reps is not None:
+        return f"{reps:,} resamples drawn (--bootstrap-reps)"
+    what = "every pair of resamples of the two sides" if pairs else "every resample of the seeds"
+    return (
+        f"exact: {what} enumerated (5 seeds: all 5^5 = 3,125 per side) up to 8 seeds, "
+        f"{stats.MC_REPS:,} resamples drawn beyond"
     )

@@ -10,6 +10,12 @@ to resampling seeds within one configuration, which is what `bootstrap_ci` does.
 NaN marks "no data" (a seed that stopped before that step); statistics ignore it per column.
 Infinity marks "never reached" in steps-to-threshold; the IQM trims it away when it is an outlier.
 
+The bootstrap is exact where the seeds allow: with n seeds there are only C(2n - 1, n) different
+resamples up to order (126 for 5 seeds), each standing for a known number of the n^n equally likely ordered
+ones, so every resample is enumerated and the percentiles are those of the whole resampling distribution
+(`np.percentile`'s linear rule over all n^n). Above `EXACT_LIMIT` different resamples (more than 8 seeds;
+for P(X > Y), pairs of resamples) it draws `MC_REPS` (20,000) of them. `bootstrap_method` says which.
+
 Honest intervals: a bootstrap over 2 or 3 seeds resamples almost nothing and gives intervals that look
 precise and are not, and an IQM of fewer than 5 values trims nothing useful. So a CI, a band and the IQM
 are used only from `MIN_SEEDS_FOR_CI` seeds on; with fewer, the mean and the seeds' range (`SeedSummary`).
@@ -17,13 +23,19 @@ are used only from `MIN_SEEDS_FOR_CI` seeds on; with fewer, the mean and the see
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
+from itertools import combinations_with_replacement
 
 import numpy as np
 
 IQM_TRIM = 0.25  # trim 25 % from each end: the inter-quartile mean
-DEFAULT_REPS = 2000
+MC_REPS = 20_000  # resamples drawn where enumerating them all is too costly (the rules' minimum)
+DEFAULT_REPS = None  # None: exact where the seeds allow (EXACT_LIMIT), else MC_REPS
+EXACT_LIMIT = 10_000  # different resamples of one configuration enumerated at most (8 seeds: 6,435)
+EXACT_PAIR_LIMIT = 50_000_000  # pairs of resamples enumerated for P(X > Y) at most (8 seeds a side)
 DEFAULT_CONFIDENCE = 0.95
 MIN_SEEDS_FOR_CI = 5  # fewer seeds: no CI, no band, no IQM (the mean and the seeds' range instead)
 
@@ -53,33 +65,85 @@ def iqm(x: np.ndarray, axis: int = 0) -> np.ndarray:
 def bootstrap_ci(
     x: np.ndarray,
     statistic: Callable[[np.ndarray], np.ndarray] = iqm,
-    reps: int = DEFAULT_REPS,
+    reps: int | None = DEFAULT_REPS,
     confidence: float = DEFAULT_CONFIDENCE,
     seed: int = 0,
     chunk: int = 250,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Percentile-bootstrap CI of `statistic` over seeds (axis 0 of `x`, shape [n_seeds, ...]).
 
-    The resampling is exactly `np.random.default_rng(seed).integers(0, n, size=(reps, n))`, each row one
-    bootstrap sample of seed indices, so a test can reproduce it. Bounds are `np.nanpercentile` at
-    (1 - confidence) / 2 and 1 - (1 - confidence) / 2. With one seed, or identical seeds, the interval
-    collapses to the point estimate: there is nothing to resample.
+    `reps` None: exact (every resample, `resamples(n)`) up to `EXACT_LIMIT` different ones, else
+    `MC_REPS` drawn. A number: exactly `np.random.default_rng(seed).integers(0, n, size=(reps, n))`, each
+    row one bootstrap sample of seed indices, so a test can reproduce it. Bounds are the percentiles at
+    (1 - confidence) / 2 and 1 - (1 - confidence) / 2, NaN left out per column. With one seed, or identical
+    seeds, the interval collapses to the point estimate: there is nothing to resample.
     """
     x = np.asarray(x, dtype=np.float64)
     n = x.shape[0]
     if n == 0:
         nan = np.full(x.shape[1:], np.nan)
         return nan, nan.copy()
-    idx = np.random.default_rng(seed).integers(0, n, size=(reps, n))
-    boots = np.empty((reps,) + x.shape[1:])
-    for lo in range(0, reps, chunk):  # chunks keep [chunk, n, grid] small for long curves
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    if reps is None and exact_bootstrap(n):
+        idx, counts = resamples(n)
+        boots = np.empty((len(idx),) + x.shape[1:])
+        for lo in range(0, len(idx), chunk):
+            boots[lo : lo + chunk] = statistic(x[idx[lo : lo + chunk]], axis=1)
+        flat = boots.reshape(len(idx), -1)
+        low = np.array([population_percentile(flat[:, j], counts, tail) for j in range(flat.shape[1])])
+        high = np.array(
+            [population_percentile(flat[:, j], counts, 100.0 - tail) for j in range(flat.shape[1])]
+        )
+        return low.reshape(x.shape[1:]), high.reshape(x.shape[1:])
+    idx = np.random.default_rng(seed).integers(0, n, size=(reps or MC_REPS, n))
+    boots = np.empty((len(idx),) + x.shape[1:])
+    for lo in range(0, len(idx), chunk):  # chunks keep [chunk, n, grid] small for long curves
         sample = x[idx[lo : lo + chunk]]  # [chunk, n, ...]
         boots[lo : lo + chunk] = statistic(sample, axis=1)
-    tail = 100.0 * (1.0 - confidence) / 2.0
     with np.errstate(invalid="ignore"), quiet_all_nan():
         low = np.nanpercentile(boots, tail, axis=0)
         high = np.nanpercentile(boots, 100.0 - tail, axis=0)
     return low, high
+
+
+def exact_bootstrap(n: int) -> bool:
+    """Whether every resample of `n` seeds is enumerated (C(2n - 1, n) <= EXACT_LIMIT: up to 8 seeds)."""
+    return n > 0 and math.comb(2 * n - 1, n) <= EXACT_LIMIT
+
+
+def bootstrap_method(n: int, reps: int | None = DEFAULT_REPS) -> str:
+    """What a CI over `n` seeds was computed from, in words a table's note can carry."""
+    if reps is None and exact_bootstrap(n):
+        return f"exact: all {n}^{n} = {n**n:,} resamples of the {n} seeds"
+    return f"{reps or MC_REPS:,} bootstrap resamples"
+
+
+@cache
+def resamples(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every bootstrap resample of `n` seeds up to order: the seed indices [M, n] of each (sorted) and how
+    many of the n^n equally likely ordered resamples it stands for (the multinomial coefficient, int64)."""
+    idx = np.array(list(combinations_with_replacement(range(n), n)), dtype=np.int64)
+    counts = np.stack([np.bincount(row, minlength=n) for row in idx])
+    ways = math.factorial(n) // np.array([math.prod(math.factorial(int(c)) for c in row) for row in counts])
+    idx.setflags(write=False)
+    return idx, ways.astype(np.int64)
+
+
+def population_percentile(values: np.ndarray, counts: np.ndarray, q: float) -> float:
+    """`np.percentile(population, q)` (its linear rule) of the population holding each of `values`
+    `counts` times, without building it; NaN values are left out (as `np.nanpercentile` does)."""
+    values = np.asarray(values, dtype=np.float64)
+    keep = ~np.isnan(values)
+    if not keep.any():
+        return np.nan
+    v, c = values[keep], np.asarray(counts)[keep]
+    order = np.argsort(v, kind="stable")
+    v, cum = v[order], np.cumsum(c[order])
+    h = q / 100.0 * float(cum[-1] - 1)
+    lo, hi = math.floor(h), math.ceil(h)
+    # Element i of the sorted population is the first value whose cumulative count passes i.
+    v_lo, v_hi = v[np.searchsorted(cum, lo, side="right")], v[np.searchsorted(cum, hi, side="right")]
+    return float(v_lo + (h - lo) * (v_hi - v_lo))
 
 
 class quiet_all_nan:
@@ -302,24 +366,68 @@ class Improvement:
 def improvement(
     x: np.ndarray,
     y: np.ndarray,
-    reps: int = DEFAULT_REPS,
+    reps: int | None = DEFAULT_REPS,
     seed: int = 0,
     confidence: float = DEFAULT_CONFIDENCE,
 ) -> Improvement:
     """`probability_of_improvement` of X over Y and, when both have `MIN_SEEDS_FOR_CI` seeds, its
     percentile-bootstrap CI: the seeds of X and of Y resampled independently (rliable's scheme with one
-    task), each replicate's P(X > Y) computed, the percentiles taken."""
+    task), each replicate's P(X > Y) computed, the percentiles taken. `reps` None: exact, every pair of
+    resamples (up to `EXACT_PAIR_LIMIT` pairs: 8 seeds a side), else `MC_REPS` drawn."""
     x, y = _valid(x), _valid(y)
     point = probability_of_improvement(x, y)
     if not (has_ci(x.size) and has_ci(y.size)):
         return Improvement(point, np.nan, np.nan, int(x.size), int(y.size), confidence)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    if reps is None and exact_improvement(x.size, y.size):
+        values, counts = _improvement_distribution(x, y)
+        low, high = (population_percentile(values, counts, q) for q in (tail, 100.0 - tail))
+        return Improvement(point, low, high, int(x.size), int(y.size), confidence)
     rng = np.random.default_rng(seed)
+    reps = reps or MC_REPS
     xb = x[rng.integers(0, x.size, size=(reps, x.size))][:, :, None]
     yb = y[rng.integers(0, y.size, size=(reps, y.size))][:, None, :]
     boots = ((xb > yb) + 0.5 * (xb == yb)).mean(axis=(1, 2))
-    tail = 100.0 * (1.0 - confidence) / 2.0
     low, high = np.percentile(boots, [tail, 100.0 - tail])
     return Improvement(point, float(low), float(high), int(x.size), int(y.size), confidence)
+
+
+def exact_improvement(nx: int, ny: int) -> bool:
+    """Whether every pair of resamples of `nx` and `ny` seeds is enumerated for P(X > Y)'s CI."""
+    return (
+        exact_bootstrap(nx)
+        and exact_bootstrap(ny)
+        and (math.comb(2 * nx - 1, nx) * math.comb(2 * ny - 1, ny) <= EXACT_PAIR_LIMIT)
+    )
+
+
+def _improvement_distribution(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P(X* > Y*) over every pair of resamples, as its distinct values and how many of the nx^nx * ny^ny
+    ordered pairs give each. A resample is a count per seed, so P* = cx . W . cy / (nx ny) with W the
+    pairwise win matrix (1, 1/2 on ties), and 2 nx ny P* is an integer: a histogram holds it exactly."""
+    (ix, wx), (iy, wy) = resamples(x.size), resamples(y.size)
+    cx = np.stack([np.bincount(r, minlength=x.size) for r in ix])  # [Mx, nx]
+    cy = np.stack([np.bincount(r, minlength=y.size) for r in iy])  # [My, ny]
+    win2 = 2 * (x[:, None] > y[None, :]) + (x[:, None] == y[None, :])  # 2 W, integers
+    right = win2 @ cy.T  # [nx, My]
+    top = 2 * x.size * y.size
+    hist = np.zeros(top + 1, dtype=np.int64)
+    for lo in range(0, len(cx), 512):
+        k = cx[lo : lo + 512] @ right  # [chunk, My] integers 0..top
+        ways = wx[lo : lo + 512, None] * wy[None, :]
+        hist += _weighted_counts(k, ways, top)
+    seen = np.flatnonzero(hist)
+    return seen / top, hist[seen]
+
+
+def _weighted_counts(k: np.ndarray, ways: np.ndarray, top: int) -> np.ndarray:
+    """Integer-weighted histogram of `k` (bincount's weights are floats: summed here in int64 instead)."""
+    order = np.argsort(k.ravel(), kind="stable")
+    ks, ws = k.ravel()[order], ways.ravel()[order]
+    out = np.zeros(top + 1, dtype=np.int64)
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    out[ks[starts]] = np.add.reduceat(ws, starts)
+    return out
 
 
 def _valid(x: np.ndarray) -> np.ndarray:

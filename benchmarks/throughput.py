@@ -188,6 +188,12 @@ def run_and_measure(args, cores: int) -> list[dict]:
     return rows
 
 
+def portable(argv: list[str]) -> list[str]:
+    """The command as `--check` shows it on any machine: a store named by its file, not by the absolute
+    path of the worktree it was measured in."""
+    return [Path(a.removeprefix("sqlite:///")).name if a.startswith("sqlite:///") else a for a in argv]
+
+
 def from_store(args, cores: int) -> list[dict]:
     """The rates of a sweep that already ran (e.g. a comparison's parts, N = --concurrent side by side):
     every FINISHED trial run of `--experiment` (or of every experiment) in the store, per algorithm."""
@@ -303,7 +309,7 @@ def main() -> None:
         print("  ".join(f"{c!s:>11}" for c in cells) + "  " + shares)
     if args.write:
         data = json.loads(THROUGHPUT_FILE.read_text())
-        source = f"benchmarks/throughput.py {shlex.join(sys.argv[1:])} on {time.strftime('%Y-%m-%d')}"
+        source = f"benchmarks/throughput.py {shlex.join(portable(sys.argv[1:]))} on {time.strftime('%Y-%m-%d')}"
         if args.from_store:
             source += f" (its runs' commits: {', '.join(_commits(args))})"
         for r in rows:

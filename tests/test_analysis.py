@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 import subprocess
@@ -210,11 +211,12 @@ def table(store):
     return pd.read_csv(store["out"] / "summary.csv").set_index("config_key")
 
 
-def _boot_ci(x, reps=2000, seed=0):
-    # independent of analysis.stats: same documented draws, IQM by sorting each row by hand
+def _boot_ci(x):
+    # independent of analysis.stats: the exact bootstrap built by brute force (every one of the n^n
+    # ordered resamples), IQM by sorting each row by hand
     x = np.asarray(x, dtype=float)
     n = len(x)
-    idx = np.random.default_rng(seed).integers(0, n, size=(reps, n))
+    idx = np.array(list(itertools.product(range(n), repeat=n)))
     s = np.sort(x[idx], axis=1)
     g = int(np.floor(0.25 * n))
     boots = s[:, g : n - g].mean(axis=1)
@@ -397,13 +399,15 @@ def test_terminal_lists_missing(store, tmp_path, capsys):
             "--out",
             str(tmp_path / "r"),
             "--no-log",
-            "--bootstrap-reps",
-            "200",
         ]
     )
     assert rc == 0
     out = capsys.readouterr().out
     assert store["ids"]["failed"] in out and "still running" in out
+    with pytest.raises(SystemExit) as stopped:  # fewer resamples than the rules allow: refused by name
+        main([EXP, "--tracking-uri", store["uri"], "--no-log", "--bootstrap-reps", "2000"])
+    assert stopped.value.code == 2
+    assert "--bootstrap-reps 2000 is invalid: at least 20,000" in capsys.readouterr().err
 
 
 def test_parent_run_got_the_artifacts(store):
@@ -482,6 +486,41 @@ def test_bootstrap_ci_contains_iqm_and_collapses_for_identical_seeds():
     lo, hi = stats.bootstrap_ci(mat, reps=300)
     mid = stats.iqm(mat)
     assert np.all(lo[:2] <= mid[:2]) and np.all(mid[:2] <= hi[:2]) and np.isnan(lo[2])
+
+
+def test_the_bootstrap_is_exact_up_to_eight_seeds_and_draws_20000_beyond():
+    """Every ordered resample of the seeds, enumerated by brute force, gives the same percentiles as the
+    exact bootstrap (which enumerates the 126 multisets of 5 seeds with their weights); P(X > Y)'s CI is
+    that of every pair of resamples. Beyond 8 seeds it draws 20,000 resamples; a number asked for is used."""
+    rng = np.random.default_rng(3)
+    for n in (3, 5):
+        x = rng.random(n).round(2)
+        everything = np.array(list(itertools.product(range(n), repeat=n)))
+        population = np.sort(x[everything], axis=1)[:, n // 4 : n - n // 4].mean(axis=1)
+        np.testing.assert_allclose(stats.bootstrap_ci(x), np.percentile(population, [2.5, 97.5]))
+    x, y = rng.random(4).round(1), rng.random(4).round(1)
+    every = np.array(list(itertools.product(range(4), repeat=4)))
+    xb, yb = x[every][:, None, :, None], y[every][None, :, None, :]
+    pairs = ((xb > yb) + 0.5 * (xb == yb)).mean(axis=(2, 3)).ravel()
+    values, counts = stats._improvement_distribution(x, y)
+    for q in (2.5, 50.0, 97.5):
+        assert stats.population_percentile(values, counts, q) == pytest.approx(np.percentile(pairs, q))
+    # with 5 seeds a side and no ties, the exact CI clears 0.5 from 21 of 25 pair wins on
+    readings = {}
+    for ranks in itertools.combinations(range(10), 5):
+        a = np.array(ranks, float)
+        b = np.array([r for r in range(10) if r not in ranks], float)
+        imp = stats.improvement(a, b)
+        readings.setdefault(round(imp.p * 25), set()).add(imp.reading())
+    assert readings[21] == readings[25] == {"ahead"} and readings[20] == readings[5] == {"not separated"}
+    assert readings[4] == {"behind"}
+    assert stats.bootstrap_method(5) == "exact: all 5^5 = 3,125 resamples of the 5 seeds"
+    assert stats.bootstrap_method(9) == "20,000 bootstrap resamples" and not stats.exact_bootstrap(9)
+    nine = rng.random(9)
+    drawn = np.random.default_rng(0).integers(0, 9, size=(20_000, 9))
+    np.testing.assert_allclose(
+        stats.bootstrap_ci(nine), np.percentile(stats.iqm(nine[drawn], axis=1), [2.5, 97.5])
+    )
 
 
 def test_interpolate_never_extrapolates():

@@ -87,9 +87,9 @@ def test_shipped_specs_exist():
 
 def test_trial_plans_of_shipped_specs():
     depth = load_spec(ROOT / "sweeps/depth_k.yaml").trial_plan()
-    assert len(depth) == 18
+    assert len(depth) == 30
     assert sorted({t["tree_depth"] for t in depth}) == [1, 2, 3, 4, 5, 6]
-    assert depth[:3] == [{"tree_depth": 1, "seed": s} for s in (0, 1, 2)]
+    assert depth[:5] == [{"tree_depth": 1, "seed": s} for s in (1, 2, 3, 4, 5)]  # seed 0 tuned
     assert len(load_spec(ROOT / "sweeps/repetitions_b.yaml").trial_plan()) == 4 * 3
     smoke = load_spec(ROOT / "sweeps/smoke.yaml")
     assert smoke.trial_plan() == [{"tree_depth": 1, "seed": 0}, {"tree_depth": 2, "seed": 0}]
@@ -106,8 +106,8 @@ def test_trial_plans_of_shipped_specs():
 
 def test_format_plan_shows_table_and_budget():
     text = format_plan(load_spec(ROOT / "sweeps/depth_k.yaml"))
-    assert "6 configuration(s) x 3 seed(s)" in text
-    assert "18 trial(s)" in text and "5,400,000 env steps" in text
+    assert "6 configuration(s) x 5 seed(s)" in text
+    assert "30 trial(s)" in text and "6,000,000 env steps" in text
     assert "tree_depth" in text
 
 
@@ -468,7 +468,7 @@ def test_tune_search_space():
 
     space = to_tune_search_space(load_spec(ROOT / "sweeps/depth_k.yaml"))
     assert space["tree_depth"] == {"grid_search": [1, 2, 3, 4, 5, 6]}
-    assert space["seed"] == {"grid_search": [0, 1, 2]}
+    assert space["seed"] == {"grid_search": [1, 2, 3, 4, 5]}
     spec = parse_spec(
         spec_with(
             search={

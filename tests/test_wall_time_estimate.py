@@ -132,3 +132,22 @@ def test_a_gpu_spec_reads_the_gpu_figure_and_without_one_is_not_estimated(rates_
         and "one H200, 16 cores; scripts/device_check.sh at abc1234" in line
     )
     assert estimate.wall_seconds(_spec(1, [0])) == pytest.approx(200000 / 50)  # the CPU spec keeps its figure
+
+
+def test_the_shipped_rates_name_their_sources_without_a_machines_paths():
+    """`--check` prints a rate's source on every machine: a store named by its file, not by the absolute
+    path of the worktree it was measured in (which no clone has); `throughput.py --write` records it so."""
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    data = json.loads(estimate.THROUGHPUT_FILE.read_text())
+    for key, source in data.get("sources", {}).items():
+        assert "sqlite:///" not in source and "/work/" not in source, (key, source)
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        import throughput
+    finally:
+        sys.path.pop(0)
+    argv = ["--from-store", "sqlite:////work/main-at-abc1234/results/x.db", "--concurrent", "2"]
+    assert throughput.portable(argv) == ["--from-store", "x.db", "--concurrent", "2"]
