@@ -128,12 +128,24 @@ def test_a_storage_or_store_that_cannot_be_written_is_refused_before_ray(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml", "unwritable.yaml"]
 
 
-def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path):
+@pytest.mark.parametrize("check", [True, False], ids=["--check", "run"])
+def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path, check):
     blocker = tmp_path / "a_file"
     blocker.write_text("in the way")
     uri = f"sqlite:///{blocker}/sub/mlflow.db"
     proc = _storage_run(_smoke_copy(tmp_path), "--check", "--tracking-uri", uri)
     assert proc.returncode == 2 and f"--tracking-uri {uri!r} is invalid: {blocker} is a file" in proc.stderr
+    # a folder nothing can be made in, though os.access says root may write there (found by a reviewer:
+    # --check passed, the run died in MLflow after Ray had started)
+    uri = "sqlite:////proc/nope/mlflow.db"
+    proc = _storage_run(_smoke_copy(tmp_path), *(["--check"] if check else []), "--tracking-uri", uri)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.splitlines() == [
+        f"--tracking-uri {uri!r} is invalid: nothing can be made in /proc (No such file or directory), "
+        "so /proc/nope/mlflow.db cannot be made"
+    ]
+    assert "RAY_IMPORTED False" in proc.stdout and "starting Ray" not in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml"]
 
 
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
