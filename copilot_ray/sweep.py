@@ -68,7 +68,7 @@ from copilot_ray.keys import (
     validation_key,
 )
 from copilot_ray.mlflow_view import column
-from copilot_ray.store import tracking_uri_problem, ui_hint, unwritable, unwritable_store
+from copilot_ray.store import missing_sqlite_file, tracking_uri_problem, ui_hint, unwritable, unwritable_store
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
 from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
@@ -523,6 +523,9 @@ def main(argv: list[str] | None = None) -> int:
         for why in no_gpus:
             print(f"warning: {why}")
         return 0
+    if (refusal := start_problem(specs, args.spec, args.resume, args.tracking_uri)) is not None:
+        print(f"error: {refusal}", file=sys.stderr)
+        return 2
     console = quiet_console(args.verbose)
     try:
         if console is not None:
@@ -537,6 +540,42 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if console is not None:
             console.close()
+
+
+def started_parts(specs: Sequence[Any]) -> list[str]:
+    """The names of the parts whose Tune experiments exist (they ran, or began to)."""
+    return [
+        spec.name
+        for spec in specs
+        if any((sweep_root(spec) / "tune" / name).exists() for name, _ in experiment_names(spec))
+    ]
+
+
+def start_problem(specs: Sequence[Any], file: str, resume: bool, tracking_uri: str | None) -> str | None:
+    """Why the sweep file cannot start as asked (results there without --resume, nothing to resume), or
+    None: said before Ray starts and before anything is written (its console log included)."""
+    if len(specs) == 1:
+        spec = specs[0]
+        try:
+            _check_resume(sweep_root(spec), experiment_names(spec), resume)
+        except SweepError as err:
+            return str(err)
+        return None
+    started = started_parts(specs)
+    if started and not resume:
+        return (
+            f"part {started[0]!r} of {file} has results already: add --resume to continue the file's "
+            "sweeps, or remove it to start over"
+        )
+    # A file's parts also resume from their store alone (carried here without Tune folders): refused
+    # only when there is neither.
+    stores = [missing_sqlite_file(tracking_uri or spec.tracking.uri) for spec in specs]
+    if resume and not started and all(stores):
+        return (
+            f"nothing to resume: no part of {file} has run here (no Tune experiment under "
+            f"{sweep_root(specs[0]) / 'tune'}, no store {stores[0]})"
+        )
+    return None
 
 
 def storage_problems(specs: Sequence[Any], tracking_uri: str | None = None) -> list[str]:
@@ -581,18 +620,7 @@ def _run_parts(specs: Sequence[Any], args) -> int:
     """A file of several specs: each runs as its own sweep, in order, on one Ray. Without --resume no
     part may have results yet (checked before anything starts); with it, the parts that started resume and
     the others start. An interrupted or failed part ends the run (--resume continues from it)."""
-    started = [
-        spec.name
-        for spec in specs
-        if any((sweep_root(spec) / "tune" / name).exists() for name, _ in experiment_names(spec))
-    ]
-    if started and not args.resume:
-        print(
-            f"error: part {started[0]!r} of {args.spec} has results already: add --resume "
-            "to continue the file's sweeps, or remove it to start over",
-            file=sys.stderr,
-        )
-        return 2
+    started = started_parts(specs)  # (results without --resume were refused before: start_problem)
     runtime = _import_runtime()
     own_ray = runtime.start_ray(args.address)
     try:

@@ -159,6 +159,36 @@ def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
         assert f"sweep {spec.name!r}" in out and f"{len(spec.trial_plan())} trial(s)" in out
 
 
+@pytest.mark.parametrize("ran", [False, True], ids=["--resume, never ran", "ran, no --resume"])
+def test_a_start_that_does_not_match_the_results_is_refused_before_ray_and_writes_nothing(tmp_path, ran):
+    """--resume of a sweep that never ran, and a second start of one that ran without --resume: one
+    error line, exit 2, and neither Ray's start announced nor its console log (or anything) written."""
+    spec = _smoke_copy(tmp_path)
+    tune = tmp_path / "results" / "smoke" / "tune" / "smoke"
+    if ran:
+        tune.mkdir(parents=True)
+    proc = _storage_run(spec, *([] if ran else ["--resume"]))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    expected = "already holds this sweep's results: add --resume" if ran else "error: nothing to resume"
+    assert len(proc.stderr.splitlines()) == 1 and expected in proc.stderr, proc.stderr
+    assert "starting Ray" not in proc.stdout and "RAY_IMPORTED False" in proc.stdout
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert written == (["results", "results/smoke", "results/smoke/tune", str(tune.relative_to(tmp_path))]
+                       if ran else []) + ["smoke.yaml"]  # fmt: skip
+
+
+def test_resume_of_a_file_of_parts_none_of_which_ran_is_refused(tmp_path, capsys):
+    """No part's Tune folder and no store to resume from: refused, nothing written."""
+    from copilot_ray.sweep import main
+
+    data = yaml.safe_load(_smoke_copy(tmp_path).read_text())
+    path = tmp_path / "parts.yaml"
+    path.write_text(yaml.safe_dump_all([{**data, "name": "one"}, {**data, "name": "two"}], sort_keys=False))
+    assert main([str(path), "--resume"]) == 2
+    assert capsys.readouterr().err.startswith(f"error: nothing to resume: no part of {path} has run here")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["parts.yaml", "smoke.yaml"]
+
+
 def test_existing_results_need_resume(tmp_path):
     from copilot_ray.sweep import SweepError, run_sweep
     from copilot_ray.sweep_spec import load_spec
