@@ -33,6 +33,10 @@ NOTICES = tuple(
         r"Experiment state snapshotting has been triggered multiple times",
         r"To visualize your results with TensorBoard",
         r"View detailed results here",
+        r"Restoring the run from the latest experiment state file",  # Tune, on --resume
+        # Tune's own resume hint (`Tuner.restore(path=..., trainable=...)`) on Ctrl-C: the sweep prints
+        # the command that resumes it instead
+        r"Experiment has been interrupted, but the most recent state was saved",
         r"^[╭│├╰]",  # Tune's box of an experiment's settings
     )
 )

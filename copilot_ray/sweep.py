@@ -441,11 +441,13 @@ def report_sweep(
         _say(f"  {line}")
     _say(f"Report: {report_command(spec, uri)}")
     if interrupted:
-        _say(f"interrupted: state saved. Resume with: {resume_command(spec)}")
+        _say(f"interrupted: state saved. Resume with: {resume_command(run.given)}")
     elif errored:
         stopped = [r for r in rows if r.status == "error" and r.stacked]
         if len(stopped) < sum(r.status == "error" for r in rows):
-            _say(f"some trials failed; retry them from their last checkpoint with: {resume_command(spec)}")
+            _say(
+                f"some trials failed; retry them from their last checkpoint with: {resume_command(run.given)}"
+            )
         if stopped:
             _say(
                 "seeds that stopped alone in a stacked trial (their MLflow runs are FAILED with the error): "
@@ -462,9 +464,10 @@ def report_command(spec, uri: str) -> str:
     return python_module("analysis.report", spec.experiment, "--parent-run", "all", "--tracking-uri", uri)
 
 
-def resume_command(spec) -> str:
-    """The command that continues this sweep file where it stopped."""
-    return python_module("copilot_ray.sweep", spec.source, "--resume")
+def resume_command(given: Path) -> str:
+    """The command that continues this sweep file where it stopped: the file as the user gave it (a
+    relative path stays relative), not the resolved copy the sweep keeps beside its results."""
+    return python_module("copilot_ray.sweep", given, "--resume")
 
 
 def _say(line: str) -> None:

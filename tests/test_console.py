@@ -26,6 +26,11 @@ NOTICES = [
     "2026-11-28 03:38:06,135\tINFO tune.py:1007 -- Wrote the latest version of all result files and "
     "experiment state to '/tmp/results/smoke/tune/smoke' in 0.0877s.",
     "To visualize your results with TensorBoard, run: `tensorboard --logdir /tmp/ray/x`",
+    # a sweep's --resume, and its Ctrl-C (Tune's own resume hint; the sweep prints its command instead)
+    "2026-12-01 23:24:43,025\tINFO tune_controller.py:448 -- Restoring the run from the latest experiment "
+    "state file: experiment_state-2026-12-01_23-24-00.json",
+    "2026-12-01 23:24:17,268\tWARNING tune.py:1054 -- Experiment has been interrupted, but the most recent "
+    'state was saved.\nResume experiment with: Tuner.restore(path="/tmp/results/smoke/tune/smoke", trainable=...)',
     "╭────────────────────────────────────────────────────────╮",
 ]
 OWN = [

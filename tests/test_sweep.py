@@ -8,6 +8,7 @@ learning.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import subprocess
@@ -270,13 +271,41 @@ def _checkpoints_tune_restores(tune_folder: Path) -> set[tuple[str, str]]:
     return restored
 
 
-def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ray_session, tmp_path):
+class _TuneRecords(logging.Handler):
+    """The messages Tune's loggers emit in the driver while it is attached, by level, formatted as Ray's
+    console handler writes them (ray/_private/log.py; the test session's Ray leaves Ray's logging alone)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setFormatter(
+            logging.Formatter("%(asctime)s\t%(levelname)s %(filename)s:%(lineno)s -- %(message)s")
+        )
+
+    def __enter__(self):
+        self.records: list[tuple[int, str]] = []
+        logging.getLogger("ray.tune").addHandler(self)
+        return self
+
+    def __exit__(self, *exc):
+        logging.getLogger("ray.tune").removeHandler(self)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append((record.levelno, self.format(record)))
+
+
+def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(
+    ray_session, tmp_path, monkeypatch, capsys
+):
     """The smoke sweep, Ctrl-C'd at its second trial's 2nd result, packed by `copilot_ray.carry`, its
     results deleted and the archive unpacked in their place (a new machine), then resumed: the archive
     holds the files of the one checkpoint Tune restores the cut trial from (its other checkpoints as
     empty folders, none of the finished trial's); both trials are then tracked once, completely, each
-    iteration logged once, and the Ray the test started is left running."""
+    iteration logged once, and the Ray the test started is left running. The cut prints one way to
+    resume, naming the spec file as given (Tune's own hint is a notice for the console log), and the
+    resume's Tune INFO lines are all notices."""
     from copilot_ray import carry
+    from copilot_ray.commands import python_module
+    from copilot_ray.console import is_notice
     from copilot_ray.sweep import run_sweep, sweep_root
     from copilot_ray.sweep_spec import load_spec
     from tests import interrupts, stores
@@ -285,9 +314,16 @@ def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ra
     data = yaml.safe_load(path.read_text())
     data["search"]["tree_depth"]["grid"] = [2, 1]  # K = 1 second: 3 iterations of 120 env steps (K = 2: 2)
     path.write_text(yaml.safe_dump(data, sort_keys=False))
-    spec = load_spec(path)
-    first = run_sweep(spec, extra_callbacks=[interrupts.at_result_after_a_finished_trial(2)])
+    monkeypatch.chdir(tmp_path)
+    spec = load_spec(path.name)  # as typed: relative to the folder it runs in
+    with _TuneRecords() as tune_said:
+        first = run_sweep(spec, extra_callbacks=[interrupts.at_result_after_a_finished_trial(2)])
     assert first.status == "interrupted" and first.exit_code == 130
+    printed = capsys.readouterr().out
+    assert printed.count("Resume with") == 1
+    assert f"Resume with: {python_module('copilot_ray.sweep', 'smoke.yaml', '--resume')}\n" in printed
+    hints = [m for _, m in tune_said.records if "Tuner.restore" in m]
+    assert hints and all(is_notice(m) for m in hints)
     assert [r.status for r in first.rows] == ["finished", "unfinished"]
     _, parents, children = _runs(spec)
     assert len(parents) == 1 and parents[0].info.status == "KILLED"
@@ -309,7 +345,9 @@ def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ra
     stores.forget_open_stores(str(tmp_path))
     with tarfile.open(out) as archive:
         archive.extractall(tmp_path, filter="data")
-    second = run_sweep(load_spec(path), resume=True)
+    with _TuneRecords() as tune_said:
+        second = run_sweep(load_spec(path), resume=True)
+    assert [m for level, m in tune_said.records if level == logging.INFO and not is_notice(m)] == []
     assert second.status == "finished" and second.exit_code == 0, second.summary
     assert second.parent_run_id == first.parent_run_id
     assert ray_session.is_initialized()  # a Ray it did not start is left running
