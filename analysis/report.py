@@ -59,6 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
+from copilot_ray.commands import python_module
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     EVAL_MASTERED,
@@ -118,7 +119,7 @@ OWNED = (
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m analysis.report", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=python_module("analysis.report"), description=__doc__.split("\n\n")[0])
     p.add_argument("experiment_pos", nargs="?", metavar="EXPERIMENT", help="MLflow experiment name")
     p.add_argument("--experiment", help="MLflow experiment name (same as the positional argument)")
     p.add_argument(

@@ -476,7 +476,7 @@ def _say(line: str) -> None:
 
 # ================================================================================================ CLI
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m copilot_ray.sweep", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=python_module("copilot_ray.sweep"), description=__doc__.split("\n\n")[0])
     p.add_argument(
         "spec", help="sweep spec YAML (format: copilot_ray/sweep_spec/__init__.py; examples: sweeps/)"
     )
