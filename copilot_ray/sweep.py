@@ -243,6 +243,8 @@ def choose_best_of(spec, tracking_uri: str | None):
 
     b = spec.best_of
     uri, experiment = spec.best_of_store(tracking_uri)
+    if (missing := missing_sqlite_file(uri)) is not None:  # (MLflow would make an empty store there)
+        raise SweepError(f"best_of: there is no store file {missing}: has sweep {b.sweep!r} run there?")
     try:
         winner = best_configuration(uri, experiment, b.sweep, b.metric, b.mode)
     except StageError as err:
@@ -529,8 +531,17 @@ def main(argv: list[str] | None = None) -> int:
     if (refusal := start_problem(specs, args.spec, args.resume, args.tracking_uri)) is not None:
         print(f"error: {refusal}", file=sys.stderr)
         return 2
-    console = quiet_console(args.verbose)
+    console = quiet_console(args.verbose)  # (it keeps what it leaves out in memory until log_to)
     try:
+        stage_two = specs[0].best_of is not None and specs[0].best_of.chosen is None
+        if len(specs) == 1 and not args.resume and stage_two:
+            # A stage 2 part run alone reads stage 1's winner now, so that none yet is refused before
+            # Ray and before any file (in a file with its stage 1, once that part has run).
+            try:
+                specs = [choose_best_of(specs[0], args.tracking_uri)]
+            except SweepError as err:
+                print(f"error: {err}", file=sys.stderr)
+                return 2
         if console is not None:
             console.log_to(sweep_root(specs[0]) / "console.log")
             _say(
