@@ -1,6 +1,7 @@
 """`python -m analysis.report [EXPERIMENT] [--experiment NAME] [--tracking-uri URI] [--out DIR]`
 
-Reads one sweep from MLflow and writes, under --out (default `results/<experiment>/report`):
+Reads one sweep from MLflow and writes, under --out (default: `<store folder>/report` for a SQLite store in
+a sweep's folder under `results/`, as `results/depth_k/mlflow.db`; else `results/<experiment>/report`):
   success_vs_env_steps.png   success (planned, direct) against env steps: IQM + 95 % bootstrap band
                              from 5 seeds on, else the mean and each seed (no band)
   final_success.png          final success per configuration (95 % CIs from 5 seeds on; paper Fig. 2b for K
@@ -59,6 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
+from copilot_ray.commands import python_module
 from copilot_ray.keys import (
     ALGORITHM_TAG,
     EVAL_MASTERED,
@@ -118,13 +120,18 @@ OWNED = (
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m analysis.report", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=python_module("analysis.report"), description=__doc__.split("\n\n")[0])
     p.add_argument("experiment_pos", nargs="?", metavar="EXPERIMENT", help="MLflow experiment name")
     p.add_argument("--experiment", help="MLflow experiment name (same as the positional argument)")
     p.add_argument(
         "--tracking-uri", help="MLflow tracking URI (default: $MLFLOW_TRACKING_URI or a found store)"
     )
-    p.add_argument("--out", type=Path, help="output folder (default: results/<experiment>/report)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        help="output folder (default: beside a SQLite store in a folder under results/, as "
+        "results/<sweep>/report; else results/<experiment>/report)",
+    )
     p.add_argument(
         "--parent-run",
         help="sweep (parent) run id when the experiment holds several sweeps; 'all': every one of them "
@@ -198,6 +205,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def default_out(experiment: str, uri: str) -> Path:
+    """The report's folder without --out: beside its store where the store is a SQLite file in a folder
+    under a results folder (a sweep's own: results/depth_k/mlflow.db -> results/depth_k/report, whatever
+    its experiment is called), else results/<experiment>/report under the working directory."""
+    if uri.startswith("sqlite:///"):
+        folder = Path(uri[len("sqlite:///") :]).parent
+        if "results" in folder.parts[:-1]:
+            return folder / "report"
+    return Path("results") / _slug(experiment) / "report"
+
+
 def join_other_stores(sweep: Sweep, args: argparse.Namespace) -> None:
     """Adds the trial runs of each --also-from store, read from --also-experiment (default: the report's)."""
     experiment = args.also_experiment or args.experiment
@@ -218,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
 
-    out = args.out or Path("results") / _slug(args.experiment) / "report"
+    out = args.out or default_out(args.experiment, uri)
     out.mkdir(parents=True, exist_ok=True)
     for pattern in OWNED:  # stale figures of an earlier report must not be logged as current
         for f in out.glob(pattern):

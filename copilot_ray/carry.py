@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from copilot_ray import tracking
+from copilot_ray.commands import python_module
 from copilot_ray.store import missing_sqlite_file
 from copilot_ray.sweep import sweep_root
 from copilot_ray.sweep_spec import SpecError, load_specs
@@ -215,7 +216,7 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m copilot_ray.carry", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=python_module("copilot_ray.carry"), description=__doc__.split("\n\n")[0])
     p.add_argument(
         "spec", help="the sweep file whose results to pack, relative to --root (the copy that ran)"
     )

@@ -6,11 +6,14 @@ Everything written to the console is also in that log; `--verbose` shows the not
 It works on what reaches `sys.stdout` / `sys.stderr` (print, and the logging handlers of Ray and MLflow,
 which write to whatever `sys.stderr` is when they emit): one write that starts a line is one message
 (a logging record is one write, however many lines it has), kept or left out by its first line.
+Where the library is used from Python, with no console of these, the same notices that Ray and RLlib log
+are left out by filters on their loggers (`leave_out_library_notices`, on the package's import).
 Standard library only.
 """
 
 from __future__ import annotations
 
+import logging
 import re
 import sys
 import threading
@@ -33,9 +36,49 @@ NOTICES = tuple(
         r"Experiment state snapshotting has been triggered multiple times",
         r"To visualize your results with TensorBoard",
         r"View detailed results here",
+        r"Restoring the run from the latest experiment state file",  # Tune, on --resume
+        # Tune's own resume hint (`Tuner.restore(path=..., trainable=...)`) on Ctrl-C: the sweep prints
+        # the command that resumes it instead
+        r"Experiment has been interrupted, but the most recent state was saved",
         r"^[╭│├╰]",  # Tune's box of an experiment's settings
     )
 )
+
+
+# The same notices where the library is used from Python (`CoPilotConfig()...build_algo()`), where no
+# quiet console routes them: (the logger that logs it, how its message starts). A filter on each of those
+# loggers leaves out exactly these messages; whatever else they log (warnings, errors) is shown.
+LIBRARY_NOTICES = (
+    ("ray.rllib.algorithms.algorithm_config", r"You are running \w+ on the new API stack"),
+    ("ray.rllib.algorithms.algorithm", r"You are running \w+ on the new API stack"),
+    ("ray.rllib.algorithms.sac.sac", r"You are running \w+ on the new API stack"),
+    ("ray.rllib.algorithms.ppo.ppo", r"You are running \w+ on the new API stack"),
+    ("ray._common.deprecation", r"DeprecationWarning: `RLModule\(config="),  # RLlib's own old signature
+    ("ray._private.worker", r"Started a local Ray instance"),
+    ("ray.tune.trainable.trainable", r"Trainable\.setup took [\d.]+ seconds"),
+    ("ray.tune.utils.util", r"Install gputil for GPU system monitoring"),
+)
+_show_library_notices = False  # --verbose asked to see them
+
+
+class _LibraryNotice(logging.Filter):
+    def __init__(self, pattern: str) -> None:
+        super().__init__()
+        self._pattern = re.compile(pattern)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        # A quiet console (train, sweep) keeps them in its log; --verbose shows them.
+        routed = _show_library_notices or isinstance(sys.stderr, _QuietStream)
+        return routed or not self._pattern.match(record.getMessage())
+
+
+def leave_out_library_notices() -> None:
+    """Installs the filters of LIBRARY_NOTICES (once; loggers not yet used are made now, and Ray's modules
+    get the same logger objects when they ask for them)."""
+    for name, pattern in LIBRARY_NOTICES:
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, _LibraryNotice) for f in logger.filters):
+            logger.addFilter(_LibraryNotice(pattern))
 
 
 def is_notice(text: str) -> bool:
@@ -122,4 +165,8 @@ class _Pending:
 
 def quiet_console(verbose: bool) -> QuietConsole | None:
     """The quiet console, installed (None with `verbose`: everything is shown, nothing is logged)."""
-    return None if verbose else QuietConsole()
+    global _show_library_notices
+    if verbose:
+        _show_library_notices = True
+        return None
+    return QuietConsole()

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from copilot_ray import keys, tracking
+from copilot_ray.commands import python_module
 from copilot_ray.store import missing_sqlite_file
 from copilot_ray.sweep_spec import SpecError, load_specs
 from copilot_ray.sweep_spec.estimate import duration_text, wall_seconds
@@ -219,7 +220,9 @@ def report(specs) -> list[str]:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m copilot_ray.progress", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        prog=python_module("copilot_ray.progress"), description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("spec", help="the sweep file, relative to --root (the copy that runs there)")
     p.add_argument("--root", default=".", help="the folder the sweep was started from (default: here)")
     return p.parse_args(argv)

@@ -184,10 +184,11 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
+    from copilot_ray.commands import python_module
     from copilot_ray.keys import EVAL_SUCCESS_AUC, ROLE_SWEEP, validation_key
     from copilot_ray.store import missing_sqlite_file, tracking_uri_problem
 
-    p = argparse.ArgumentParser(prog="python -m copilot_ray.stages", description=main.__doc__)
+    p = argparse.ArgumentParser(prog=python_module("copilot_ray.stages"), description=main.__doc__)
     p.add_argument("experiment")
     p.add_argument("--tracking-uri", required=True)
     p.add_argument("--metric", default=validation_key(EVAL_SUCCESS_AUC), help="the stage-1 objective")

@@ -7,6 +7,7 @@ typo is one clear line instead of an MLflow traceback after Ray is up. Standard 
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 from copilot_ray import mlflow_view
@@ -53,20 +54,37 @@ def missing_sqlite_file(uri: str) -> Path | None:
 
 def unwritable(path: str | Path, kind: str = "folder") -> str | None:
     """Why a `kind` ("folder" or "file") cannot be created or written at `path`, or None when it can.
-    Nothing is created: the path itself, or else the nearest folder on its way that exists, is looked at
-    (a file where a folder must be, or no write permission)."""
+    Nothing is left behind: the path itself, or else the nearest folder on its way that exists, is
+    looked at (a file where a folder must be, no write permission, a folder nothing can be made in)."""
     path = Path(path).expanduser().absolute()
     if path.exists():
         if kind == "folder" and not path.is_dir():
             return f"{path} is a file, not a folder"
         if kind == "file" and path.is_dir():
             return f"{path} is a folder, not a file"
-        return None if os.access(path, os.W_OK) else f"{path} is not writable"
+        if not os.access(path, os.W_OK):
+            return f"{path} is not writable"
+        if path.is_dir() and (why := _cannot_make_in(path)) is not None:
+            return f"nothing can be made in {path} ({why})"
+        return None
     existing = next(p for p in path.parents if p.exists())
     if not existing.is_dir():
         return f"{existing} is a file, so no {kind} can be made under it"
     if not os.access(existing, os.W_OK | os.X_OK):
         return f"{existing} is not writable, so {path} cannot be made"
+    if (why := _cannot_make_in(existing)) is not None:
+        return f"nothing can be made in {existing} ({why}), so {path} cannot be made"
+    return None
+
+
+def _cannot_make_in(folder: Path) -> str | None:
+    """Why nothing can be made in the existing `folder` (None when something can), found by making an
+    empty folder there and removing it at once: os.access answers yes to root for every folder, /proc's
+    and /sys's included, where nothing can be made."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".copilot_ray-write-check-", dir=folder))
+    except OSError as err:
+        return err.strerror or type(err).__name__
     return None
 
 

@@ -68,7 +68,7 @@ from copilot_ray.keys import (
     validation_key,
 )
 from copilot_ray.mlflow_view import column
-from copilot_ray.store import tracking_uri_problem, ui_hint, unwritable, unwritable_store
+from copilot_ray.store import missing_sqlite_file, tracking_uri_problem, ui_hint, unwritable, unwritable_store
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
 from copilot_ray.sweep_spec.estimate import gpu_problem, local_gpus, total_wall_time_line
@@ -243,6 +243,8 @@ def choose_best_of(spec, tracking_uri: str | None):
 
     b = spec.best_of
     uri, experiment = spec.best_of_store(tracking_uri)
+    if (missing := missing_sqlite_file(uri)) is not None:  # (MLflow would make an empty store there)
+        raise SweepError(f"best_of: there is no store file {missing}: has sweep {b.sweep!r} run there?")
     try:
         winner = best_configuration(uri, experiment, b.sweep, b.metric, b.mode)
     except StageError as err:
@@ -441,11 +443,13 @@ def report_sweep(
         _say(f"  {line}")
     _say(f"Report: {report_command(spec, uri)}")
     if interrupted:
-        _say(f"interrupted: state saved. Resume with: {resume_command(spec)}")
+        _say(f"interrupted: state saved. Resume with: {resume_command(run.given)}")
     elif errored:
         stopped = [r for r in rows if r.status == "error" and r.stacked]
         if len(stopped) < sum(r.status == "error" for r in rows):
-            _say(f"some trials failed; retry them from their last checkpoint with: {resume_command(spec)}")
+            _say(
+                f"some trials failed; retry them from their last checkpoint with: {resume_command(run.given)}"
+            )
         if stopped:
             _say(
                 "seeds that stopped alone in a stacked trial (their MLflow runs are FAILED with the error): "
@@ -462,9 +466,10 @@ def report_command(spec, uri: str) -> str:
     return python_module("analysis.report", spec.experiment, "--parent-run", "all", "--tracking-uri", uri)
 
 
-def resume_command(spec) -> str:
-    """The command that continues this sweep file where it stopped."""
-    return python_module("copilot_ray.sweep", spec.source, "--resume")
+def resume_command(given: Path) -> str:
+    """The command that continues this sweep file where it stopped: the file as the user gave it (a
+    relative path stays relative), not the resolved copy the sweep keeps beside its results."""
+    return python_module("copilot_ray.sweep", given, "--resume")
 
 
 def _say(line: str) -> None:
@@ -473,7 +478,7 @@ def _say(line: str) -> None:
 
 # ================================================================================================ CLI
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m copilot_ray.sweep", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=python_module("copilot_ray.sweep"), description=__doc__.split("\n\n")[0])
     p.add_argument(
         "spec", help="sweep spec YAML (format: copilot_ray/sweep_spec/__init__.py; examples: sweeps/)"
     )
@@ -523,8 +528,20 @@ def main(argv: list[str] | None = None) -> int:
         for why in no_gpus:
             print(f"warning: {why}")
         return 0
-    console = quiet_console(args.verbose)
+    if (refusal := start_problem(specs, args.spec, args.resume, args.tracking_uri)) is not None:
+        print(f"error: {refusal}", file=sys.stderr)
+        return 2
+    console = quiet_console(args.verbose)  # (it keeps what it leaves out in memory until log_to)
     try:
+        stage_two = specs[0].best_of is not None and specs[0].best_of.chosen is None
+        if len(specs) == 1 and not args.resume and stage_two:
+            # A stage 2 part run alone reads stage 1's winner now, so that none yet is refused before
+            # Ray and before any file (in a file with its stage 1, once that part has run).
+            try:
+                specs = [choose_best_of(specs[0], args.tracking_uri)]
+            except SweepError as err:
+                print(f"error: {err}", file=sys.stderr)
+                return 2
         if console is not None:
             console.log_to(sweep_root(specs[0]) / "console.log")
             _say(
@@ -537,6 +554,42 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if console is not None:
             console.close()
+
+
+def started_parts(specs: Sequence[Any]) -> list[str]:
+    """The names of the parts whose Tune experiments exist (they ran, or began to)."""
+    return [
+        spec.name
+        for spec in specs
+        if any((sweep_root(spec) / "tune" / name).exists() for name, _ in experiment_names(spec))
+    ]
+
+
+def start_problem(specs: Sequence[Any], file: str, resume: bool, tracking_uri: str | None) -> str | None:
+    """Why the sweep file cannot start as asked (results there without --resume, nothing to resume), or
+    None: said before Ray starts and before anything is written (its console log included)."""
+    if len(specs) == 1:
+        spec = specs[0]
+        try:
+            _check_resume(sweep_root(spec), experiment_names(spec), resume)
+        except SweepError as err:
+            return str(err)
+        return None
+    started = started_parts(specs)
+    if started and not resume:
+        return (
+            f"part {started[0]!r} of {file} has results already: add --resume to continue the file's "
+            "sweeps, or remove it to start over"
+        )
+    # A file's parts also resume from their store alone (carried here without Tune folders): refused
+    # only when there is neither.
+    stores = [missing_sqlite_file(tracking_uri or spec.tracking.uri) for spec in specs]
+    if resume and not started and all(stores):
+        return (
+            f"nothing to resume: no part of {file} has run here (no Tune experiment under "
+            f"{sweep_root(specs[0]) / 'tune'}, no store {stores[0]})"
+        )
+    return None
 
 
 def storage_problems(specs: Sequence[Any], tracking_uri: str | None = None) -> list[str]:
@@ -581,18 +634,7 @@ def _run_parts(specs: Sequence[Any], args) -> int:
     """A file of several specs: each runs as its own sweep, in order, on one Ray. Without --resume no
     part may have results yet (checked before anything starts); with it, the parts that started resume and
     the others start. An interrupted or failed part ends the run (--resume continues from it)."""
-    started = [
-        spec.name
-        for spec in specs
-        if any((sweep_root(spec) / "tune" / name).exists() for name, _ in experiment_names(spec))
-    ]
-    if started and not args.resume:
-        print(
-            f"error: part {started[0]!r} of {args.spec} has results already: add --resume "
-            "to continue the file's sweeps, or remove it to start over",
-            file=sys.stderr,
-        )
-        return 2
+    started = started_parts(specs)  # (results without --resume were refused before: start_problem)
     runtime = _import_runtime()
     own_ray = runtime.start_ray(args.address)
     try:

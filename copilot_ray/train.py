@@ -80,7 +80,7 @@ class _Parser(argparse.ArgumentParser):
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = _Parser(
-        prog="python -m copilot_ray.train",
+        prog=python_module("copilot_ray.train"),
         usage="%(prog)s [--env ENV] [--layout LAYOUT] [--stop-env-steps N] [--seed S] [--SETTING VALUE ...]",
         description=__doc__.split("\n\n")[0],
         epilog=example(),

@@ -455,6 +455,27 @@ def test_no_parent_run_reports_and_skips_logging(store, tmp_path, capsys):
     assert "not logged" in (tmp_path / "report.md").read_text()
 
 
+def test_without_out_the_report_goes_beside_a_sweeps_store(store, tmp_path, monkeypatch, capsys):
+    """A sweep's store results/<sweep>/mlflow.db gets its report in results/<sweep>/report (its
+    experiment's name is another: the sweep's folder is what the user knows); a store elsewhere keeps
+    results/<experiment>/report under the working directory."""
+    import shutil
+
+    monkeypatch.chdir(tmp_path)
+    sweep = tmp_path / "results" / "depth_k"
+    sweep.mkdir(parents=True)
+    shutil.copy(Path(store["uri"].removeprefix("sqlite:///")), sweep / "mlflow.db")
+    assert main(["orphans", "--tracking-uri", f"sqlite:///{sweep / 'mlflow.db'}"]) == 0
+    assert f"report: {sweep / 'report' / 'report.md'}" in capsys.readouterr().out
+    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["depth_k"]
+    elsewhere = tmp_path / "stores" / "mlflow.db"
+    elsewhere.parent.mkdir()
+    shutil.copy(sweep / "mlflow.db", elsewhere)
+    assert main(["orphans", "--tracking-uri", f"sqlite:///{elsewhere}"]) == 0
+    assert (tmp_path / "results" / "orphans" / "report" / "report.md").is_file()
+    assert not (elsewhere.parent / "report").exists()
+
+
 def test_no_store_found_exit_2(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
     monkeypatch.chdir(tmp_path)

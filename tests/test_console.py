@@ -6,11 +6,16 @@ from __future__ import annotations
 
 import io
 import logging
+import os
+import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
-from copilot_ray.console import is_notice, quiet_console
+from copilot_ray.console import LIBRARY_NOTICES, is_notice, quiet_console
+
+ROOT = Path(__file__).resolve().parents[1]
 
 # Lines a sweep and a train run printed before the console was quiet (Ray 2.60, MLflow 3).
 NOTICES = [
@@ -26,6 +31,11 @@ NOTICES = [
     "2026-11-28 03:38:06,135\tINFO tune.py:1007 -- Wrote the latest version of all result files and "
     "experiment state to '/tmp/results/smoke/tune/smoke' in 0.0877s.",
     "To visualize your results with TensorBoard, run: `tensorboard --logdir /tmp/ray/x`",
+    # a sweep's --resume, and its Ctrl-C (Tune's own resume hint; the sweep prints its command instead)
+    "2026-12-01 23:24:43,025\tINFO tune_controller.py:448 -- Restoring the run from the latest experiment "
+    "state file: experiment_state-2026-12-01_23-24-00.json",
+    "2026-12-01 23:24:17,268\tWARNING tune.py:1054 -- Experiment has been interrupted, but the most recent "
+    'state was saved.\nResume experiment with: Tuner.restore(path="/tmp/results/smoke/tune/smoke", trainable=...)',
     "╭────────────────────────────────────────────────────────╮",
 ]
 OWN = [
@@ -76,7 +86,63 @@ def test_notices_go_to_the_log_and_the_rest_to_both(tmp_path, monkeypatch):
     assert logged.index(NOTICES[0]) < logged.index(OWN[0])
 
 
-def test_verbose_installs_nothing():
+def test_verbose_installs_nothing(monkeypatch):
+    from copilot_ray import console
+
+    monkeypatch.setattr(console, "_show_library_notices", False)  # what --verbose turns on, restored
     before = (sys.stdout, sys.stderr)
     assert quiet_console(verbose=True) is None
     assert (sys.stdout, sys.stderr) == before
+    assert console._show_library_notices  # the library's notices are shown as well
+
+
+def test_the_library_leaves_out_its_known_notices_and_keeps_everything_else(tmp_path, monkeypatch):
+    """From Python (no quiet console) a known notice is left out and anything else its logger says is
+    shown; inside a quiet console the notice reaches the console log."""
+    from copilot_ray import console as module
+
+    monkeypatch.setattr(module, "_show_library_notices", False)  # no --verbose in this process
+    err = io.StringIO()
+    handler = logging.StreamHandler(err)
+    name = "ray.rllib.algorithms.sac.sac"
+    log = logging.getLogger(name)
+    log.addHandler(handler)
+    try:
+        monkeypatch.setattr(sys, "stderr", io.StringIO())
+        notice = "You are running SAC on the new API stack! This is the new default behavior."
+        log.warning(notice)
+        log.warning("something went wrong")
+        assert err.getvalue() == "something went wrong\n"
+        console = quiet_console(verbose=False)
+        console.log_to(tmp_path / "console.log")
+        log.warning(notice)
+        console.close()
+        assert err.getvalue().endswith(notice + "\n")
+    finally:
+        log.removeHandler(handler)
+    assert name in dict(LIBRARY_NOTICES)
+
+
+def test_the_python_api_writes_no_auth_token_home_and_prints_no_known_notice(tmp_path):
+    """The README's Python API on a fresh machine: no RAY_AUTH_MODE set, HOME a new folder. Building the
+    algorithm starts Ray (one CPU) and writes nothing under HOME/.ray, and none of Ray's or RLlib's known
+    notices reaches the console."""
+    script = (
+        "import ray\n"
+        "from copilot_ray.algorithms.copilot.algorithm import CoPilotConfig\n"
+        "ray.init(num_cpus=1, include_dashboard=False)\n"
+        "algo = (CoPilotConfig().environment('maze-point', env_config={'layout': 'u-maze'})\n"
+        "        .copilot(tree_depth=1, repetitions=1).build_algo())\n"
+        "algo.stop()\n"
+        "ray.shutdown()\n"
+        "print('BUILT')\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "RAY_AUTH_MODE"}
+    env.update(HOME=str(tmp_path), PYTHONPATH=str(ROOT))
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0 and "BUILT" in done.stdout, done.stderr[-3000:]
+    assert not (tmp_path / ".ray").exists()
+    said = (done.stdout + done.stderr).splitlines()
+    assert [line for line in said if is_notice(line) or "auth" in line.lower()] == []

@@ -315,6 +315,31 @@ def test_a_stage_two_part_writes_the_winner_into_the_spec_it_runs_with(tmp_path)
     assert again.spec.best_of.chosen == {"actor_lr": 5e-4}
 
 
+@pytest.mark.parametrize("store", ["missing", "without the sweep"])
+def test_a_stage_two_part_with_no_winner_yet_is_refused_before_ray_and_writes_nothing(
+    tmp_path, store, capsys
+):
+    """Run alone, a stage 2 part whose stage 1 has not run (no store file; a store without its trials):
+    one error line, exit 2, Ray's start not announced, no console log, no store made."""
+    from copilot_ray.sweep import main
+
+    uri = f"sqlite:///{tmp_path}/store.db" if store == "missing" else _store_with_a_tuning_sweep(tmp_path)
+    best_of = {
+        "sweep": "tuna",
+        "metric": "copilot/validation/success_auc",
+        "uri": uri,
+        "experiment": "tuning",
+    }
+    path = write(tmp_path, part("final", best_of=best_of, tracking={"storage": str(tmp_path / "results")}))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    capsys.readouterr()  # (what making the stage-1 store printed)
+    assert main([str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert len(err.splitlines()) == 1 and err.startswith("error: best_of: ") and "'tuna'" in err, err
+    assert "starting Ray" not in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no results/, no store.db
+
+
 def test_resuming_a_stage_two_part_notes_only_real_changes_and_says_added_seeds_do_not_run(tmp_path, capsys):
     """The saved copy differs from the file by what resolving wrote (stage 1's winner, the store): no
     note for that. Seeds added to the file are named, with what to do: a started part keeps its seeds."""

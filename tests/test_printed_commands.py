@@ -5,6 +5,7 @@ store of a sweep that ran.) No Ray."""
 
 from __future__ import annotations
 
+import importlib
 import os
 import shlex
 import signal
@@ -14,6 +15,8 @@ import sys
 import time
 import urllib.request
 from pathlib import Path
+
+import pytest
 
 from copilot_ray.commands import mlflow, python, python_module
 from copilot_ray.store import ui_hint
@@ -102,4 +105,20 @@ def test_the_report_command_a_sweep_prints_imports_in_this_install():
     command = python_module("analysis.report", "--help")
     done = subprocess.run(shlex.split(command), cwd=Path.cwd(), capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert "usage: python -m analysis.report" in done.stdout
+    assert f"usage: {python_module('analysis.report')}" in done.stdout
+
+
+PROGRAMS = ["copilot_ray.sweep", "copilot_ray.train", "copilot_ray.carry", "copilot_ray.progress",
+            "copilot_ray.stages", "analysis.report"]  # fmt: skip
+
+
+@pytest.mark.parametrize("module", PROGRAMS)
+def test_a_bad_flag_s_hint_names_this_interpreter(module, capsys):
+    """argparse's usage line and train's hint name the program as it runs here (`.venv/bin/python -m
+    ...` from a checkout's root), not a plain `python`."""
+    main = importlib.import_module(module).main
+    with pytest.raises(SystemExit) as done:
+        main(["--no-such-flag"])
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert f"{python_module(module)} " in err and f" python -m {module}" not in f" {err}", err

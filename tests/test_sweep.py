@@ -8,6 +8,7 @@ learning.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import subprocess
@@ -128,12 +129,24 @@ def test_a_storage_or_store_that_cannot_be_written_is_refused_before_ray(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml", "unwritable.yaml"]
 
 
-def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path):
+@pytest.mark.parametrize("check", [True, False], ids=["--check", "run"])
+def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path, check):
     blocker = tmp_path / "a_file"
     blocker.write_text("in the way")
     uri = f"sqlite:///{blocker}/sub/mlflow.db"
     proc = _storage_run(_smoke_copy(tmp_path), "--check", "--tracking-uri", uri)
     assert proc.returncode == 2 and f"--tracking-uri {uri!r} is invalid: {blocker} is a file" in proc.stderr
+    # a folder nothing can be made in, though os.access says root may write there (found by a reviewer:
+    # --check passed, the run died in MLflow after Ray had started)
+    uri = "sqlite:////proc/nope/mlflow.db"
+    proc = _storage_run(_smoke_copy(tmp_path), *(["--check"] if check else []), "--tracking-uri", uri)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.splitlines() == [
+        f"--tracking-uri {uri!r} is invalid: nothing can be made in /proc (No such file or directory), "
+        "so /proc/nope/mlflow.db cannot be made"
+    ]
+    assert "RAY_IMPORTED False" in proc.stdout and "starting Ray" not in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml"]
 
 
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
@@ -145,6 +158,36 @@ def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
     out = capsys.readouterr().out
     for spec in load_specs(path):  # every part's plan
         assert f"sweep {spec.name!r}" in out and f"{len(spec.trial_plan())} trial(s)" in out
+
+
+@pytest.mark.parametrize("ran", [False, True], ids=["--resume, never ran", "ran, no --resume"])
+def test_a_start_that_does_not_match_the_results_is_refused_before_ray_and_writes_nothing(tmp_path, ran):
+    """--resume of a sweep that never ran, and a second start of one that ran without --resume: one
+    error line, exit 2, and neither Ray's start announced nor its console log (or anything) written."""
+    spec = _smoke_copy(tmp_path)
+    tune = tmp_path / "results" / "smoke" / "tune" / "smoke"
+    if ran:
+        tune.mkdir(parents=True)
+    proc = _storage_run(spec, *([] if ran else ["--resume"]))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    expected = "already holds this sweep's results: add --resume" if ran else "error: nothing to resume"
+    assert len(proc.stderr.splitlines()) == 1 and expected in proc.stderr, proc.stderr
+    assert "starting Ray" not in proc.stdout and "RAY_IMPORTED False" in proc.stdout
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert written == (["results", "results/smoke", "results/smoke/tune", str(tune.relative_to(tmp_path))]
+                       if ran else []) + ["smoke.yaml"]  # fmt: skip
+
+
+def test_resume_of_a_file_of_parts_none_of_which_ran_is_refused(tmp_path, capsys):
+    """No part's Tune folder and no store to resume from: refused, nothing written."""
+    from copilot_ray.sweep import main
+
+    data = yaml.safe_load(_smoke_copy(tmp_path).read_text())
+    path = tmp_path / "parts.yaml"
+    path.write_text(yaml.safe_dump_all([{**data, "name": "one"}, {**data, "name": "two"}], sort_keys=False))
+    assert main([str(path), "--resume"]) == 2
+    assert capsys.readouterr().err.startswith(f"error: nothing to resume: no part of {path} has run here")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["parts.yaml", "smoke.yaml"]
 
 
 def test_existing_results_need_resume(tmp_path):
@@ -228,13 +271,41 @@ def _checkpoints_tune_restores(tune_folder: Path) -> set[tuple[str, str]]:
     return restored
 
 
-def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ray_session, tmp_path):
+class _TuneRecords(logging.Handler):
+    """The messages Tune's loggers emit in the driver while it is attached, by level, formatted as Ray's
+    console handler writes them (ray/_private/log.py; the test session's Ray leaves Ray's logging alone)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setFormatter(
+            logging.Formatter("%(asctime)s\t%(levelname)s %(filename)s:%(lineno)s -- %(message)s")
+        )
+
+    def __enter__(self):
+        self.records: list[tuple[int, str]] = []
+        logging.getLogger("ray.tune").addHandler(self)
+        return self
+
+    def __exit__(self, *exc):
+        logging.getLogger("ray.tune").removeHandler(self)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append((record.levelno, self.format(record)))
+
+
+def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(
+    ray_session, tmp_path, monkeypatch, capsys
+):
     """The smoke sweep, Ctrl-C'd at its second trial's 2nd result, packed by `copilot_ray.carry`, its
     results deleted and the archive unpacked in their place (a new machine), then resumed: the archive
     holds the files of the one checkpoint Tune restores the cut trial from (its other checkpoints as
     empty folders, none of the finished trial's); both trials are then tracked once, completely, each
-    iteration logged once, and the Ray the test started is left running."""
+    iteration logged once, and the Ray the test started is left running. The cut prints one way to
+    resume, naming the spec file as given (Tune's own hint is a notice for the console log), and the
+    resume's Tune INFO lines are all notices."""
     from copilot_ray import carry
+    from copilot_ray.commands import python_module
+    from copilot_ray.console import is_notice
     from copilot_ray.sweep import run_sweep, sweep_root
     from copilot_ray.sweep_spec import load_spec
     from tests import interrupts, stores
@@ -243,9 +314,16 @@ def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ra
     data = yaml.safe_load(path.read_text())
     data["search"]["tree_depth"]["grid"] = [2, 1]  # K = 1 second: 3 iterations of 120 env steps (K = 2: 2)
     path.write_text(yaml.safe_dump(data, sort_keys=False))
-    spec = load_spec(path)
-    first = run_sweep(spec, extra_callbacks=[interrupts.at_result_after_a_finished_trial(2)])
+    monkeypatch.chdir(tmp_path)
+    spec = load_spec(path.name)  # as typed: relative to the folder it runs in
+    with _TuneRecords() as tune_said:
+        first = run_sweep(spec, extra_callbacks=[interrupts.at_result_after_a_finished_trial(2)])
     assert first.status == "interrupted" and first.exit_code == 130
+    printed = capsys.readouterr().out
+    assert printed.count("Resume with") == 1
+    assert f"Resume with: {python_module('copilot_ray.sweep', 'smoke.yaml', '--resume')}\n" in printed
+    hints = [m for _, m in tune_said.records if "Tuner.restore" in m]
+    assert hints and all(is_notice(m) for m in hints)
     assert [r.status for r in first.rows] == ["finished", "unfinished"]
     _, parents, children = _runs(spec)
     assert len(parents) == 1 and parents[0].info.status == "KILLED"
@@ -267,7 +345,9 @@ def test_a_sweep_cut_mid_trial_is_carried_and_resumed_each_trial_tracked_once(ra
     stores.forget_open_stores(str(tmp_path))
     with tarfile.open(out) as archive:
         archive.extractall(tmp_path, filter="data")
-    second = run_sweep(load_spec(path), resume=True)
+    with _TuneRecords() as tune_said:
+        second = run_sweep(load_spec(path), resume=True)
+    assert [m for level, m in tune_said.records if level == logging.INFO and not is_notice(m)] == []
     assert second.status == "finished" and second.exit_code == 0, second.summary
     assert second.parent_run_id == first.parent_run_id
     assert ray_session.is_initialized()  # a Ray it did not start is left running

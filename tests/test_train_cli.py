@@ -109,6 +109,15 @@ NEWCOMERS_BAD_FLAGS = [
         ["--tracking-uri", f"sqlite:///{ROOT}/pyproject.toml/mlflow.db"],
         f"--tracking-uri 'sqlite:///{ROOT}/pyproject.toml/mlflow.db' is invalid: {ROOT}/pyproject.toml is a file",
     ),
+    # a folder nothing can be made in, though os.access lets root write there: Ray started, then failed
+    (
+        ["--tracking-uri", "sqlite:////proc/nope/mlflow.db"],
+        "--tracking-uri 'sqlite:////proc/nope/mlflow.db' is invalid: nothing can be made in /proc",
+    ),
+    (
+        ["--checkpoint-dir", "/proc/nope/run"],
+        "--checkpoint-dir '/proc/nope/run' is invalid: nothing can be made in /proc",
+    ),
     (
         ["--checkpoint-dir", f"{ROOT}/pyproject.toml/run"],
         f"--checkpoint-dir '{ROOT}/pyproject.toml/run' is invalid: {ROOT}/pyproject.toml is a file",
