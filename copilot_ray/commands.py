@@ -14,6 +14,8 @@ from pathlib import Path
 # for one person's browser and starts fastest.
 UI_ENVIRONMENT = {"MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false"}
 UI_PORT = 5000
+# MLflow's `--app-name` of copilot_ray's UI server (copilot_ray.mlflow_app; its entry point: pyproject.toml)
+UI_APP = "copilot"
 
 
 def relative_path(path: str | Path) -> str:
@@ -48,7 +50,26 @@ def mlflow() -> str:
     return shown_path(script) if os.access(script, os.X_OK) else f"{python()} -m mlflow"
 
 
+def ui_app() -> str | None:
+    """MLflow's `--app-name` of copilot_ray's UI server (copilot_ray.mlflow_app: model training and no
+    assistant panel by default) where this install has its entry point (pyproject.toml), else None (an
+    install from before it: MLflow's own server)."""
+    from importlib.metadata import entry_points
+
+    return UI_APP if any(e.name == UI_APP for e in entry_points(group="mlflow.app")) else None
+
+
 def mlflow_ui(tracking_uri: str, port: int = UI_PORT) -> str:
-    """The command that serves `tracking_uri`'s runs in MLflow's UI on 127.0.0.1:`port`, quickly."""
+    """The command that serves `tracking_uri`'s runs in MLflow's UI on 127.0.0.1:`port`, quickly, opening
+    on the model-training pages (`ui_app`)."""
     env = " ".join(f"{k}={v}" for k, v in UI_ENVIRONMENT.items())
-    return f"{env} {mlflow()} ui --workers 1 --port {port} --backend-store-uri {shlex.quote(tracking_uri)}"
+    app = ui_app()
+    return " ".join(
+        [
+            env,
+            mlflow(),
+            "ui",
+            *(["--app-name", app] if app else []),
+            f"--workers 1 --port {port} --backend-store-uri {shlex.quote(tracking_uri)}",
+        ]
+    )

@@ -100,8 +100,9 @@ def ui_hint(tracking_uri: str, experiment_id: str | None = None, trials_view: bo
     """How to look at a store's runs in MLflow's UI: the command that serves a local store (this
     install's MLflow, without its job runner) and the pages to open. `trials_view`: a sweep's
     experiment, which carries a view of its trials by configuration (copilot_ray.mlflow_view): its table
-    and its chart. Else MLflow 3's UI would open an experiment on its GenAI pages (whatever the
-    experiment's tags say); `?workflowType=machine_learning` opens it on its runs."""
+    and its chart. `?workflowType=machine_learning` opens an experiment on its runs in MLflow 3's UI
+    whatever the browser chose before (the experiment's tags do not decide it; the page the printed
+    command serves makes model training the default: copilot_ray.mlflow_app)."""
     if experiment_id is None:
         pages = [""]
     elif trials_view:

@@ -68,6 +68,7 @@ from copilot_ray.keys import (
     validation_key,
 )
 from copilot_ray.mlflow_view import column
+from copilot_ray.registry import get_algorithm, metric_known
 from copilot_ray.store import missing_sqlite_file, tracking_uri_problem, ui_hint, unwritable, unwritable_store
 from copilot_ray.sweep_spec import SpecError, SpecLoader, format_plan, load_spec, load_specs, parse_spec
 from copilot_ray.sweep_spec.comparison import overshoot_warnings
@@ -333,15 +334,18 @@ def trials_view_of(spec) -> tuple[list[tuple[str, str]] | None, list[str], list[
         *([column("tags", VARIANT_TAG)] if spec.variants else []),
         *(column("params", p) for p in varied),
     ]
-    # the summary's headline figures (its planned / direct split stays in the summary: a table that fits)
+    # the summary's headline figures that the algorithm logs (its METRICS: a planner logs no validation
+    # success, HER no paths), the planned / direct split left to the summary (a table that fits)
+    logged = get_algorithm(spec.algorithm).metrics
     shown = [
         k
         for k in summary_keys(searched)
         if k not in (validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT))
+        and metric_known(k, logged)
     ]
     columns += [column("metrics", m) for m in (*shown, ENV_STEPS)]
     charts = [validation_key(EVAL_SUCCESS), *([] if searched else [PATH_SUCCESS])]
-    return configurations, columns, charts
+    return configurations, columns, [m for m in charts if metric_known(m, logged)]
 
 
 def _sweep_params(spec) -> dict[str, Any]:

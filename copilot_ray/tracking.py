@@ -114,8 +114,7 @@ class MlflowRun:
 
     def __init__(self, tracking_uri: str, experiment: str, run_name: str, tags: Mapping[str, str]):
         self.client = _client(tracking_uri)
-        exp = self.client.get_experiment_by_name(experiment)
-        exp_id = exp.experiment_id if exp else self.client.create_experiment(experiment)
+        exp_id = ensure_experiment(self.client, experiment)  # (marked as model training, as a sweep's)
         self.run = self.client.create_run(exp_id, run_name=run_name, tags=dict(tags))
         self.run_id = self.run.info.run_id
 
@@ -182,8 +181,10 @@ def _client(tracking_uri: str):
     return mlflow.MlflowClient(tracking_uri)
 
 
-# MLflow 3's UI opens an experiment on its GenAI traces page unless the experiment says it is model
-# training; with this tag it opens on the runs.
+# The experiment's kind, as MLflow 3's UI offers to set it ("Machine learning"). MLflow 3.17's UI reads
+# it only with its workflow switch off, and that switch is on in every build (its GenAI / model-training
+# choice comes from the address's `workflowType`, else the browser's stored choice, else GenAI:
+# copilot_ray/mlflow_app.py serves the model-training default); set all the same, for the UIs that read it.
 EXPERIMENT_KIND_TAG, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
 NOTE_TAG = "mlflow.note.content"  # an experiment's or a run's description in the UI
 

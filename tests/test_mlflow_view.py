@@ -42,6 +42,71 @@ def test_the_demo_shows_both_configurations_open_with_its_figures_as_columns():
     assert view["runsHiddenMode"] == "SHOW_ALL"
 
 
+def _parts(file: str, experiment: str) -> list:
+    return [s for s in load_specs(ROOT / "sweeps" / file) if s.experiment == experiment]
+
+
+def _view_of(parts) -> dict:
+    view = None
+    for part in parts:
+        view = mlflow_view.trials_view(*trials_view_of(part), earlier=view)
+    return view
+
+
+def _sections(view) -> dict[str, list[str]]:
+    """Each chart section's name and the metrics its charts draw."""
+    charts = view["compareRunCharts"]
+    return {
+        section["name"]: [c["metricKey"] for c in charts if c["metricSectionId"] == section["uuid"]]
+        for section in view["compareRunSections"]
+    }
+
+
+def test_the_chart_view_has_a_section_per_figure_its_runs_log_and_no_other():
+    (her,) = [p for p in _parts("privilege_matched.yaml", "privilege-matched") if p.algorithm == "her"]
+    # HER plans no paths: no paths column, no paths section (it would stand empty)
+    view = _view_of([her])
+    assert _sections(view) == {
+        f"{validation_key(EVAL_SUCCESS)} (Step = env steps)": [validation_key(EVAL_SUCCESS)]
+    }
+    assert not [c for c in view["selectedColumns"] if "paths/" in c]
+    # the planners log no validation success; CO-PILOT, its fourth part, adds it to their view
+    planners = _parts("planners_maze.yaml", "planners-maze")
+    assert [p.algorithm for p in planners] == ["rrt_star", "sgt_pg", "next", "copilot"]
+    assert list(_sections(_view_of(planners[:3])).values()) == [[PATH_SUCCESS]]
+    assert list(_sections(_view_of(planners)).values()) == [[PATH_SUCCESS], [validation_key(EVAL_SUCCESS)]]
+    assert f"metrics.`{validation_key(EVAL_SUCCESS)}`" not in _view_of(planners[:3])["selectedColumns"]
+    # every part of the comparison logs success; all but HER paths (SoRB's from its graph search)
+    compared = _view_of(_parts("privilege_matched.yaml", "privilege-matched"))
+    assert list(_sections(compared).values()) == [[validation_key(EVAL_SUCCESS)], [PATH_SUCCESS]]
+    assert compared["chartsSearchFilter"] == f"^({validation_key(EVAL_SUCCESS)}|{PATH_SUCCESS})$"
+
+
+def test_each_chart_is_full_width_tall_and_says_its_step_is_env_steps():
+    view = _view_of(_parts("privilege_matched.yaml", "privilege-matched"))
+    assert view["isAccordionReordered"]  # (else MLflow sorts the sections by name)
+    for section in view["compareRunSections"]:
+        assert section["columns"] == 1 and section["cardHeight"] >= 400
+        assert section["name"].endswith("(Step = env steps)")  # MLflow's x axis says "Step"
+    for chart in view["compareRunCharts"]:
+        # runs log at step = env steps (MLflow's metric-as-x-axis pairs sampled histories: step)
+        assert chart["type"] == "LINE" and chart["xAxisKey"] == "step" and not chart["useGlobalXaxisKey"]
+        assert chart["lineSmoothness"] > 0 and not chart["useGlobalLineSmoothing"]  # seeds' steps differ
+    assert len({c["uuid"] for c in view["compareRunCharts"]}) == len(view["compareRunCharts"])
+
+
+def test_every_column_is_as_wide_as_its_header_and_the_run_name_as_its_longest_group():
+    view = _view_of(_parts("privilege_matched.yaml", "privilege-matched"))
+    widths = view["columnWidths"]
+    assert set(widths) == {"attributes.`Run Name`", *view["selectedColumns"]}
+    for col in view["selectedColumns"]:
+        header = col.split(".", 1)[1].strip("`")
+        assert widths[col] >= 6.5 * len(header) + 30, col  # 12 px semi-bold, the sort mark beside it
+    # "Group: copilot variant=frozen_planner" (the longest label) and its expander, dot and count
+    assert widths["attributes.`Run Name`"] >= 6 * len("Group: copilot variant=frozen_planner") + 60
+    assert widths["metrics.`copilot/validation/success_auc`"] > 200  # MLflow's default 180 cut it
+
+
 def test_a_search_is_not_grouped_and_shows_no_test_figure():
     tuning = next(s for s in load_specs(ROOT / "sweeps" / "fair_maze.yaml") if s.searcher.type == "optuna")
     view = mlflow_view.trials_view(*trials_view_of(tuning))

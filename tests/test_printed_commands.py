@@ -1,6 +1,6 @@
 """The commands the programs print for the user to run next run as printed: they name this install's
 Python and MLflow (no activated virtual environment needed), and the MLflow UI command starts without
-MLflow's job runner. (The sweep's closing `Report:` command is run in tests/test_sweep.py, on the
+MLflow's job runner, its page storing the UI's model-training default (copilot_ray.mlflow_app). (The sweep's closing `Report:` command is run in tests/test_sweep.py, on the
 store of a sweep that ran.) No Ray."""
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from copilot_ray.commands import mlflow, python, python_module
+from copilot_ray.commands import UI_APP, mlflow, python, python_module
+from copilot_ray.mlflow_app import defaults_script
 from copilot_ray.store import ui_hint
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -94,6 +95,11 @@ def test_the_mlflow_ui_command_serves_the_store_as_printed_without_a_job_runner(
         assert answer is not None and '"name": "printed"' in answer.replace('":"', '": "'), ui.poll()
         processes = [_cmdline(p) for p in _descendants(ui.pid)]
         assert not [p for p in processes if "huey" in p], processes
+        # its page opens the model-training views, the assistant panel closed, in a browser new to it
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30) as response:
+            page = response.read().decode()
+        assert f" --app-name {UI_APP} " in command
+        assert page.index(defaults_script()) < page.index("static/js/main.")
     finally:
         os.killpg(ui.pid, signal.SIGTERM)
         ui.wait(timeout=30)

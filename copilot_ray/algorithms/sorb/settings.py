@@ -89,6 +89,8 @@ METRICS: tuple[str, ...] = (
     keys.ENV_STEPS,
     keys.SORB_GRAPH_EDGES,
     keys.SORB_WAYPOINTS,
+    # the plan its graph search gives, scored as a motion planner's, once the search has started
+    *keys.PATH_METRICS,
 )
 
 # HER's space (SoRB trains HER's agent) plus the search's structure: the graph's size and edge cutoff.
