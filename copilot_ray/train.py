@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import logging
 import os
 import signal
 import sys
@@ -33,8 +32,7 @@ from copilot_ray import keys
 from copilot_ray.commands import python_module, relative_path
 from copilot_ray.console import quiet_console
 from copilot_ray.envs import UnknownEnvError, make
-from copilot_ray.heartbeat import LOGGER_NAME as HEARTBEAT_LOGGER
-from copilot_ray.heartbeat import Heartbeat, watched
+from copilot_ray.heartbeat import Heartbeat, StopRequested, hide_progress, show_progress, watched
 from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
 from copilot_ray.store import (
@@ -337,50 +335,58 @@ class Terminated(KeyboardInterrupt):
 
 
 class _Stops:
-    """Ctrl-C and SIGTERM as exceptions in the main thread (KeyboardInterrupt, Terminated), held back
-    while an iteration's result is being recorded, so that the checkpoint and MLflow agree."""
+    """Ctrl-C and SIGTERM in the main thread. Inside an iteration (`at_boundaries`) the first one asks
+    the algorithm, through its heartbeat, to stop at its next boundary (the end of a warm-start phase, of
+    a repetition, of an evaluation), where a checkpoint continues exactly; a second one stops at once.
+    While an iteration's result is recorded (`held`) a stop waits for it, so that the checkpoint and
+    MLflow agree. Elsewhere (Ray's start, the build) a stop raises at once. A stop is raised as
+    KeyboardInterrupt, or Terminated for SIGTERM."""
 
     def __init__(self) -> None:
-        self._holding = False
+        self._mode = "at_once"
+        self._heartbeat: Heartbeat | None = None
         self._pending: type[KeyboardInterrupt] | None = None
 
     def handle(self, signum, frame) -> None:
         stop = Terminated if signum == signal.SIGTERM else KeyboardInterrupt
-        if self._holding:
+        if self._mode == "held":
+            self._pending = self._pending or stop
+            return
+        if self._mode == "boundary" and self._pending is None and self._heartbeat is not None:
             self._pending = stop
+            why = "terminated (SIGTERM)" if stop is Terminated else "interrupted"
+            again = "another SIGTERM" if stop is Terminated else "Ctrl-C again"
+            # Said by the heartbeat's own thread: a signal handler must not write to a stream.
+            self._heartbeat.request_stop(
+                f"{why}: stopping at {self._heartbeat.boundary}, then writing a checkpoint ({again} to "
+                "stop at once)"
+            )
             return
         raise stop()
 
     @contextlib.contextmanager
+    def at_boundaries(self, heartbeat: Heartbeat):
+        """Around `algo.train()`: a first stop waits for the algorithm's next boundary (the iteration
+        then ends there, or its warm start pauses: StopRequested, raised as the stop it stands for)."""
+        self._mode, self._heartbeat = "boundary", heartbeat
+        try:
+            yield
+        except StopRequested as paused:
+            stop, self._pending = self._pending or KeyboardInterrupt, None
+            raise stop(str(paused)) from None
+        finally:
+            self._mode = "at_once"
+
+    @contextlib.contextmanager
     def held(self):
-        self._holding = True
+        self._mode = "held"
         try:
             yield
         finally:
-            self._holding = False
+            self._mode = "at_once"
             if self._pending is not None:
                 stop, self._pending = self._pending, None
                 raise stop()
-
-
-class _SinceStart(logging.Formatter):
-    def __init__(self, started: float) -> None:
-        super().__init__()
-        self.started = started
-
-    def format(self, record: logging.LogRecord) -> str:
-        return f"  ... {record.getMessage()}  wall {record.created - self.started:7.1f}s"
-
-
-def _print_heartbeat(started: float) -> logging.Handler:
-    """The algorithm's heartbeat lines (copilot_ray.heartbeat) on this console."""
-    handler = logging.StreamHandler(sys.stdout)
-    handler.setFormatter(_SinceStart(started))
-    logger = logging.getLogger(HEARTBEAT_LOGGER)
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    logger.propagate = False
-    return handler
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -399,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     print(first_line(args, values), flush=True)
     console = quiet_console(args.verbose)
-    heartbeat = _print_heartbeat(started)
+    show_progress(started=started)  # the algorithm's heartbeat lines on this console
     try:
         try:
             config = build_config(args)
@@ -408,7 +414,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         return _run(args, config, console, saved, started)
     finally:
-        logging.getLogger(HEARTBEAT_LOGGER).removeHandler(heartbeat)
+        hide_progress()
         if console is not None:
             console.close()
 
@@ -457,7 +463,8 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
                 f"resumed from {checkpoint_dir}: iteration {algo.iteration}, {steps:,} env steps", flush=True
             )
         while not _done(args, algo.iteration, steps):
-            with watched(algo.heartbeat):  # a line even when one planner phase outlasts the interval
+            # watched: a line even when one planner phase outlasts the interval
+            with watched(algo.heartbeat), stops.at_boundaries(algo.heartbeat):
                 result = algo.train()
             with stops.held():  # the iteration the checkpoint will hold is logged whole
                 steps = int(keys.result_value(result, keys.ENV_STEPS) or 0)
@@ -469,7 +476,8 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
     except KeyboardInterrupt as stop:
         status, code = "KILLED", EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED
         why = "terminated (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
-        print(f"{why}: writing a checkpoint before exiting", file=sys.stderr, flush=True)
+        where = f"{stop}; " if str(stop) else ""  # a paused warm start says how far it got
+        print(f"{why}: {where}writing a checkpoint before exiting", file=sys.stderr, flush=True)
     except BaseException:
         status = "FAILED"
         raise

@@ -50,3 +50,38 @@ def test_watched_runs_the_watcher_only_while_the_block_runs(caplog):
     said = len(caplog.records)
     time.sleep(0.2)
     assert said >= 2 and len(caplog.records) == said
+
+
+def test_a_stop_asked_for_is_said_once_by_the_work_not_by_the_asker_and_stays_until_cleared(caplog):
+    """`request_stop` may come from a signal handler, which must not write: the message waits for the
+    next beat (or the watch), is said once, and the stop stays asked for until `clear_stop`."""
+    beat = Heartbeat(interval_s=100.0)
+    with caplog.at_level(logging.INFO, logger=LOGGER_NAME):
+        beat.request_stop("interrupted: stopping at the end of this repetition")
+        assert beat.stop_requested and caplog.records == []
+        beat.beat(lambda: "env steps 10")  # not due: only the stop's message
+        beat.beat(lambda: "env steps 20")
+        beat.request_stop("again")
+        beat.overdue()
+    assert [r.getMessage() for r in caplog.records] == [
+        "interrupted: stopping at the end of this repetition",
+        "again",
+    ]
+    assert beat.stop_requested
+    beat.clear_stop()
+    assert not beat.stop_requested
+
+
+def test_show_progress_prints_the_lines_with_the_wall_time_once_per_call(capsys):
+    """The Python API's one-liner: heartbeat lines on stdout; a second call replaces the first."""
+    from copilot_ray.heartbeat import hide_progress, show_progress
+
+    show_progress()
+    show_progress()
+    try:
+        Heartbeat().say("planner warm start: phase 1 of 1000")
+    finally:
+        hide_progress()
+    Heartbeat().say("not shown")
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("  ... planner warm start: phase 1 of 1000  wall ")
