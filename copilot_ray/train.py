@@ -43,6 +43,8 @@ from copilot_ray.store import (
     unwritable_store,
 )
 from copilot_ray.sweep_spec import load_yaml_value
+from copilot_ray.sweep_spec.estimate import duration_text
+from copilot_ray.train_plan import checkpoint_folder, expected_seconds, format_train_plan
 
 ALGORITHM = "copilot"
 # The flags of settings whose names changed, so that old command lines keep working.
@@ -59,12 +61,20 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 def example() -> str:
     """--help's closing example, naming this install's Python and MLflow (they run as printed)."""
+    budget = 300_000
     run = python_module(
-        "copilot_ray.train", "--layout", "four-rooms", "--preset", "paper_literal", "--stop-env-steps", 300000
+        "copilot_ray.train", "--layout", "four-rooms", "--preset", "paper_literal", "--stop-env-steps", budget
     )
     ui, then = ui_hint(default_tracking_uri(RESULTS), "<id>")
+    seconds = expected_seconds(ALGORITHM, {"preset": "paper_literal"}, budget, None)
+    took = (
+        ""
+        if seconds is None
+        else f"about {duration_text(seconds)} on two cores by --check's measured figures; "
+    )
     return (
-        f"example (about an hour on two cores; --help lists every setting):\n  {run} --seed 1\n  {ui}\n"
+        f"example ({took}--check prints the plan and the time first; --help lists every setting):\n"
+        f"  {run} --seed 1\n  {ui}\n"
         f"  ({then}: the runs, not the GenAI pages MLflow 3's UI opens on by default)"
     )
 
@@ -126,6 +136,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="continue the run whose checkpoint folder this is, in its MLflow run, with the flags it began "
         "with (only --stop-env-steps and --stop-iters may be given with it, to go further)",
+    )
+    run.add_argument(
+        "--check",
+        action="store_true",
+        help="check every flag, print the plan (settings, env steps per iteration, evaluations, the store "
+        "and checkpoint folder) and the wall time to expect, and start nothing",
     )
     run.add_argument(
         "--verbose",
@@ -257,6 +273,26 @@ def checked_run(args: argparse.Namespace) -> tuple[dict[str, Any], RunContext]:
         env_step_budget=args.stop_env_steps,
     )
     return values, run
+
+
+def plan(args: argparse.Namespace, values: dict[str, Any]) -> str:
+    """--check's plan of the run (train_plan.py), from the checked flags alone."""
+    tracking = None
+    if not args.no_tracking:
+        uri = args.tracking_uri or default_tracking_uri(RESULTS)
+        tracking = f"experiment {args.experiment!r} at {uri}"
+    checkpoint = checkpoint_folder(ALGORITHM, args.checkpoint_dir, RESULTS, args.env, values, args.seed)
+    return format_train_plan(
+        ALGORITHM,
+        args.env,
+        args.layout,
+        args.seed,
+        values,
+        args.stop_env_steps,
+        args.stop_iters,
+        tracking,
+        checkpoint,
+    )
 
 
 def progress_line(result: dict[str, Any], started: float) -> str:
@@ -402,6 +438,9 @@ def main(argv: list[str] | None = None) -> int:
         for line in err.lines:
             print(f"error: {line}", file=sys.stderr)
         return 2
+    if args.check:
+        print(plan(args, values))
+        return 0
     started = time.time()
     print(first_line(args, values), flush=True)
     console = quiet_console(args.verbose)

@@ -142,6 +142,76 @@ def test_bad_flags_exit_2_in_one_line_before_ray_is_imported():
         assert message in err and "Traceback" not in err, (argv, err)
 
 
+# The README's first example, and the paper's readings (no warm start).
+CHECKED = [
+    [
+        "--layout",
+        "four-rooms",
+        "--tree-depth",
+        "5",
+        "--repetitions",
+        "5",
+        "--stop-env-steps",
+        "200000",
+        "--check",
+    ],
+    [
+        "--preset",
+        "paper_literal",
+        "--stop-env-steps",
+        "300000",
+        "--stop-iters",
+        "4",
+        "--no-tracking",
+        "--check",
+    ],
+]
+
+
+def test_check_prints_the_plan_and_the_time_to_expect_and_starts_and_writes_nothing(tmp_path):
+    """--check: exit 0 with the plan (the bound on an iteration, the evaluations, the store, the
+    checkpoint folder) and the wall time from the measured figures (the warm start's phases x seconds per
+    phase + env steps / a lone run's rate), Ray never imported and no file made (one fresh interpreter
+    runs both cases in an empty folder)."""
+    import json
+
+    from copilot_ray.sweep_spec.estimate import duration_text, measured_rate, measured_warm_start_phase
+
+    code = (
+        "import contextlib, io, json, sys; from copilot_ray import train\n"
+        "out = []\n"
+        "for argv in json.loads(sys.argv[1]):\n"
+        "    text = io.StringIO()\n"
+        "    with contextlib.redirect_stdout(text):\n"
+        "        rc = train.main(argv)\n"
+        "    out.append([rc, 'ray' in sys.modules, text.getvalue()])\n"
+        "print(json.dumps(out))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(CHECKED)], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    (rc, ray_imported, readme), (rc2, ray_imported2, paper) = json.loads(done.stdout)
+    assert (rc, ray_imported, rc2, ray_imported2) == (0, False, 0, False)
+    assert list(tmp_path.iterdir()) == []  # no store, no results folder, no console log
+
+    phase, rate = measured_warm_start_phase("copilot")[0], measured_rate("copilot", 1)[0]
+    assert "CO-PILOT on maze-point (four-rooms), seed 0" in readme and "K=5" in readme and "b=5" in readme
+    assert "an iteration: <= 15,750 env steps (5 repetitions of <= 3,150)" in readme
+    assert "evaluations: 100 validation + 100 test tasks after every iteration; >= 13 in the run" in readme
+    assert f"MLflow: experiment 'copilot-train' at sqlite:///{tmp_path}/results/train/mlflow.db" in readme
+    assert "checkpoint: results/train/maze-point-K5-b5-s0-<start time>/" in readme
+    assert f"wall time: about {duration_text(1000 * phase + 200_000 / rate)} " in readme
+    assert f"1,000 phases x {phase:.2f} s" in readme and "measured_throughput.json" in readme
+    # paper_literal: no warm start; 4 iterations end it before its 300k env steps
+    assert "preset paper_literal" in paper and "MLflow: none (--no-tracking)" in paper
+    assert (
+        f"wall time: about {duration_text(4 * 15_750 / rate)} " in paper and "no planner warm start" in paper
+    )
+    assert " phases x " not in paper
+    assert "at most 63,000 env steps" in paper
+
+
 def test_a_default_results_folder_that_cannot_be_made_is_refused(tmp_path, monkeypatch, capsys):
     """`results` is a file here: the default store and checkpoint folder (results/train) are named."""
     monkeypatch.chdir(tmp_path)
