@@ -447,7 +447,8 @@ def main(argv: list[str] | None = None) -> int:
     show_progress(started=started)  # the algorithm's heartbeat lines on this console
     try:
         try:
-            config = build_config(args)
+            with ticking("loading RLlib and checking the algorithm's config"):  # ~15 s on two busy cores
+                config = build_config(args)
         except (ValueError, KeyError, FileNotFoundError) as err:
             print(f"error: {err}", file=sys.stderr)
             return 2

@@ -481,6 +481,8 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
                 # past the bound --check gives.
                 stopped = True
                 break
+            # What the watch repeats until the traversal's first beat (not the last iteration's evaluation).
+            self.heartbeat.beat(self._traversal_progress)
             if curriculum is None:
                 trees = np.stack([self.train_starts[idx], self.train_goals[idx]], axis=1)
             else:
