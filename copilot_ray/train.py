@@ -5,14 +5,18 @@
 
 Every CO-PILOT setting is a flag (`--planner-std-final 0.015`, `--preset paper_literal`; values are
 written as in a sweep spec, so `null`, `[64, 64]` and `1e-3` work); `--help` lists them with their
-rules and defaults. Prints a first line at once, one progress line per iteration and, inside an
+rules and defaults; `--check` prints the run's plan and the wall time to expect and starts nothing
+(train_plan.py). Prints a first line at once, one progress line per iteration and, inside an
 iteration, a line at least every 10 s (the planner's warm start, the traversal's env steps and SAC
 updates, evaluations); Ray's, RLlib's and MLflow's notices go to `<checkpoint folder>.console.log`
 (`--verbose` shows them). The run is tracked in MLflow (by default in the embedded store
 results/train/mlflow.db; `--no-tracking` for none) and its checkpoint (at the end, on Ctrl-C and on
 SIGTERM, which stop it alike: the MLflow run KILLED, exit status 130 / 143) goes to a folder of its own
-named after the run; `--resume THAT_FOLDER` continues the run there, in the same MLflow run. Every bad
-argument is reported, each naming the flag and its value, before Ray starts (exit status 2).
+named after the run; `--resume THAT_FOLDER` continues the run there, in the same MLflow run. A first
+Ctrl-C or SIGTERM inside an iteration stops at the next boundary (a warm-start phase's end, a
+repetition's, an evaluation's), so that the resumed run goes on as if never stopped; a second one stops
+at once. Every bad argument is reported, each naming the flag and its value, before Ray starts (exit
+status 2).
 """
 
 from __future__ import annotations
@@ -70,7 +74,7 @@ def example() -> str:
     took = (
         ""
         if seconds is None
-        else f"about {duration_text(seconds)} on two cores by --check's measured figures; "
+        else f"about {duration_text(seconds)} with a core of its own, by --check's measured figures; "
     )
     return (
         f"example ({took}--check prints the plan and the time first; --help lists every setting):\n"
