@@ -3,8 +3,10 @@ environment steps (a probe chooses; the test tasks are for reports).
 
 Runs CO-PILOT under one or more presets (readings of the paper: `default`, the measured defaults;
 `paper_literal`) on the same env-step budget, one process, no Tune. Every iteration prints one line with the test success and the diagnostics that say
-why a run does (not) learn; rows.json is rewritten after every iteration (a killed run keeps them) and
-a PNG and a table are written at the end. A measurement, not a test.
+why a run does (not) learn, and inside an iteration a line every few seconds (warm-start phases, env
+steps, SAC updates, evaluations: `copilot_ray.heartbeat.show_progress`; `--no-progress` for none);
+rows.json is rewritten after every iteration (a killed run keeps them) and a PNG and a table are written
+at the end. A measurement, not a test.
 
     PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --env-steps 80000
     PYTHONPATH=. .venv/bin/python benchmarks/maze_learning.py --presets default --set after_failure=continue
@@ -168,6 +170,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--task-batch-size", type=int, default=2, help="tasks traversed per iteration")
     p.add_argument("--out", default="results/benchmarks/maze_learning")
+    p.add_argument("--no-progress", action="store_true", help="no lines inside an iteration")
     args = p.parse_args(argv)
     from copilot_ray.algorithms.copilot.settings import PRESETS
 
@@ -178,6 +181,10 @@ def main(argv: list[str] | None = None) -> None:
 
     import ray
 
+    from copilot_ray.heartbeat import show_progress
+
+    if not args.no_progress:
+        show_progress()  # the warm start alone is minutes without a line otherwise
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)

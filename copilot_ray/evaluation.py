@@ -60,14 +60,17 @@ class EvaluationSchedule:
         self.every_env_steps = int(every_env_steps)
         self._last_bucket = 0  # env steps // every_env_steps at the last evaluation
 
-    def due(self, iteration: int, env_steps: int) -> bool:
-        """Whether to evaluate after iteration `iteration` (1-based) ending at `env_steps`."""
+    def due(self, iteration: int, env_steps: int, whole: bool = True) -> bool:
+        """Whether to evaluate after iteration `iteration` (1-based) ending at `env_steps`. An iteration
+        that is not `whole` (a stop cut it short, its batch left to the next) is evaluated only at an
+        env-step point: on the iterations cadence the iteration that finishes its batch is, where an
+        uninterrupted run evaluates too."""
         if self.every_env_steps > 0:
             if self.point_passed(env_steps):
                 self._last_bucket = int(env_steps) // self.every_env_steps
                 return True
             return False
-        return bool(self.every_iterations) and iteration % self.every_iterations == 0
+        return whole and bool(self.every_iterations) and iteration % self.every_iterations == 0
 
     def point_passed(self, env_steps: int) -> bool:
         """Whether `env_steps` is past an env-step evaluation point not evaluated at yet (False on the

@@ -5,14 +5,18 @@
 
 Every CO-PILOT setting is a flag (`--planner-std-final 0.015`, `--preset paper_literal`; values are
 written as in a sweep spec, so `null`, `[64, 64]` and `1e-3` work); `--help` lists them with their
-rules and defaults. Prints a first line at once, one progress line per iteration and, inside an
+rules and defaults; `--check` prints the run's plan and the wall time to expect and starts nothing
+(train_plan.py). Prints a first line at once, one progress line per iteration and, inside an
 iteration, a line at least every 10 s (the planner's warm start, the traversal's env steps and SAC
 updates, evaluations); Ray's, RLlib's and MLflow's notices go to `<checkpoint folder>.console.log`
 (`--verbose` shows them). The run is tracked in MLflow (by default in the embedded store
 results/train/mlflow.db; `--no-tracking` for none) and its checkpoint (at the end, on Ctrl-C and on
 SIGTERM, which stop it alike: the MLflow run KILLED, exit status 130 / 143) goes to a folder of its own
-named after the run; `--resume THAT_FOLDER` continues the run there, in the same MLflow run. Every bad
-argument is reported, each naming the flag and its value, before Ray starts (exit status 2).
+named after the run; `--resume THAT_FOLDER` continues the run there, in the same MLflow run. A first
+Ctrl-C or SIGTERM inside an iteration stops at the next boundary (a warm-start phase's end, a
+repetition's, an evaluation's), so that the resumed run goes on as if never stopped; a second one stops
+at once. Every bad argument is reported, each naming the flag and its value, before Ray starts (exit
+status 2).
 """
 
 from __future__ import annotations
@@ -20,7 +24,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import logging
 import os
 import signal
 import sys
@@ -33,8 +36,7 @@ from copilot_ray import keys
 from copilot_ray.commands import python_module, relative_path
 from copilot_ray.console import quiet_console
 from copilot_ray.envs import UnknownEnvError, make
-from copilot_ray.heartbeat import LOGGER_NAME as HEARTBEAT_LOGGER
-from copilot_ray.heartbeat import Heartbeat, watched
+from copilot_ray.heartbeat import Heartbeat, StopRequested, hide_progress, show_progress, watched
 from copilot_ray.registry import RunContext, get_algorithm
 from copilot_ray.settings import problems
 from copilot_ray.store import (
@@ -45,6 +47,8 @@ from copilot_ray.store import (
     unwritable_store,
 )
 from copilot_ray.sweep_spec import load_yaml_value
+from copilot_ray.sweep_spec.estimate import duration_text
+from copilot_ray.train_plan import checkpoint_folder, expected_seconds, format_train_plan
 
 ALGORITHM = "copilot"
 # The flags of settings whose names changed, so that old command lines keep working.
@@ -61,12 +65,20 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 def example() -> str:
     """--help's closing example, naming this install's Python and MLflow (they run as printed)."""
+    budget = 300_000
     run = python_module(
-        "copilot_ray.train", "--layout", "four-rooms", "--preset", "paper_literal", "--stop-env-steps", 300000
+        "copilot_ray.train", "--layout", "four-rooms", "--preset", "paper_literal", "--stop-env-steps", budget
     )
     ui, then = ui_hint(default_tracking_uri(RESULTS), "<id>")
+    seconds = expected_seconds(ALGORITHM, {"preset": "paper_literal"}, budget, None)
+    took = (
+        ""
+        if seconds is None
+        else f"about {duration_text(seconds)} with a core of its own, by --check's measured figures; "
+    )
     return (
-        f"example (about an hour on two cores; --help lists every setting):\n  {run} --seed 1\n  {ui}\n"
+        f"example ({took}--check prints the plan and the time first; --help lists every setting):\n"
+        f"  {run} --seed 1\n  {ui}\n"
         f"  ({then}: the runs, not the GenAI pages MLflow 3's UI opens on by default)"
     )
 
@@ -128,6 +140,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="continue the run whose checkpoint folder this is, in its MLflow run, with the flags it began "
         "with (only --stop-env-steps and --stop-iters may be given with it, to go further)",
+    )
+    run.add_argument(
+        "--check",
+        action="store_true",
+        help="check every flag, print the plan (settings, env steps per iteration, evaluations, the store "
+        "and checkpoint folder) and the wall time to expect, and start nothing",
     )
     run.add_argument(
         "--verbose",
@@ -261,6 +279,26 @@ def checked_run(args: argparse.Namespace) -> tuple[dict[str, Any], RunContext]:
     return values, run
 
 
+def plan(args: argparse.Namespace, values: dict[str, Any]) -> str:
+    """--check's plan of the run (train_plan.py), from the checked flags alone."""
+    tracking = None
+    if not args.no_tracking:
+        uri = args.tracking_uri or default_tracking_uri(RESULTS)
+        tracking = f"experiment {args.experiment!r} at {uri}"
+    checkpoint = checkpoint_folder(ALGORITHM, args.checkpoint_dir, RESULTS, args.env, values, args.seed)
+    return format_train_plan(
+        ALGORITHM,
+        args.env,
+        args.layout,
+        args.seed,
+        values,
+        args.stop_env_steps,
+        args.stop_iters,
+        tracking,
+        checkpoint,
+    )
+
+
 def progress_line(result: dict[str, Any], started: float) -> str:
     steps = keys.result_value(result, keys.ENV_STEPS) or 0
 
@@ -337,50 +375,58 @@ class Terminated(KeyboardInterrupt):
 
 
 class _Stops:
-    """Ctrl-C and SIGTERM as exceptions in the main thread (KeyboardInterrupt, Terminated), held back
-    while an iteration's result is being recorded, so that the checkpoint and MLflow agree."""
+    """Ctrl-C and SIGTERM in the main thread. Inside an iteration (`at_boundaries`) the first one asks
+    the algorithm, through its heartbeat, to stop at its next boundary (the end of a warm-start phase, of
+    a repetition, of an evaluation), where a checkpoint continues exactly; a second one stops at once.
+    While an iteration's result is recorded (`held`) a stop waits for it, so that the checkpoint and
+    MLflow agree. Elsewhere (Ray's start, the build) a stop raises at once. A stop is raised as
+    KeyboardInterrupt, or Terminated for SIGTERM."""
 
     def __init__(self) -> None:
-        self._holding = False
+        self._mode = "at_once"
+        self._heartbeat: Heartbeat | None = None
         self._pending: type[KeyboardInterrupt] | None = None
 
     def handle(self, signum, frame) -> None:
         stop = Terminated if signum == signal.SIGTERM else KeyboardInterrupt
-        if self._holding:
+        if self._mode == "held":
+            self._pending = self._pending or stop
+            return
+        if self._mode == "boundary" and self._pending is None and self._heartbeat is not None:
             self._pending = stop
+            why = "terminated (SIGTERM)" if stop is Terminated else "interrupted"
+            again = "another SIGTERM" if stop is Terminated else "Ctrl-C again"
+            # Said by the heartbeat's own thread: a signal handler must not write to a stream.
+            self._heartbeat.request_stop(
+                f"{why}: stopping at {self._heartbeat.boundary}, then writing a checkpoint ({again} to "
+                "stop at once)"
+            )
             return
         raise stop()
 
     @contextlib.contextmanager
+    def at_boundaries(self, heartbeat: Heartbeat):
+        """Around `algo.train()`: a first stop waits for the algorithm's next boundary (the iteration
+        then ends there, or its warm start pauses: StopRequested, raised as the stop it stands for)."""
+        self._mode, self._heartbeat = "boundary", heartbeat
+        try:
+            yield
+        except StopRequested as paused:
+            stop, self._pending = self._pending or KeyboardInterrupt, None
+            raise stop(str(paused)) from None
+        finally:
+            self._mode = "at_once"
+
+    @contextlib.contextmanager
     def held(self):
-        self._holding = True
+        self._mode = "held"
         try:
             yield
         finally:
-            self._holding = False
+            self._mode = "at_once"
             if self._pending is not None:
                 stop, self._pending = self._pending, None
                 raise stop()
-
-
-class _SinceStart(logging.Formatter):
-    def __init__(self, started: float) -> None:
-        super().__init__()
-        self.started = started
-
-    def format(self, record: logging.LogRecord) -> str:
-        return f"  ... {record.getMessage()}  wall {record.created - self.started:7.1f}s"
-
-
-def _print_heartbeat(started: float) -> logging.Handler:
-    """The algorithm's heartbeat lines (copilot_ray.heartbeat) on this console."""
-    handler = logging.StreamHandler(sys.stdout)
-    handler.setFormatter(_SinceStart(started))
-    logger = logging.getLogger(HEARTBEAT_LOGGER)
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    logger.propagate = False
-    return handler
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -396,19 +442,23 @@ def main(argv: list[str] | None = None) -> int:
         for line in err.lines:
             print(f"error: {line}", file=sys.stderr)
         return 2
+    if args.check:
+        print(plan(args, values))
+        return 0
     started = time.time()
     print(first_line(args, values), flush=True)
     console = quiet_console(args.verbose)
-    heartbeat = _print_heartbeat(started)
+    show_progress(started=started)  # the algorithm's heartbeat lines on this console
     try:
         try:
-            config = build_config(args)
+            with ticking("loading RLlib and checking the algorithm's config"):  # ~15 s on two busy cores
+                config = build_config(args)
         except (ValueError, KeyError, FileNotFoundError) as err:
             print(f"error: {err}", file=sys.stderr)
             return 2
         return _run(args, config, console, saved, started)
     finally:
-        logging.getLogger(HEARTBEAT_LOGGER).removeHandler(heartbeat)
+        hide_progress()
         if console is not None:
             console.close()
 
@@ -457,7 +507,8 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
                 f"resumed from {checkpoint_dir}: iteration {algo.iteration}, {steps:,} env steps", flush=True
             )
         while not _done(args, algo.iteration, steps):
-            with watched(algo.heartbeat):  # a line even when one planner phase outlasts the interval
+            # watched: a line even when one planner phase outlasts the interval
+            with watched(algo.heartbeat), stops.at_boundaries(algo.heartbeat):
                 result = algo.train()
             with stops.held():  # the iteration the checkpoint will hold is logged whole
                 steps = int(keys.result_value(result, keys.ENV_STEPS) or 0)
@@ -469,7 +520,8 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
     except KeyboardInterrupt as stop:
         status, code = "KILLED", EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED
         why = "terminated (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
-        print(f"{why}: writing a checkpoint before exiting", file=sys.stderr, flush=True)
+        where = f"{stop}; " if str(stop) else ""  # a paused warm start says how far it got
+        print(f"{why}: {where}writing a checkpoint before exiting", file=sys.stderr, flush=True)
     except BaseException:
         status = "FAILED"
         raise

@@ -108,3 +108,38 @@ def test_collision_cost_length_needs_the_envs_hook():
 
     with pytest.raises(ValueError, match=r"collision_cost='length' is invalid for env NoLengths"):
         CoPilotCurriculum(NoLengths(), _settings(collision_cost="length"), None, None, None, None, 0)
+
+
+def test_a_warm_start_paused_by_a_stop_and_resumed_from_its_state_ends_in_the_uninterrupted_planner():
+    """6 phases in one go, against 3, a stop (train's Ctrl-C through the heartbeat), the state and the
+    run's rng carried to a fresh curriculum (what a checkpoint and --resume do), and the other 3: the
+    same planner, weight for weight, the same phase count and collision checks."""
+    from copilot_ray.heartbeat import Heartbeat, StopRequested
+
+    whole, rng = _curriculum(planner_warm_start=6)
+    whole.prepare(1, rng, Heartbeat())
+
+    class CtrlCInPhase3(Heartbeat):
+        def beat(self, message):
+            if message().endswith("phase 3 of 6"):
+                self.request_stop("interrupted")  # phase 3 still runs: the stop waits for its end
+            super().beat(message)
+
+    paused, rng = _curriculum(planner_warm_start=6)
+    with pytest.raises(StopRequested, match="planner warm start paused after 3 of 6 phases"):
+        paused.prepare(1, rng, CtrlCInPhase3())
+    assert paused.phases.count == 3
+    state, rng_state = paused.state_dict(), rng.bit_generator.state
+
+    resumed, _ = _curriculum(planner_warm_start=6)
+    resumed.load_state_dict(state)
+    rng = np.random.default_rng()
+    rng.bit_generator.state = rng_state
+    assert set(resumed.prepare(1, rng, Heartbeat())) == {
+        keys.PLANNER_PREFIX + "warm_start_s",
+        keys.PLANNER_PREFIX + "warm_start_cost",
+    }
+    assert (resumed.phases.count, resumed.collision_checks) == (6, whole.collision_checks)
+    for a, b in zip(resumed.planner.parameters(), whole.planner.parameters(), strict=True):
+        np.testing.assert_array_equal(a.detach().numpy(), b.detach().numpy())
+    assert resumed.prepare(2, rng) == {}  # done: the next iteration has no warm start

@@ -174,3 +174,17 @@ def test_benchmark_commands_use_flags_the_benchmark_has(command):
     source = (ROOT / script).read_text()
     for flag in re.findall(r"(?<!\S)--[a-z][a-z0-9-]*", command.split(script, 1)[1]):
         assert f'"{flag}"' in source, f"{script} has no {flag}"
+
+
+def test_the_python_snippets_imports_exist():
+    """The "From Python" lines (`from copilot_ray... import ...`, the progress one-liner included) import
+    what they name; nothing is built or started."""
+    lines = [
+        line.strip().split("  #")[0]
+        for line in README.splitlines()
+        if line.startswith("    from copilot_ray")
+    ]
+    assert any("show_progress" in line for line in lines), "the README's snippet shows no progress"
+    for line in lines:
+        statements = [part.strip() for part in line.split(";")]
+        exec("\n".join(s for s in statements if s.startswith("from ")), {})  # noqa: S102 - README's own lines

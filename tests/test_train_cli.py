@@ -151,6 +151,76 @@ def test_bad_flags_exit_2_in_one_line_before_ray_is_imported():
         assert message in err and "Traceback" not in err, (argv, err)
 
 
+# The README's first example, and the paper's readings (no warm start).
+CHECKED = [
+    [
+        "--layout",
+        "four-rooms",
+        "--tree-depth",
+        "5",
+        "--repetitions",
+        "5",
+        "--stop-env-steps",
+        "200000",
+        "--check",
+    ],
+    [
+        "--preset",
+        "paper_literal",
+        "--stop-env-steps",
+        "300000",
+        "--stop-iters",
+        "4",
+        "--no-tracking",
+        "--check",
+    ],
+]
+
+
+def test_check_prints_the_plan_and_the_time_to_expect_and_starts_and_writes_nothing(tmp_path):
+    """--check: exit 0 with the plan (the bound on an iteration, the evaluations, the store, the
+    checkpoint folder) and the wall time from the measured figures (the warm start's phases x seconds per
+    phase + env steps / a lone run's rate), Ray never imported and no file made (one fresh interpreter
+    runs both cases in an empty folder)."""
+    import json
+
+    from copilot_ray.sweep_spec.estimate import duration_text, measured_rate, measured_warm_start_phase
+
+    code = (
+        "import contextlib, io, json, sys; from copilot_ray import train\n"
+        "out = []\n"
+        "for argv in json.loads(sys.argv[1]):\n"
+        "    text = io.StringIO()\n"
+        "    with contextlib.redirect_stdout(text):\n"
+        "        rc = train.main(argv)\n"
+        "    out.append([rc, 'ray' in sys.modules, text.getvalue()])\n"
+        "print(json.dumps(out))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(CHECKED)], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    (rc, ray_imported, readme), (rc2, ray_imported2, paper) = json.loads(done.stdout)
+    assert (rc, ray_imported, rc2, ray_imported2) == (0, False, 0, False)
+    assert list(tmp_path.iterdir()) == []  # no store, no results folder, no console log
+
+    phase, rate = measured_warm_start_phase("copilot")[0], measured_rate("copilot", 1)[0]
+    assert "CO-PILOT on maze-point (four-rooms), seed 0" in readme and "K=5" in readme and "b=5" in readme
+    assert "an iteration: <= 15,750 env steps (5 repetitions of <= 3,150)" in readme
+    assert "evaluations: 100 validation + 100 test tasks after every iteration; >= 13 in the run" in readme
+    assert f"MLflow: experiment 'copilot-train' at sqlite:///{tmp_path}/results/train/mlflow.db" in readme
+    assert "checkpoint: results/train/maze-point-K5-b5-s0-<start time>/" in readme
+    assert f"wall time: about {duration_text(1000 * phase + 200_000 / rate)} " in readme
+    assert f"1,000 phases x {phase:.2f} s" in readme and "measured_throughput.json" in readme
+    # paper_literal: no warm start; 4 iterations end it before its 300k env steps
+    assert "preset paper_literal" in paper and "MLflow: none (--no-tracking)" in paper
+    assert (
+        f"wall time: about {duration_text(4 * 15_750 / rate)} " in paper and "no planner warm start" in paper
+    )
+    assert " phases x " not in paper
+    assert "at most 63,000 env steps" in paper
+
+
 def test_a_default_results_folder_that_cannot_be_made_is_refused(tmp_path, monkeypatch, capsys):
     """`results` is a file here: the default store and checkpoint folder (results/train) are named."""
     monkeypatch.chdir(tmp_path)
@@ -281,3 +351,96 @@ def test_resume_refuses_a_folder_without_a_run_and_flags_of_the_runs_own(tmp_pat
     (tmp_path / train.RUN_FILE).write_text("{}")
     assert train.main(["--resume", str(tmp_path), "--tree-depth", "3"]) == 2
     assert "--tree-depth is invalid with --resume" in capsys.readouterr().err
+
+
+def test_a_first_stop_inside_an_iteration_waits_for_its_boundary_and_a_second_one_stops_at_once():
+    """Inside `algo.train()` a first Ctrl-C or SIGTERM asks the algorithm's heartbeat to stop at its next
+    boundary (and says so, naming it); a second one raises at once; a warm start paused by the first
+    (StopRequested) leaves as the stop it stands for, saying how far it got."""
+    import signal
+
+    from copilot_ray.heartbeat import Heartbeat, StopRequested
+
+    stops, beat = train._Stops(), Heartbeat()
+    beat.boundary = "the end of this warm-start phase"
+    with pytest.raises(train.Terminated, match="paused after 2 of 4 phases"), stops.at_boundaries(beat):
+        stops.handle(signal.SIGTERM, None)
+        assert beat.stop_requested and beat._stop_message == (
+            "terminated (SIGTERM): stopping at the end of this warm-start phase, then writing a checkpoint "
+            "(another SIGTERM to stop at once)"
+        )
+        raise StopRequested("planner warm start paused after 2 of 4 phases")
+
+    stops, beat = train._Stops(), Heartbeat()
+    with pytest.raises(KeyboardInterrupt), stops.at_boundaries(beat):
+        stops.handle(signal.SIGINT, None)
+        assert "(Ctrl-C again to stop at once)" in beat._stop_message
+        stops.handle(signal.SIGINT, None)  # the second: at once
+    with pytest.raises(KeyboardInterrupt):
+        stops.handle(signal.SIGINT, None)  # outside an iteration (Ray's start, the build): at once
+
+
+@pytest.mark.ray
+def test_ctrl_c_pauses_the_warm_start_and_ends_an_iteration_at_a_repetition_so_resume_redoes_nothing(
+    ray_session, tmp_path, monkeypatch, capsys
+):
+    """Ctrl-C after the warm start's 2nd of 4 phases: the run stops at that phase's end, its checkpoint
+    holds the 2 phases, and --resume goes on at phase 3. Ctrl-C during the first repetition's traversal:
+    the iteration ends when that repetition does (30 env steps, not evaluated: its batch is unfinished),
+    and the next --resume takes up the batch's other repetition, so no iteration takes more than the 60
+    env steps --check bounds it by and nothing is traversed twice."""
+    import os
+    import signal
+
+    import mlflow
+
+    from copilot_ray import keys
+    from copilot_ray.algorithms.sac.algorithm import GoalSAC
+    from copilot_ray.planning.planner_phases import PlannerPhases
+
+    monkeypatch.chdir(tmp_path)
+    phase, traverse = PlannerPhases.run, GoalSAC._traverse
+    presses = {"phase": 2, "traversal": None}  # the phase after which, the traversal after which
+
+    def phase_then_ctrl_c(self, *args, **kwargs):
+        built = phase(self, *args, **kwargs)
+        if self.count == presses["phase"]:
+            os.kill(os.getpid(), signal.SIGINT)
+        return built
+
+    def traverse_then_ctrl_c(self, *args, **kwargs):
+        done = traverse(self, *args, **kwargs)
+        if presses["traversal"] is not None:
+            presses["traversal"] = None
+            os.kill(os.getpid(), signal.SIGINT)
+        return done
+
+    monkeypatch.setattr(PlannerPhases, "run", phase_then_ctrl_c)
+    monkeypatch.setattr(GoalSAC, "_traverse", traverse_then_ctrl_c)
+    argv = [*TINY, "--planner-warm-start", "4", "--repetitions", "2", "--stop-iters", "50"]
+    assert train.main(argv) == train.EXIT_INTERRUPTED
+    out, err = capsys.readouterr()
+    assert (
+        "interrupted: stopping at the end of this warm-start phase, then writing a checkpoint "
+        "(Ctrl-C again to stop at once)"
+    ) in out
+    assert "interrupted: planner warm start paused after 2 of 4 phases; writing a checkpoint" in err
+    (folder,) = [p for p in (tmp_path / "results" / "train").iterdir() if p.is_dir()]
+
+    presses.update(phase=None, traversal=1)
+    assert train.main(["--resume", str(folder)]) == train.EXIT_INTERRUPTED
+    out, err = capsys.readouterr()
+    assert "planner warm start: resuming at phase 3 of 4" in out
+    assert "interrupted: stopping at the end of this repetition" in out
+    assert "iter    1  env_steps        30" in out and "evaluating" not in out
+
+    assert train.main(["--resume", str(folder), "--stop-env-steps", "60"]) == 0
+    out = capsys.readouterr().out
+    assert f"resumed from {folder}: iteration 1, 30 env steps" in out and "planner warm start" not in out
+    client = mlflow.MlflowClient(f"sqlite:///{tmp_path / 'results' / 'train' / 'mlflow.db'}")
+    (run,) = client.search_runs([client.get_experiment_by_name("copilot-train").experiment_id])
+    assert run.info.status == "FINISHED"
+    history = client.get_metric_history(run.info.run_id, keys.TRAINING_ITERATION)
+    assert [(m.step, m.value) for m in history] == [(30, 1.0), (60, 2.0)]
+    evaluated = client.get_metric_history(run.info.run_id, keys.SUCCESS_PLANNED)
+    assert [m.step for m in evaluated] == [60]  # the iteration that finished the batch

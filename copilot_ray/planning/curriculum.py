@@ -28,6 +28,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from copilot_ray import keys
+from copilot_ray.heartbeat import StopRequested
 
 from .alpha_schedule import AlphaClock, AlphaSchedule
 from .path_metrics import CountedChecks
@@ -137,7 +138,8 @@ class CoPilotCurriculum:
     # ------------------------------------------------------------------------------ an iteration
     def prepare(self, iteration: int, rng: np.random.Generator, heartbeat=None) -> dict[str, float]:
         """The warm start, on the first call (of a run: it is checkpointed); `heartbeat`
-        (copilot_ray.heartbeat.Heartbeat, optional) says how far it got."""
+        (copilot_ray.heartbeat.Heartbeat, optional) says how far it got, and a stop asked for through it
+        pauses the warm start between two phases (StopRequested; the next call goes on)."""
         return {} if self._warm_started else self._warm_start(rng, heartbeat)
 
     def tasks_to_draw(self, traversed: int) -> int:
@@ -246,15 +248,25 @@ class CoPilotCurriculum:
 
     def _warm_start(self, rng: np.random.Generator, heartbeat=None) -> dict[str, float]:
         """`planner_warm_start` planner phases on the Euclidean + collision cost (alpha = 1): no env
-        steps, so the agent's first sub-goals do not run through walls (SGT-PG's planner, trained alone)."""
+        steps, so the agent's first sub-goals do not run through walls (SGT-PG's planner, trained alone).
+
+        A stop asked for through `heartbeat` pauses it before the next phase (StopRequested): the phases
+        done are `phases.count` (the warm start is the run's first phases), checkpointed with the
+        planner, and the next call goes on from there with the run's rng as the pause left it, so a
+        paused warm start ends in the planner an uninterrupted one would. `warm_start_s`: the seconds
+        of this call (after a pause, the part it ran)."""
         t0 = time.perf_counter()
         cost = self._segment_cost(1.0)
         n = min(WARM_START_TASKS, len(self.train_starts))
-        phases = self.settings["planner_warm_start"]
+        phases, done = self.settings["planner_warm_start"], self.phases.count
         if heartbeat is not None:
-            heartbeat.say(f"planner warm start: {phases} planner phases on {n} tasks each (no env steps)")
-        for phase in range(phases):
+            heartbeat.boundary = "the end of this warm-start phase"
+            how = f"resuming at phase {done + 1} of {phases}" if done else f"{phases} planner phases"
+            heartbeat.say(f"planner warm start: {how} on {n} tasks each (no env steps)")
+        for phase in range(done, phases):
             if heartbeat is not None:
+                if heartbeat.stop_requested:
+                    raise StopRequested(f"planner warm start paused after {phase} of {phases} phases")
                 heartbeat.beat(lambda phase=phase: f"planner warm start: phase {phase + 1} of {phases}")
             idx = rng.choice(len(self.train_starts), size=n, replace=False)
             built = self.phases.run(

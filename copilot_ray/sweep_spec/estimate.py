@@ -12,6 +12,8 @@
   `max_concurrent_trials`. A spec whose trials hold a GPU (`resources.gpus_per_trial` > 0) reads the
   file's GPU figures (`env_steps_per_s_gpu`, from the GPU check `scripts/device_check.sh`) and is not
   estimated without one: a CPU figure would be wrong either way.
+* `train --check` (copilot_ray/train_plan.py) reads the same file: a lone run's rate and the planner warm
+  start's seconds per phase (`measured_warm_start_phase`), with one run's estimate (`run_estimate`).
 
 Standard library only (no Ray): `--check` and the spec's validation use it.
 """
@@ -62,31 +64,39 @@ def trial_estimates(spec: SweepSpec) -> list[TrialEstimate]:
         return []
     out = []
     for point in _points(spec):
-        merged = spec.merged(point)
-        per_iteration = int(entry.max_iteration_env_steps(merged))
-        past = entry.max_env_steps_past_budget
-        between = per_iteration if past is None else int(past(merged)) + 1
-        cadence = int(_setting(entry, merged, "eval_every_env_steps") or 0)
-        interval = int(_setting(entry, merged, "eval_interval") or 0)
         label = ", ".join(f"{k}={v}" for k, v in point.items() if k != "seed") or "every trial"
-        budget, iterations = spec.stop.env_steps, spec.stop.iterations
-        if budget is None:  # stops by iterations only
-            evals = None if not interval else iterations // interval
-            why = f"{iterations} iterations / eval_interval {interval}"
-            if cadence:
-                evals, why = None, "by env steps, with no env-step budget to count against"
-        elif cadence:
-            evals = budget // max(cadence, between)
-            unit = "iteration" if past is None else "repetition"
-            why = f"{budget:,} env steps / max(eval_every_env_steps {cadence:,}, {unit} {between:,})"
-        else:
-            done = math.ceil(budget / per_iteration)
-            if iterations is not None:
-                done = min(done, iterations)
-            evals = done // interval if interval else 0
-            why = f"at least {done} iteration(s) of at most {per_iteration:,} env steps / eval_interval {interval}"
-        out.append(TrialEstimate(label, per_iteration, between, evals, why))
+        out.append(run_estimate(entry, spec.merged(point), label, spec.stop.env_steps, spec.stop.iterations))
     return out
+
+
+def run_estimate(
+    entry, merged: dict[str, Any], label: str, budget: int | None, iterations: int | None
+) -> TrialEstimate:
+    """One run's estimate (a sweep's configuration, or `train`'s run): `entry` the algorithm (it takes
+    env steps), `merged` its setting values, the run's env-step `budget` and `iterations` (None: none)."""
+    per_iteration = int(entry.max_iteration_env_steps(merged))
+    past = entry.max_env_steps_past_budget
+    between = per_iteration if past is None else int(past(merged)) + 1
+    cadence = int(_setting(entry, merged, "eval_every_env_steps") or 0)
+    interval = int(_setting(entry, merged, "eval_interval") or 0)
+    if budget is None:  # stops by iterations only
+        evals = None if not interval else iterations // interval
+        why = f"{iterations} iterations / eval_interval {interval}"
+        if cadence:
+            evals, why = None, "by env steps, with no env-step budget to count against"
+    elif cadence:
+        evals = budget // max(cadence, between)
+        unit = "iteration" if past is None else "repetition"
+        why = f"{budget:,} env steps / max(eval_every_env_steps {cadence:,}, {unit} {between:,})"
+    else:
+        done = math.ceil(budget / per_iteration)
+        if iterations is not None:
+            done = min(done, iterations)
+        evals = done // interval if interval else 0
+        why = (
+            f"at least {done} iteration(s) of at most {per_iteration:,} env steps / eval_interval {interval}"
+        )
+    return TrialEstimate(label, per_iteration, between, evals, why)
 
 
 def too_few_evaluations(spec: SweepSpec) -> list[str]:
@@ -122,22 +132,44 @@ def budget_overshoot(spec: SweepSpec) -> int | None:
 GPU_RATES = "env_steps_per_s_gpu"
 
 
-def measured_rate(algorithm: str, concurrent: int, gpu: bool = False) -> tuple[float, str] | None:
-    """(env steps per second of one trial, where the figure comes from), or None without one. `gpu`:
-    the figure of a trial holding a GPU share (the file's GPU section, its own machine and source)."""
+def _measured(gpu: bool = False) -> dict[str, Any] | None:
+    """The throughput file's figures (`gpu`: its GPU section, with the file's layout: its own machine,
+    source(s) and rates), or None without a readable file."""
     try:
         data = json.loads(THROUGHPUT_FILE.read_text())
     except (OSError, ValueError):
         return None
-    if gpu:  # the GPU section has the file's layout: its own machine, source(s) and rates
-        data = data.get(GPU_RATES, {})
-    rates = data.get("env_steps_per_s", {}).get(algorithm)
+    return data.get(GPU_RATES, {}) if gpu else data
+
+
+def _source(data: dict[str, Any], key: str) -> str:
+    """Where a figure comes from: one measured apart from the others names its own (`sources[key]`)."""
+    source = data.get("sources", {}).get(key, data.get("source", "?"))
+    return f"{THROUGHPUT_FILE.name}: {data.get('machine', '?')}; {source}"
+
+
+def measured_rate(algorithm: str, concurrent: int, gpu: bool = False) -> tuple[float, str] | None:
+    """(env steps per second of one trial, where the figure comes from), or None without one. `gpu`:
+    the figure of a trial holding a GPU share (the file's GPU section, its own machine and source)."""
+    data = _measured(gpu)
+    rates = (data or {}).get("env_steps_per_s", {}).get(algorithm)
     slot = "lone" if concurrent <= 1 else "side_by_side"
     if not rates or slot not in rates:
         return None
-    # A figure measured apart from the others names its own source (`sources`: "<algorithm>.<slot>").
-    source = data.get("sources", {}).get(f"{algorithm}.{slot}", data.get("source", "?"))
-    return float(rates[slot]), f"{THROUGHPUT_FILE.name}: {data.get('machine', '?')}; {source}"
+    return float(rates[slot]), _source(data, f"{algorithm}.{slot}")
+
+
+WARM_START = "warm_start_s_per_phase"
+
+
+def measured_warm_start_phase(algorithm: str) -> tuple[float, str] | None:
+    """(seconds of one planner warm-start phase, where the figure comes from), or None without one: the
+    file's `warm_start_s_per_phase` (measured on one torch thread, as `train` runs it)."""
+    data = _measured()
+    seconds = (data or {}).get(WARM_START, {}).get(algorithm)
+    if seconds is None:
+        return None
+    return float(seconds), _source(data, f"{algorithm}.{WARM_START}")
 
 
 def _uses_gpu(spec: SweepSpec) -> bool:

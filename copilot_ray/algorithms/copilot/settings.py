@@ -208,8 +208,10 @@ _PLANNER = [
         1000,
         "planner phases (Euclidean cost, no env steps) before the agent's first traversal",
         0,
-        why="~100-170 s of one core, no env steps, so that the agent's first sub-goals are not the untrained "
-        "planner's. On VALIDATION tasks (planner only, seeds 0-3, `bash benchmarks/planner_validation_probe.sh`, "
+        why="~4 min of one core on maze-point (0.20-0.24 s per phase on one torch thread, as train runs it, "
+        "with or without the other core busy: `PYTHONPATH=. .venv/bin/python benchmarks/warm_start.py "
+        "[--busy-core]`, docs/measured.md), no env steps, so that the agent's first sub-goals are not the "
+        "untrained planner's. On VALIDATION tasks (planner only, seeds 0-3, `bash benchmarks/planner_validation_probe.sh`, "
         "docs/planner_probe): collision-free plans before the agent's first step 0.75-0.92 on four-rooms and "
         "0.97-1.00 on u-maze; four-rooms seed 3 collapsed between phases 800 and 900 (0.00, see Known limits)",
     ),

@@ -18,7 +18,8 @@ the env's validation and test tasks. One `training_step`:
         trees    <- [s0, g], or curriculum.trees(tasks)   CO-PILOT: a planner phase
         traverse the trees on the env runners          one episode per sub-task, SAC updates in between
         curriculum.learn(sub-tasks)                    CO-PILOT: D_tau, tau_hat, alpha
-        stop early, keeping the batch, past an env-step evaluation point or the env-step budget
+        stop early, keeping the batch, past an env-step evaluation point or the env-step budget, or
+        where a stop was asked for (`heartbeat.request_stop`: train's Ctrl-C and SIGTERM)
     log; evaluate when due (validation and test tasks)
 
 Ending an iteration at the repetition that passes an evaluation point (`eval_every_env_steps`) keeps a
@@ -453,9 +454,11 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
     def training_step(self) -> None:
         """One iteration (module docstring): draw the tasks (or take up the unfinished batch), run their
         remaining of `repetitions` traversals with SAC updates in between, ending early, with the batch
-        kept for the next iteration, past an env-step evaluation point or the run's env-step budget; log,
+        kept for the next iteration, past an env-step evaluation point or the run's env-step budget, or
+        where a stop was asked for through `self.heartbeat` (an iteration a stop cuts short is evaluated
+        only at an env-step point: on the iterations cadence the one that finishes its batch is); log,
         evaluate when due. A curriculum plans the trees of each repetition and learns from its finished
-        sub-tasks."""
+        sub-tasks; its warm start pauses between phases on a stop (StopRequested)."""
         cfg = self.config
         curriculum = self.curriculum
         self._check_learned("at the start of the iteration", drill=True)
@@ -469,7 +472,17 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
         n_tasks = min(cfg.task_batch_size, len(idx))  # the agent's tasks: the first of the batch
         stats: dict[str, list[float]] = defaultdict(list)  # averaged over the repetitions
         timing: dict[str, float] = defaultdict(float)
+        self.heartbeat.boundary = "the end of this repetition"
+        stopped = False
         while self._batch_done < cfg.repetitions:
+            if self.heartbeat.stop_requested:
+                # A stop (train's Ctrl-C, SIGTERM) ends the iteration between repetitions, where the batch
+                # and its repetitions done are whole: a resumed run redoes nothing and takes no iteration
+                # past the bound --check gives.
+                stopped = True
+                break
+            # What the watch repeats until the traversal's first beat (not the last iteration's evaluation).
+            self.heartbeat.beat(self._traversal_progress)
             if curriculum is None:
                 trees = np.stack([self.train_starts[idx], self.train_goals[idx]], axis=1)
             else:
@@ -521,7 +534,9 @@ class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
         if q_mean is not None:
             self._log({keys.DIAG_Q_MEAN: q_mean})
         self._log({keys.TIME_PREFIX + key: value for key, value in timing.items()})
-        if self.evaluation.schedule.due(self.iteration + 1, self._env_steps()):
+        whole = not (stopped and self._batch is not None)
+        if self.evaluation.schedule.due(self.iteration + 1, self._env_steps(), whole=whole):
+            self.heartbeat.boundary = "the end of this evaluation"
             t = time.perf_counter()
             self._evaluate()
             self._log({keys.TIME_PREFIX + "eval_s": time.perf_counter() - t})

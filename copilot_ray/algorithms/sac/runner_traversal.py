@@ -122,16 +122,17 @@ class RunnerTraversal:
             if episodes:
                 records.append(subtask_records(episodes))
                 self._learn(episodes)
-            self.heartbeat.beat(
-                lambda: (
-                    f"iteration {self.iteration + 1}: repetition {self._batch_done + 1} of "
-                    f"{cfg.repetitions}, {self._env_steps():,} env steps, {self._updates_done:,} SAC updates "
-                    "this iteration"
-                )
-            )
+            self.heartbeat.beat(self._traversal_progress)
         if not records:
             raise RuntimeError("no sub-task of this repetition was traversed: every env runner failed")
         return concatenated(records)
+
+    def _traversal_progress(self) -> str:
+        """The heartbeat's line during a traversal (cheap: built at every beat)."""
+        return (
+            f"iteration {self.iteration + 1}: repetition {self._batch_done + 1} of {self.config.repetitions}, "
+            f"{self._env_steps():,} env steps, {self._updates_done:,} SAC updates this iteration"
+        )
 
     def _lose_subtasks(self, runner_id: int, count: int) -> None:
         """A runner died with `count` sub-tasks of this repetition: counted, logged, not hidden."""
