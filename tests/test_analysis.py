@@ -1803,3 +1803,29 @@ def test_a_plan_of_its_own_is_what_the_algorithm_declares():
     assert not plans_of_its_own(trial("her", zeros, zeros))
     assert plans_of_its_own(trial("retired_method", some, zeros))
     assert not plans_of_its_own(trial("retired_method", zeros, zeros))
+
+
+def test_signed_rank_test_exact_on_hand_computed_cases():
+    """Two-sided, exact: 8 positive differences give the smallest p, 2 / 2^8; 5 give 2 / 2^5 = 0.0625
+    (no difference of five pairs reaches 0.05); a zero is dropped before ranking; tied |d| take their
+    average rank and every sign pattern is enumerated (by hand below: 16 patterns of ranks 1.5, 1.5, 3,
+    4, W+ = 6: 6 of them at or above it)."""
+    from scipy.stats import wilcoxon
+
+    eight = stats.signed_rank_test(np.arange(1, 9) / 100)
+    assert (eight.p, eight.statistic, eight.w_plus, eight.n) == (pytest.approx(2 / 256), 0.0, 36.0, 8)
+    assert stats.signed_rank_test(np.arange(1, 6) / 10).p == pytest.approx(0.0625)
+    zero = stats.signed_rank_test([0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    assert (zero.n, zero.zeros, zero.p) == (5, 1, pytest.approx(0.0625))
+    tied = stats.signed_rank_test([0.1, 0.1, 0.2, -0.3])
+    assert (tied.w_plus, tied.w_minus, tied.statistic) == (6.0, 4.0, 4.0)
+    assert tied.p == pytest.approx(2 * 6 / 16) and "tied" in tied.method
+    # without ties it is scipy's exact test, whatever the signs
+    d = np.array([0.05, -0.12, 0.3, 0.07, -0.01, 0.22])
+    assert stats.signed_rank_test(d).p == pytest.approx(wilcoxon(d, method="exact").pvalue)
+    # W- = 1 + 4 = 5; subsets of ranks 1..6 summing to <= 5: {}, 1, 2, 3, 12, 4, 13, 5, 14, 23: 10 of 64
+    assert stats.signed_rank_test(d).p == pytest.approx(2 * 10 / 64)
+    assert stats.signed_rank_test([0.0, 0.0]).p == 1.0
+    assert np.isnan(stats.signed_rank_test([]).p)
+    # Holm: m = 3 tests (the NaN is none); 0.01 x 3, then max(0.03, 0.03 x 2), then max(0.06, 0.04)
+    np.testing.assert_allclose(stats.holm([0.01, 0.04, 0.03, np.nan]), [0.03, 0.06, 0.06, np.nan])
