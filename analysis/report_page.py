@@ -236,9 +236,9 @@ def final_text(final_evaluations: int | None, short: bool = False) -> str:
             "past the budget, so long iterations would buy extra env steps."
         )
     last = (
-        "its last evaluation"
+        "each seed's last evaluation"
         if final_evaluations == 1
-        else f"the mean of its last {final_evaluations} evaluations"
+        else f"the mean of each seed's last {final_evaluations} evaluations"
     )
     return (
         f"Final = {last} at or before the env-step budget (stop.env_steps, the same for every method of a "
@@ -246,7 +246,7 @@ def final_text(final_evaluations: int | None, short: bool = False) -> str:
         "counts at the cadence point it was due at (eval_every_env_steps): it runs at the end of the first "
         "iteration past its point, so the one due at the budget runs a little after it and is the "
         "evaluation at the budget; none due after it counts. A seed with fewer such evaluations has no "
-        "final (named above); a sweep without a budget: its last ones. Not the curve at the budget (the "
+        "final (named under Missing); a sweep without a budget: its last ones. Not the curve at the budget (the "
         "report's default)."
     )
 

@@ -1999,7 +1999,7 @@ def test_report_reference_final_evaluations_and_the_99_reading(tmp_path, capsys)
     assert "## Probability of improvement over each other configuration" in report
     assert "a seed of the reference configuration, K=5 (--reference)" in report
     assert "| K=5 (-) | K=3 (-) | 1.00 [95% CI 1.00, 1.00] | ahead (99%: ahead) |" in report
-    assert "Final = the mean of its last 2 evaluations at or before the env-step budget" in report
+    assert "Final = the mean of each seed's last 2 evaluations at or before the env-step budget" in report
     assert "--final-evaluations 2" in report
     # the depth page's "depth with the highest IQM" of the primary figure, from the summary's point
     iqm4, iqm5 = (stats.iqm(np.array(mean2[k])) for k in (4, 5))
@@ -2044,6 +2044,10 @@ def test_signed_rank_test_exact_on_hand_computed_cases():
     # W- = 1 + 4 = 5; subsets of ranks 1..6 summing to <= 5: {}, 1, 2, 3, 12, 4, 13, 5, 14, 23: 10 of 64
     assert stats.signed_rank_test(d).p == pytest.approx(2 * 10 / 64)
     assert stats.signed_rank_test([0.0, 0.0]).p == 1.0
+    # float noise splits neither a zero nor a tie: 0.3 - 0.1 - 0.2 is 0; 0.45 - 0.375 ties 0.525 - 0.6
+    assert abs(0.45 - 0.375) != abs(0.525 - 0.6) and 0.3 - 0.1 - 0.2 != 0  # as floats they differ
+    noisy = stats.signed_rank_test([0.3 - 0.1 - 0.2, 0.45 - 0.375, 0.525 - 0.6, 0.01])
+    assert (noisy.zeros, noisy.n, noisy.w_plus, noisy.w_minus) == (1, 3, 3.5, 2.5) and "tied" in noisy.method
     assert np.isnan(stats.signed_rank_test([]).p)
     # Holm: m = 3 tests (the NaN is none); 0.01 x 3, then max(0.03, 0.03 x 2), then max(0.06, 0.04)
     np.testing.assert_allclose(stats.holm([0.01, 0.04, 0.03, np.nan]), [0.03, 0.06, 0.06, np.nan])
