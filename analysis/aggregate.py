@@ -69,7 +69,9 @@ class CurveSummary:
 @dataclass
 class MetricSummary:
     n_seeds: int  # seeds with at least one evaluation of this metric
-    finals: np.ndarray  # each seed's success at the budget, or its last evaluation (`final_values`)
+    # each seed's final (`final_values`: its success at the budget, or the mean of its last K evaluations
+    # at or before it); NaN: a seed with fewer than K such evaluations
+    finals: np.ndarray
     final: stats.SeedSummary
     aucs: np.ndarray  # each seed's normalised area under the curve over `auc_window` (NaN: not covered)
     auc: stats.SeedSummary
@@ -83,6 +85,8 @@ class MetricSummary:
     # seeds that reached it)
     to_threshold: dict[float, tuple[float, int]]
     curve: CurveSummary | None
+    final_evaluations: int | None = None  # K of `final_values` (None: the curve at the budget)
+    seeds: list[str] = field(default_factory=list)  # each value's seed, in the order of `finals` and `aucs`
 
 
 def follows_plan(algorithm: str) -> bool | None:
@@ -134,11 +138,21 @@ class Missing:
     failed: list[Trial] = field(default_factory=list)  # FAILED / KILLED: excluded from the numbers
     running: list[Trial] = field(default_factory=list)  # included, but their values are provisional
     no_eval: list[Trial] = field(default_factory=list)  # usable runs without any evaluation metric
-    short_configs: list[tuple[str, list[str]]] = field(default_factory=list)  # (label, missing seeds)
+    # (label, missing seeds, whether another configuration has them with evaluations)
+    short_configs: list[tuple[str, list[str], bool]] = field(default_factory=list)
     single_point: list[tuple[str, str]] = field(default_factory=list)  # (label, metric)
+    # (label, seed, evaluations it has at or before the budget, K): too few for --final-evaluations K
+    short_finals: list[tuple[str, str, int, int]] = field(default_factory=list)
 
     def empty(self) -> bool:
-        return not (self.failed or self.running or self.no_eval or self.short_configs or self.single_point)
+        return not (
+            self.failed
+            or self.running
+            or self.no_eval
+            or self.short_configs
+            or self.single_point
+            or self.short_finals
+        )
 
     def lines(self) -> list[str]:
         out = []
@@ -156,8 +170,20 @@ class Missing:
             out.append(
                 f"no evaluation metrics yet ({t.status.lower()}): {t.run_name} ({t.run_id}): config {t.config_key}, seed {t.seed}"
             )
-        for label, seeds in self.short_configs:
-            out.append(f"configuration {label} lacks seeds {', '.join(seeds)} (fewer seeds than the others)")
+        for label, seeds, elsewhere in self.short_configs:
+            # "than the others" only where there are others that have them: one configuration of an
+            # interrupted sweep lacks seeds whose own runs failed or have not evaluated yet
+            why = (
+                "fewer seeds than the others"
+                if elsewhere
+                else "its runs of them ended unfinished or have no evaluation yet, as listed here"
+            )
+            out.append(f"configuration {label} lacks seeds {', '.join(seeds)} ({why})")
+        for label, seed, have, k in self.short_finals:
+            out.append(
+                f"configuration {label}, seed {seed}: {have} evaluation(s) due at or before the budget, fewer "
+                f"than --final-evaluations {k}: no final success (left out of the final's figures)"
+            )
         for label, metric in self.single_point:
             out.append(
                 f"configuration {label}: {metric} has a single evaluation - drawn as a marker, not a trend"
@@ -197,8 +223,13 @@ def method_label(trial: Trial, axes: list[str]) -> str:
 
 
 def summarise(
-    sweep: Sweep, reps: int = stats.DEFAULT_REPS, seed: int = 0
+    sweep: Sweep, reps: int = stats.DEFAULT_REPS, seed: int = 0, final_evaluations: int | None = None
 ) -> tuple[list[ConfigSummary], Missing]:
+    """Every configuration's figures over its seeds, and what is missing. `final_evaluations` K: each
+    seed's final is the mean of its last K evaluations at or before the budget (`final_values`); None:
+    its curve at the budget."""
+    if final_evaluations is not None and final_evaluations < 1:
+        raise ValueError(f"final_evaluations={final_evaluations!r} is invalid: an integer >= 1")
     axes = sweep.axes()
     missing = Missing()
     by_key = _keyed(configurations(sweep.trials), axes)
@@ -227,6 +258,8 @@ def summarise(
         for m in CURVE_METRICS
     }
     all_seeds = sorted({t.seed for t in sweep.trials}, key=natural_key)
+    # the evaluations a count is read at: those the final success is read from (`_count_at`)
+    headline = EVAL_SUCCESS if any(EVAL_SUCCESS in t.curves for t in included) else SUCCESS_PLANNED
 
     configs = []
     for key, trials in by_key.items():
@@ -235,16 +268,22 @@ def summarise(
         have = {t.seed for t in use}
         lacking = [s for s in all_seeds if s not in have]
         if lacking:
-            missing.short_configs.append((label, lacking))
+            mine = {t.run_id for t in trials}
+            elsewhere = {t.seed for t in included if t.run_id not in mine}  # other configurations'
+            missing.short_configs.append((label, lacking, any(s in elsewhere for s in lacking)))
         metrics = {}
         for m in CURVE_METRICS:
-            ms = _metric_summary(
-                [t for t in use if m in t.curves], m, grids[m], windows[m], budget, reps, seed
-            )
+            with_m = [t for t in use if m in t.curves]
+            ms = _metric_summary(with_m, m, grids[m], windows[m], budget, reps, seed, final_evaluations)
             if ms is not None:
                 metrics[m] = ms
                 if ms.curve is not None and ms.curve.single_point:
                     missing.single_point.append((label, m))
+                if m == headline and final_evaluations is not None:
+                    for t, f in zip(with_m, ms.finals, strict=True):
+                        if np.isnan(f):
+                            n = evaluations_up_to(t.curves[m][0], budget, t.eval_every)
+                            missing.short_finals.append((label, t.seed, n, final_evaluations))
         walls = [t.wall_time_s for t in use if np.isfinite(t.wall_time_s)]
         configs.append(
             ConfigSummary(
@@ -255,7 +294,10 @@ def summarise(
                 metrics=metrics,
                 wall_time_s=float(np.mean(walls)) if walls else float("nan"),
                 env_steps=_mean([t.env_steps for t in use]),
-                privilege_counts={k: _mean([_count_at(t, k, budget) for t in use]) for k in PRIVILEGE_COUNTS},
+                privilege_counts={
+                    k: _mean([_count_at(t, k, budget, headline, final_evaluations) for t in use])
+                    for k in PRIVILEGE_COUNTS
+                },
                 privileges=privileges_label(trials),
                 env=env_label(trials[0], axes),
                 method=method_label(trials[0], axes),
@@ -321,14 +363,24 @@ IMPROVEMENT_OVER = ("best", "each")
 
 
 def improvement_pairs(
-    configs: list[ConfigSummary], metric: str, over: str = "best"
+    configs: list[ConfigSummary], metric: str, over: str = "best", reference: ConfigSummary | None = None
 ) -> list[tuple[ConfigSummary, ConfigSummary]]:
-    """(CO-PILOT default, other) for each CO-PILOT default configuration with `metric`. over="best": the
-    other is the configuration of another algorithm with the highest final `metric` (IQM, or mean with
-    fewer than 5 seeds); over="each": every other configuration, CO-PILOT's own variants (an ablation)
-    included. [] without such a pair (e.g. a sweep of one algorithm)."""
+    """(X, other) pairs for P(X > other). Without `reference`, X is each CO-PILOT default configuration
+    with `metric`; over="best": the other is the configuration of another algorithm with the highest
+    final `metric` (IQM, or mean with fewer than 5 seeds); over="each": every other configuration,
+    CO-PILOT's own variants (an ablation) included. With `reference` (--reference, e.g. one depth of a
+    depth sweep, where every row is CO-PILOT), X is that configuration alone; "best": the other
+    configuration with the highest final `metric`, "each": every other one. [] without such a pair (e.g.
+    a sweep of one algorithm and no reference)."""
     if over not in IMPROVEMENT_OVER:
         raise ValueError(f"over={over!r} is invalid: use one of {IMPROVEMENT_OVER}")
+    if reference is not None:
+        if metric not in reference.metrics:
+            return []
+        others = [c for c in configs if c is not reference and metric in c.metrics]
+        if over == "each" or not others:
+            return [(reference, y) for y in others]
+        return [(reference, max(others, key=lambda c: _final_point(c, metric)))]
     defaults = [c for c in configs if c.is_copilot_default and metric in c.metrics]
     if over == "each":
         # CO-PILOT's default as it ships: a variant of it (an ablation, a privileged row) is an other.
@@ -337,14 +389,58 @@ def improvement_pairs(
     others = [c for c in configs if c.algorithm != COPILOT and metric in c.metrics]
     if not others:
         return []
-    best = max(others, key=lambda c: np.nan_to_num(c.metrics[metric].final.point, nan=-np.inf))
+    best = max(others, key=lambda c: _final_point(c, metric))
     return [(c, best) for c in defaults]
 
 
-def _metric_summary(trials, metric: str, grid: np.ndarray, window, budget: float, reps: int, seed: int):
+def _final_point(c: ConfigSummary, metric: str) -> float:
+    return float(np.nan_to_num(c.metrics[metric].final.point, nan=-np.inf))
+
+
+class UnknownConfigurationError(ValueError):
+    """A configuration named (--reference) that the report does not have, or that names several."""
+
+
+def find_configuration(configs: list[ConfigSummary], name: str) -> ConfigSummary:
+    """The configuration `name` names, as the report labels it: its label ("K=5", "algorithm=copilot,
+    variant=frozen_planner, K=5"), its config key ("tree_depth=5"), its variant's name
+    ("frozen_planner"), or some of its label's parts ("variant=frozen_planner"); the first of these rules
+    that names exactly one wins. UnknownConfigurationError, listing the labels there are, when none names
+    one, or one names several."""
+    wanted = [part.strip() for part in name.split(",") if part.strip()]
+    rules = (
+        lambda c: c.label == name,
+        lambda c: c.key == name or any(t.config_key == name for t in c.all_trials),
+        lambda c: c.all_trials[0].tags.get(VARIANT_TAG, "") == name,
+        lambda c: bool(wanted) and set(wanted) <= {p.strip() for p in c.label.split(",")},
+    )
+    labels = "; ".join(repr(c.label) for c in configs) or "(none)"
+    for rule in rules:
+        found = [c for c in configs if rule(c)]
+        if len(found) == 1:
+            return found[0]
+        if found:
+            raise UnknownConfigurationError(
+                f"{name!r} names {len(found)} configurations: "
+                + "; ".join(repr(c.label) for c in found)
+                + " (give more of the label)"
+            )
+    raise UnknownConfigurationError(f"{name!r} is no configuration here; the labels are: {labels}")
+
+
+def _metric_summary(
+    trials,
+    metric: str,
+    grid: np.ndarray,
+    window,
+    budget: float,
+    reps: int,
+    seed: int,
+    final_evaluations: int | None = None,
+):
     if not trials:
         return None
-    finals, final_steps = final_values(trials, metric, budget)
+    finals, final_steps = final_values(trials, metric, budget, final_evaluations)
     aucs = np.array([stats.normalised_auc(*t.curves[metric], *window) for t in trials])
     to_thr = {}
     for thr in THRESHOLDS:
@@ -357,10 +453,12 @@ def _metric_summary(trials, metric: str, grid: np.ndarray, window, budget: float
         aucs=aucs,
         auc=stats.summarise_seeds(aucs, reps=reps, seed=seed),
         auc_window=window,
-        final_step=float(np.mean(final_steps)),
+        final_step=_mean(final_steps),
         **_cadence(trials, metric, budget),
         to_threshold=to_thr,
         curve=_curve(trials, metric, grid, reps, seed),
+        final_evaluations=final_evaluations,
+        seeds=[t.seed for t in trials],
     )
 
 
@@ -372,9 +470,20 @@ def _grid_to(grid: np.ndarray, budget: float) -> np.ndarray:
     return np.append(kept, budget) if kept.size else grid[:1]
 
 
-def _count_at(t: Trial, key: str, budget: float) -> float:
-    """A privilege count (cumulative) at the budget: interpolated on its curve where the run went past
-    the budget, its last value otherwise."""
+def _count_at(
+    t: Trial, key: str, budget: float, metric: str = EVAL_SUCCESS, final_evaluations: int | None = None
+) -> float:
+    """A privilege count (cumulative) where the trial's final `metric` is read: at the evaluations the
+    final is a weighted mean of, with the same weights (`final_reading`), so that success and count come
+    from the same point. A count spent inside evaluations (SoRB with the map checks at each evaluation)
+    thus includes the evaluation the final is read from, and no later one. Without that curve: the count
+    interpolated at the budget where the run went past it, its last value otherwise."""
+    if key in t.curves and metric in t.curves:
+        steps, values = t.curves[metric]
+        index, weights, _ = final_reading(steps, budget, final_evaluations, t.eval_every)
+        if len(index):
+            counts = np.interp(steps[index], *t.curves[key])
+            return float(np.dot(counts, weights))
     if key in t.curves and np.isfinite(budget):
         steps, values = t.curves[key]
         if len(steps) and steps[-1] > budget:
@@ -397,28 +506,87 @@ def _capped(window: tuple[float, float], budget: float) -> tuple[float, float]:
     return (start, end) if np.isfinite(end) and end > start else (np.nan, np.nan)
 
 
-def final_values(trials: list[Trial], metric: str, budget: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each seed's final success and the env step it is read at: its curve at the env-step budget,
-    linear between the evaluations on either side; a seed whose evaluations end before the budget (still
-    running) gives its last one, one whose evaluations all come after it its first; a sweep without a
-    budget: the last evaluation.
+def final_values(
+    trials: list[Trial], metric: str, budget: float, final_evaluations: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each seed's final success and the env step it is read at.
 
-    Why not simply the last evaluation: a trial stops at the end of the first iteration past the
-    budget, so a method with long iterations (CO-PILOT's are ~16k env steps) would be scored after up
+    By default (`final_evaluations` None) its curve at the env-step budget, linear between the
+    evaluations on either side; a seed whose evaluations end before the budget (still running) gives its
+    last one, one whose evaluations all come after it its first; a sweep without a budget: the last
+    evaluation. Why not simply the last evaluation: a trial stops at the end of the first iteration past
+    the budget, so a method with long iterations (CO-PILOT's are ~16k env steps) would be scored after up
     to an iteration more experience than one with short iterations.
+
+    With `final_evaluations` K (a rule fixed in advance, e.g. docs/depth_k): the mean of the seed's last
+    K evaluations at or before the budget (`evaluations_up_to`: an evaluation counts at the cadence point
+    it was due at), read at the last of them; a seed with fewer than K there has none (NaN, NaN). See
+    `final_reading`.
     """
-    read = [value_at(t.curves[metric], budget) for t in trials]
+    read = [value_at(t.curves[metric], budget, final_evaluations, t.eval_every) for t in trials]
     return np.array([v for v, _ in read]), np.array([at for _, at in read])
 
 
-def value_at(curve: tuple[np.ndarray, np.ndarray], budget: float) -> tuple[float, float]:
-    """A curve's value at the budget and the env step it is read at (`final_values`' rule); (NaN, NaN)
-    for an empty curve."""
-    steps, values = curve
+def final_reading(
+    steps: np.ndarray, budget: float, final_evaluations: int | None = None, every: float = float("nan")
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Which evaluations a curve's final is read from: (their indices into `steps`, sorted; weights
+    summing to 1; the env step it is read at). `final_values`' rule: at the budget, the one or two
+    evaluations on either side with linear weights; with K, the last K at or before it
+    (`evaluations_up_to`, on the cadence `every`), 1/K each. Empty (and NaN) where there is none."""
+    steps = np.asarray(steps, dtype=np.float64)
+    none = (np.zeros(0, dtype=np.int64), np.zeros(0), float("nan"))
     if not len(steps):
-        return float("nan"), float("nan")
+        return none
+    if final_evaluations is not None:
+        upto = evaluations_up_to(steps, budget, every)
+        if upto < final_evaluations:
+            return none
+        index = np.arange(upto - final_evaluations, upto)
+        return index, np.full(final_evaluations, 1.0 / final_evaluations), float(steps[upto - 1])
     at = float(np.clip(budget, steps[0], steps[-1])) if np.isfinite(budget) else float(steps[-1])
-    return float(np.interp(at, steps, values)), at
+    j = int(np.searchsorted(steps, at, side="left"))  # the first evaluation at or after it
+    if steps[j] == at or j == 0:
+        return np.array([j]), np.array([1.0]), at
+    w = (at - steps[j - 1]) / (steps[j] - steps[j - 1])
+    return np.array([j - 1, j]), np.array([1.0 - w, w]), at
+
+
+def evaluations_up_to(steps: np.ndarray, budget: float, every: float = float("nan")) -> int:
+    """How many of a curve's evaluations are at or before the budget (all of them without one). With an
+    env-step cadence `every` (`Trial.eval_every`), an evaluation counts at the cadence point it was due
+    at, floor(env steps / every) x every: an evaluation runs at the end of the first iteration past its
+    point, so the one due at a 200k budget runs a little after it (the privilege-matched runs': 200,010
+    to 202,027 env steps) and is the evaluation "at 200k"; without a cadence, at its own env step."""
+    steps = np.asarray(steps, dtype=np.float64)
+    if not np.isfinite(budget):
+        return len(steps)
+    due = np.floor(steps / every) * every if np.isfinite(every) and every > 0 else steps
+    return int((due <= budget).sum())
+
+
+def value_at(
+    curve: tuple[np.ndarray, np.ndarray],
+    budget: float,
+    final_evaluations: int | None = None,
+    every: float = float("nan"),
+) -> tuple[float, float]:
+    """A curve's final and the env step it is read at (`final_values`' rule); (NaN, NaN) for an empty
+    curve, or with `final_evaluations` K one with fewer than K evaluations at or before the budget."""
+    steps, values = curve
+    index, weights, at = final_reading(steps, budget, final_evaluations, every)
+    if not len(index):
+        return float("nan"), float("nan")
+    return float(np.dot(np.asarray(values, dtype=np.float64)[index], weights)), at
+
+
+def final_words(final_evaluations: int | None) -> str:
+    """What "final" means on the page, in a few words (a figure's axis, a table's note)."""
+    if final_evaluations is None:
+        return "at the env-step budget"
+    if final_evaluations == 1:
+        return "the last evaluation due at or before the budget"
+    return f"mean of the last {final_evaluations} evaluations due at or before the budget"
 
 
 def _cadence(trials: list[Trial], metric: str, budget: float) -> dict[str, float]:

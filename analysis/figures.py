@@ -33,7 +33,7 @@ from copilot_ray.keys import (  # noqa: E402
 )
 
 from . import stats  # noqa: E402
-from .aggregate import ConfigSummary, CurveSummary  # noqa: E402
+from .aggregate import ConfigSummary, CurveSummary, final_words  # noqa: E402
 
 TITLES = {
     EVAL_SUCCESS: "each method's headline (CO-PILOT, SoRB, RRT* curriculum: along their plans; SAC, HER, PPO: "
@@ -259,16 +259,27 @@ BAR_FONT = 8  # the bars' tick labels
 CHECKS_LINEAR_BELOW = 1e3  # the checks axis is logarithmic above this and linear below (0: no map)
 
 
-def checks_at(c: ConfigSummary, steps: np.ndarray) -> np.ndarray | None:
-    """The collision checks a configuration had spent by each of `steps` (env steps): each seed's count
-    (`copilot/privileges/collision_checks`, cumulative) interpolated there, averaged over seeds. None when
-    none of its runs logged the count."""
-    curves = [
-        t.curves[PRIVILEGE_COLLISION_CHECKS] for t in c.trials if PRIVILEGE_COLLISION_CHECKS in t.curves
-    ]
-    if not curves:
+def checks_at(c: ConfigSummary, steps: np.ndarray, metric: str = EVAL_SUCCESS) -> np.ndarray | None:
+    """The collision checks a configuration had spent by each of `steps` (env steps), averaged over
+    seeds: each seed's count (`copilot/privileges/collision_checks`, cumulative) read at its evaluations
+    of `metric` and interpolated between them as its success curve is, so that a point of success
+    against checks pairs a success with the checks spent by the same evaluations (a method that checks
+    only inside evaluations, SoRB with the map, jumps at each); outside its evaluations, the count
+    itself. None when none of its runs logged the count."""
+    per_seed = []
+    for t in c.trials:
+        if PRIVILEGE_COLLISION_CHECKS not in t.curves:
+            continue
+        counts = np.interp(steps, *t.curves[PRIVILEGE_COLLISION_CHECKS])
+        evaluated = t.curves.get(metric, (np.zeros(0), np.zeros(0)))[0]
+        if len(evaluated) > 1:
+            inside = (steps >= evaluated[0]) & (steps <= evaluated[-1])
+            at_evaluations = np.interp(evaluated, *t.curves[PRIVILEGE_COLLISION_CHECKS])
+            counts[inside] = np.interp(steps[inside], evaluated, at_evaluations)
+        per_seed.append(counts)
+    if not per_seed:
         return None
-    return np.mean([np.interp(steps, s, v) for s, v in curves], axis=0)
+    return np.mean(per_seed, axis=0)
 
 
 def success_vs_checks(
@@ -291,7 +302,7 @@ def success_vs_checks(
         m = c.metrics.get(metric)
         if m is None or m.curve is None:
             continue
-        checks = checks_at(c, m.curve.grid)
+        checks = checks_at(c, m.curve.grid, metric)
         if checks is None:
             notes.append(
                 f"{path.name}: {c.label} not drawn: its runs did not log {PRIVILEGE_COLLISION_CHECKS}."
@@ -411,7 +422,8 @@ def final_success(
     )
     ax.set_xlim(-0.6, len(shown) - 0.4)
     ax.set_ylim(0, 1.05)
-    ax.set_ylabel("final success rate (at the env-step budget)")
+    rules = {m.final_evaluations for c in shown for name in drawn if (m := c.metrics.get(name))}
+    ax.set_ylabel(f"final success rate ({final_words(rules.pop() if len(rules) == 1 else None)})")
     ax.set_xlabel(axis_name)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)

@@ -41,7 +41,7 @@ from copilot_ray.keys import (
     PARENT_TAG,
     PATH_SUCCESS,
     PATHS_PREFIX,
-    PRIVILEGE_COLLISION_CHECKS,
+    PRIVILEGE_COUNTS,
     REPORT_ARTIFACT,
     RESOLVED_SPEC_ARTIFACT,
     ROLE_SWEEP,
@@ -72,6 +72,8 @@ ENV_CONFIG_PREFIX = "env.config."
 SWEEP_AXIS = "sweep"
 PARENT_AXIS = "sweep run"
 PARAM_AXIS_PREFIX = "param:"
+# The env-step evaluation cadence's setting (`Trial.eval_every`).
+EVAL_EVERY_PARAM = "eval_every_env_steps"
 # Params that differ from run to run of one configuration (never part of its identity).
 PER_RUN_PARAMS = (SEED_PARAM, "checkpoint_dir")
 # Statuses whose numbers enter the statistics: a RUNNING trial is a valid prefix of its curve; a FAILED or
@@ -130,6 +132,17 @@ class Trial:
             return float(self.latest[ENV_STEPS])
         ends = [steps[-1] for steps, _ in self.curves.values() if len(steps)]
         return float(max(ends)) if ends else float("nan")
+
+    @property
+    def eval_every(self) -> float:
+        """Its env-step evaluation cadence (the setting `EVAL_EVERY_PARAM`): an evaluation runs at the end
+        of the first iteration past each multiple of it. NaN: none logged (an iterations cadence, older
+        runs)."""
+        try:
+            every = float(self.params.get(EVAL_EVERY_PARAM, "nan"))
+        except ValueError:
+            return float("nan")
+        return every if every > 0 else float("nan")
 
     @property
     def usable(self) -> bool:
@@ -328,6 +341,60 @@ def _client(uri: str):
     return mlflow.MlflowClient(tracking_uri=uri)
 
 
+def moved_artifacts(tracking_uri: str, run_id: str, artifact_uri: str) -> Path | None:
+    """Where a run's artifacts are when its SQLite store was moved with them: a carried archive
+    (`copilot_ray.carry`) unpacked on another machine keeps the store and the artifacts side by side,
+    but the store still names the artifacts by the absolute paths of the machine that ran it. Then the
+    longest tail of that path (from the run's own folder up) that exists beside the store's file, or one
+    folder above it, is where they are. None: the named path exists, the store is not a SQLite file, the
+    artifacts are not local files, or no tail from the run's folder on exists there."""
+    from urllib.parse import unquote, urlparse
+
+    if not tracking_uri.startswith("sqlite:///"):
+        return None
+    parsed = urlparse(artifact_uri)
+    if parsed.scheme not in ("file", ""):
+        return None
+    named = Path(unquote(parsed.path))
+    if named.exists() or run_id not in named.parts:
+        return None
+    parts = named.parts[1:] if named.is_absolute() else named.parts
+    last = parts.index(run_id)  # a tail must keep the run's own folder
+    db = Path(tracking_uri[len("sqlite:///") :]).resolve()
+    for base in (db.parent, db.parent.parent):
+        for i in range(last + 1):
+            candidate = base.joinpath(*parts[i:])
+            if candidate.is_dir():
+                return candidate
+    return None
+
+
+class RunArtifacts:
+    """A run's artifacts: through the tracking store, or from where a moved store's artifacts are
+    (`moved_artifacts`); `list` and `download` as MLflow's client has them."""
+
+    def __init__(self, tracking_uri: str, run_id: str, artifact_uri: str | None = None, client=None):
+        self.client = client or _client(tracking_uri)
+        self.run_id = run_id
+        if artifact_uri is None:
+            artifact_uri = self.client.get_run(run_id).info.artifact_uri
+        self.moved = moved_artifacts(tracking_uri, run_id, artifact_uri or "")
+
+    def list(self, path: str | None = None) -> list:
+        if self.moved is not None:
+            from mlflow.store.artifact.local_artifact_repo import LocalArtifactRepository
+
+            return LocalArtifactRepository(str(self.moved)).list_artifacts(path)
+        return self.client.list_artifacts(self.run_id, path)
+
+    def download(self, path: str, dst: str) -> str:
+        if self.moved is not None:
+            from mlflow.store.artifact.local_artifact_repo import LocalArtifactRepository
+
+            return LocalArtifactRepository(str(self.moved)).download_artifacts(path, dst)
+        return self.client.download_artifacts(self.run_id, path, dst)
+
+
 def _all_runs(client, experiment_id: str, filter_string: str = "") -> list:
     runs, token = [], None
     while True:
@@ -476,7 +543,7 @@ def spec_artifacts(tracking_uri: str, run_id: str) -> list[str]:
     """The spec files a sweep (parent) run holds: `spec.resolved.yaml` (what ran) and `spec.yaml`
     (what was given); [] when there are none or the artifact store cannot be read."""
     try:
-        names = {f.path for f in _client(tracking_uri).list_artifacts(run_id)}
+        names = {f.path for f in RunArtifacts(tracking_uri, run_id).list()}
     except Exception:  # provenance must not cost the report
         return []
     return [n for n in (RESOLVED_SPEC_ARTIFACT, SPEC_ARTIFACT) if n in names]
@@ -497,19 +564,17 @@ def _trial(client, run, tasks: str = TEST, budgets: dict[str, float] | None = No
         budget=(budgets or {}).get(tags.get(PARENT_TAG, ""), float("nan")),
     )
     prefixes = (*DIAGNOSTIC_PREFIXES, PATHS_PREFIX, *((VALIDATION_PREFIX,) if tasks == VALIDATION else ()))
-    # The collision checks too: success against the checks spent (the privilege-matched comparison).
-    wanted = {*CURVE_METRICS, PRIVILEGE_COLLISION_CHECKS} | {
-        k for k in run.data.metrics if k.startswith(prefixes)
-    }
+    # The privilege counts too: success against the checks spent (the privilege-matched comparison), and
+    # each count read where the final success is read (`aggregate._count_at`).
+    wanted = {*CURVE_METRICS, *PRIVILEGE_COUNTS} | {k for k in run.data.metrics if k.startswith(prefixes)}
     for key in sorted(wanted):
         if key in run.data.metrics:  # the latest value is present iff a history exists: saves a query
             trial.curves[key] = metric_curve(client, run.info.run_id, key)
     trial.curves = fresh_only(trial.curves, trial.curves.get(EVAL_FRESH))  # loaded above: under copilot/eval/
     trial.wall_time_s = float(run.data.metrics.get(TIME_TOTAL_S, float("nan")))
     try:
-        trial.tree_artifacts = sorted(
-            f.path for f in client.list_artifacts(run.info.run_id, TREES_DIR) if f.path.endswith(".npz")
-        )
+        artifacts = RunArtifacts(str(client.tracking_uri), run.info.run_id, run.info.artifact_uri, client)
+        trial.tree_artifacts = sorted(f.path for f in artifacts.list(TREES_DIR) if f.path.endswith(".npz"))
     except Exception:  # an unreachable artifact store must not cost the whole report its tables
         trial.tree_artifacts = []
     if tasks == VALIDATION:
@@ -605,11 +670,11 @@ class TreeSnapshot:
 
 def load_tree_snapshots(tracking_uri: str, run_id: str, paths: list[str]) -> list[TreeSnapshot]:
     """Download only the named npz artifacts (a long run has one per evaluation) and parse them."""
-    client = _client(tracking_uri)
+    artifacts = RunArtifacts(tracking_uri, run_id)
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         for path in paths:
-            local = client.download_artifacts(run_id, path, tmp)
+            local = artifacts.download(path, tmp)
             with np.load(local, allow_pickle=False) as z:
                 out.append(
                     TreeSnapshot(

@@ -24,7 +24,10 @@ a sweep's folder under `results/`, as `results/depth_k/mlflow.db`; else `results
   summary.csv, summary.md    per-configuration tables: the headline (seeds, privileges and their counts,
                              env steps, final test success, success AUC) and the details (planned /
                              direct, steps to thresholds, wall time)
-  improvement.csv            P(CO-PILOT's default beats the best other method), when there is one
+  improvement.csv            P(CO-PILOT's default, or the --reference configuration, beats the best
+                             other or each other one), with the readings of its 95 % and 99 % CIs
+  paired.csv                 with --paired: per-seed differences, the exact Wilcoxon signed-rank test
+                             and Holm's adjusted p of the same pairs, seed for seed
   metrics.csv.gz             every run's copilot/*, paths/* and env-step metrics (run, config, seed,
                              metric, env steps, value)
   planners_paths.png, planners.csv, planners.md
@@ -48,7 +51,8 @@ Tracking store: --tracking-uri, else $MLFLOW_TRACKING_URI, else an existing ./ml
 ./results/*/mlflow.db that holds the experiment (see `load.resolve_tracking_uri`).
 
 Exit status: 0 written (possibly with missing runs listed), 1 written but logging to MLflow failed,
-2 bad input (no store, unknown experiment, no child runs, unknown parent run).
+2 bad input (no store, unknown experiment, no child runs, unknown parent run, a flag's bad value, an
+unknown --reference).
 """
 
 from __future__ import annotations
@@ -75,7 +79,16 @@ from copilot_ray.keys import (
 )
 
 from . import defaults, figures, paths, report_page, run_figures, stats, tables
-from .aggregate import IMPROVEMENT_OVER, ConfigSummary, Missing, headline_metric, privileges_label, summarise
+from .aggregate import (
+    IMPROVEMENT_OVER,
+    ConfigSummary,
+    Missing,
+    UnknownConfigurationError,
+    find_configuration,
+    headline_metric,
+    privileges_label,
+    summarise,
+)
 from .export import METRICS_CSV, write_metrics_csv
 from .load import (
     AUTO,
@@ -115,6 +128,7 @@ OWNED = (
     "planners.csv",
     "planners.md",
     "improvement.csv",
+    "paired.csv",
     METRICS_CSV,
 )
 
@@ -167,6 +181,30 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="whom CO-PILOT's default is held against in the probability of improvement: the best other "
         "method (default), or each other configuration, its own variants included (an ablation's rows)",
     )
+    p.add_argument(
+        "--reference",
+        metavar="CONFIG",
+        help="whom the probability of improvement (and --paired) is computed FROM, instead of CO-PILOT's "
+        "default: a configuration as the report labels it ('K=5'), its config key ('tree_depth=5'), its "
+        "variant's name, or parts of its label ('variant=frozen_planner'); e.g. --reference tree_depth=5 "
+        "--improvement-over each gives P(K=5 > K=j) for every j. An unknown one exits 2 listing the labels",
+    )
+    p.add_argument(
+        "--final-evaluations",
+        type=int,
+        metavar="K",
+        help="each seed's final = the mean of its last K evaluations at or before the env-step budget, each "
+        "counted at the cadence point it was due at (the one due at the budget runs just after it); a seed "
+        "with fewer has none. Default: its curve at the budget, linear between the evaluations on either "
+        "side",
+    )
+    p.add_argument(
+        "--paired",
+        action="store_true",
+        help="also the paired comparison, seed for seed (paired.csv): for each pair the probability of "
+        "improvement compares, the per-seed differences of final success and of its AUC over the seeds "
+        "both have, the exact two-sided Wilcoxon signed-rank test, and Holm's correction over them all",
+    )
     p.add_argument("--task", type=int, default=0, help="test task index for the sub-goal tree figure")
     p.add_argument("--stages", type=int, default=3, help="training stages (columns) in the tree figure")
     p.add_argument(
@@ -190,6 +228,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     if args.bootstrap_reps is not None and args.bootstrap_reps < stats.MC_REPS:
         p.error(
             f"--bootstrap-reps {args.bootstrap_reps} is invalid: at least {stats.MC_REPS:,} (or leave it out: exact)"
+        )
+    if args.final_evaluations is not None and args.final_evaluations < 1:
+        p.error(
+            f"--final-evaluations {args.final_evaluations} is invalid: the number of last evaluations "
+            "averaged, an integer >= 1"
         )
     if args.target is not None and not 0 < args.target <= 1:
         p.error(f"--target: {args.target:g} is not a success rate in (0, 1]")
@@ -236,13 +279,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
 
+    configs, missing = summarise(
+        sweep, reps=args.bootstrap_reps, seed=args.seed, final_evaluations=args.final_evaluations
+    )
+    try:
+        reference = find_configuration(configs, args.reference) if args.reference is not None else None
+    except UnknownConfigurationError as e:  # before --out is touched: an earlier report stays whole
+        print(f"error: --reference {args.reference}: {e}", file=sys.stderr)
+        return 2
+
     out = args.out or default_out(args.experiment, uri)
     out.mkdir(parents=True, exist_ok=True)
     for pattern in OWNED:  # stale figures of an earlier report must not be logged as current
         for f in out.glob(pattern):
             f.unlink()
-
-    configs, missing = summarise(sweep, reps=args.bootstrap_reps, seed=args.seed)
     _print_status(sweep, configs, missing)
     seed_notes = seeds_wanted(sweep, configs, args)
     for line in seed_notes:
@@ -267,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
     tree_figs, snapshots = _tree_figures(sweep, configs, args, out, notes)
     diag_figs = _diagnostic_figures(configs, snapshots, out, notes, left_out, tasks)
 
-    frame, improvement = _write_tables(sweep, configs, args, out, notes)
+    frame, improvement, paired = _write_tables(sweep, configs, args, out, notes, reference)
 
     log_to = None if args.no_log else sweep.parent_run_id
     if not args.no_log and sweep.parent_run_id is None:
@@ -278,7 +328,9 @@ def main(argv: list[str] | None = None) -> int:
     for line in provenance:
         if line.startswith("WARNING"):
             print(line, file=sys.stderr)
-    below = _blocks_below_summary(configs, tasks, improvement, several, args, planner_table, planner_title)
+    below = _blocks_below_summary(
+        configs, tasks, improvement, several, args, planner_table, planner_title, reference, paired
+    )
     doc = report_page.document(
         sweep,
         configs,
@@ -293,6 +345,7 @@ def main(argv: list[str] | None = None) -> int:
         below,
         tasks_why,
         args.bootstrap_reps,
+        args.final_evaluations,
     )
     (out / "report.md").write_text(report_page.to_markdown(doc))
     (out / "report.html").write_text(report_page.to_html(doc, sweep.experiment))
@@ -308,36 +361,53 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _write_tables(sweep: Sweep, configs: list[ConfigSummary], args, out: Path, notes: list[str]):
-    """summary.csv / .md, improvement.csv and metrics.csv.gz; (the summary frame, the improvement frame)."""
+def _write_tables(
+    sweep: Sweep, configs: list[ConfigSummary], args, out: Path, notes: list[str], reference=None
+):
+    """summary.csv / .md, improvement.csv, paired.csv (--paired) and metrics.csv.gz; (the summary
+    frame, the improvement frame, the paired frame or None)."""
     frame = tables.summary_frame(configs, sweep.tasks)
     tables.write_csv(frame, out / "summary.csv")
     (out / "summary.md").write_text(tables.markdown(frame))
     improvement = tables.improvement_frame(
-        configs, reps=args.bootstrap_reps, seed=args.seed, over=args.improvement_over
+        configs, reps=args.bootstrap_reps, seed=args.seed, over=args.improvement_over, reference=reference
     )
     if not improvement.empty:
         tables.write_csv(improvement, out / "improvement.csv")
+    paired = None
+    if args.paired:
+        paired = tables.paired_frame(configs, over=args.improvement_over, reference=reference)
+        if not paired.empty:
+            tables.write_csv(paired, out / "paired.csv")
     labels = {t.run_id: c.label for c in configs for t in c.all_trials}
     try:
         write_metrics_csv(sweep, labels, out)
     except Exception as e:  # an unreadable history must not cost the report its tables and figures
         notes.append(f"{METRICS_CSV} not written: {type(e).__name__}: {e}")
-    return frame, improvement
+    return frame, improvement, paired
 
 
 def _blocks_below_summary(
-    configs, tasks: str, improvement, several: bool, args, planner_table, planner_title
+    configs,
+    tasks: str,
+    improvement,
+    several: bool,
+    args,
+    planner_table,
+    planner_title,
+    reference=None,
+    paired=None,
 ) -> list[tuple]:
-    """Right under the summary tables: the probability of improvement (not for a look at one seed each,
-    which compares nothing), the target's verdict, the settings against this checkout's defaults, the
-    planners' table."""
+    """Right under the summary tables: the probability of improvement and the paired comparison (not
+    for a look at one seed each, which compares nothing), the target's verdict, the settings against
+    this checkout's defaults, the planners' table."""
     below = (
         []
         if one_seed_each(configs)
         else report_page.improvement_blocks(
-            configs, improvement, several, args.improvement_over, args.bootstrap_reps
+            configs, improvement, several, args.improvement_over, args.bootstrap_reps, reference
         )
+        + report_page.paired_blocks(paired, reference)
     )
     below += report_page.target_blocks(configs, tasks, args)
     settings_table = defaults.defaults_table(configs)
@@ -505,7 +575,10 @@ def seeds_wanted(sweep: Sweep, configs: list[ConfigSummary], args) -> list[str]:
         join_other_stores(validation, args)
     except AnalysisError:
         return out
-    on_validation = {c.key: c for c in summarise(validation, reps=10, seed=args.seed)[0]}
+    on_validation = {
+        c.key: c
+        for c in summarise(validation, reps=10, seed=args.seed, final_evaluations=args.final_evaluations)[0]
+    }
     metric = headline_metric(configs)
     for c in short:
         v = on_validation.get(c.key)

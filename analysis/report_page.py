@@ -102,33 +102,87 @@ def _spec_lines(sweep: Sweep) -> list[str]:
 
 
 def improvement_blocks(
-    configs, frame, several: bool, over: str = "best", reps: int | None = None
+    configs, frame, several: bool, over: str = "best", reps: int | None = None, reference=None
 ) -> list[tuple]:
-    """Under the headline table: P(CO-PILOT's default beats the best other method, or each other row)."""
-    if not several or not any(m in c.metrics for c in configs for m in SUCCESS_METRICS):
-        return []  # one method, or planners alone (no success of an agent to compare)
-    whom = (
-        "the best other method (highest final success)"
-        if over == "best"
-        else "each other configuration (its own variants, an ablation's rows, included)"
-    )
+    """Under the headline table: P(X beats the best other method, or each other row), X being CO-PILOT's
+    default or the --reference configuration."""
+    if not (several or reference is not None) or not any(
+        m in c.metrics for c in configs for m in SUCCESS_METRICS
+    ):
+        return []  # one method and no reference, or planners alone (no success of an agent to compare)
+    if reference is None:
+        whom = (
+            "the best other method (highest final success)"
+            if over == "best"
+            else "each other configuration (its own variants, an ablation's rows, included)"
+        )
+        who = (
+            "a seed of CO-PILOT's default configuration (algorithm copilot, no preset; a variant such as "
+            "the privileged after_failure restart is a row of its own, its privileges beside it)"
+        )
+        mine = "CO-PILOT's"
+    else:
+        whom = (
+            "the best other configuration (highest final success)"
+            if over == "best"
+            else "each other configuration"
+        )
+        who = f"a seed of the reference configuration, {reference.label} (--reference)"
+        mine = "the reference's"
     head = ("h2", f"Probability of improvement over {whom.split(' (')[0]}")
     why = (
-        "P(X > Y) (Agarwal et al. 2021): the chance that a seed of CO-PILOT's default configuration "
-        "(algorithm copilot, no preset; a variant such as the privileged after_failure restart is a row of "
-        f"its own, its privileges beside it) scores higher than a seed of {whom}, "
+        f"P(X > Y) (Agarwal et al. 2021): the chance that {who} scores higher than a seed of {whom}, "
         "ties counting 1/2, from the seeds' final success and success AUC; 95% percentile "
         "bootstrap CI with the seeds of both resampled independently ("
         + bootstrap_words(reps, pairs=True)
         + f"). Only with >= {stats.MIN_SEEDS_FOR_CI} "
         "seeds on each side. The reading holds the CI against 0.5: ahead (wholly above), behind (wholly "
         "below), not separated (it holds 0.5); with 5 seeds a side and no ties the CI clears 0.5 only from "
-        "P >= 0.84. The last column says whether CO-PILOT's CI of final success lies wholly above "
-        "the other method's (a CI on both sides needs as many seeds)."
+        "P >= 0.84. Beside each reading, in brackets, the same reading of the 99% CI (improvement.csv: "
+        "the _99 columns), a Bonferroni check where several comparisons decide together (five 99% "
+        f"intervals hold all at once with about 95% confidence or more). The last column says whether {mine} CI of final success "
+        "lies wholly above the other's (a CI on both sides needs as many seeds)."
     )
     if frame.empty:
-        return [head, ("p", why), ("p", "No CO-PILOT default configuration or no other method with success.")]
-    return [head, ("p", why), ("table", tables.improvement_table(frame))]
+        none = (
+            "No CO-PILOT default configuration or no other method with success."
+            if reference is None
+            else f"No other configuration with success beside {reference.label}."
+        )
+        return [head, ("p", why), ("p", none)]
+    return [head, ("p", why), ("table", tables.improvement_table(frame, reference is not None))]
+
+
+def paired_blocks(frame, reference=None) -> list[tuple]:
+    """--paired: the per-seed differences, the exact Wilcoxon signed-rank test and Holm's adjusted p."""
+    if frame is None:
+        return []
+    head = ("h2", "Paired comparison, seed for seed (--paired)")
+    who = reference.label if reference is not None else "CO-PILOT's default"
+    if frame.empty:
+        return [head, ("p", f"No pair to compare: no configuration beside {who} with success.")]
+    smallest = sorted({int(n) for n in frame["n_pairs"] if n > 0})
+    floor = "; ".join(f"{n} pairs: {2 / 2**n:.4f}" for n in smallest)
+    why = (
+        f"The pairs of the probability of improvement above, seed for seed: each seed both configurations "
+        f"ran, the difference {who} minus the other, of final success (the primary figure) and of its "
+        "AUC (the secondary). The exact two-sided Wilcoxon signed-rank test over those differences "
+        "(scipy.stats.wilcoxon, method='exact'): differences of exactly 0 are dropped before ranking "
+        "(Wilcoxon's treatment; the pairs column says how many), tied |differences| share their average "
+        "rank, and then p is enumerated over all 2^n sign patterns of those ranks (scipy's exact table "
+        "assumes no ties); every difference 0: p = 1. W = the smaller of the rank sums of positive (W+) and "
+        "negative (W-) differences. Holm's step-down correction over every test in this table (one family: "
+        "the comparisons against the reference, both figures); the reading on the adjusted p at alpha "
+        f"{stats.PAIRED_ALPHA:g}: ahead (the reference higher), behind, not separated. The smallest "
+        f"two-sided p n pairs can give, 2 / 2^n ({floor})"
+        + (
+            f": with {smallest[0]} pairs no difference can reach alpha {stats.PAIRED_ALPHA:g}"
+            if smallest and 2 / 2 ** smallest[0] >= stats.PAIRED_ALPHA
+            else ""
+        )
+        + ". Seeds that only one side has are left out (paired.csv: unpaired_seeds)."
+    )
+    return [head, ("p", why), ("table", tables.paired_table(frame))]
 
 
 def target_blocks(configs: list[ConfigSummary], tasks: str, args) -> list[tuple]:
@@ -153,7 +207,7 @@ TARGET_TEXT = (
 DIAGNOSTICS_TEXT = (
     "The diagnostics figure's curves in numbers, for the configurations that logged sub-goal tree "
     "diagnostics: each seed's value at the env-step budget (linear between the rows on either side, as "
-    f"final success): IQM [95% CI] from {stats.MIN_SEEDS_FOR_CI} seeds on, else the mean (the seeds' "
+    f"final success is by default): IQM [95% CI] from {stats.MIN_SEEDS_FOR_CI} seeds on, else the mean (the seeds' "
     "range, n). The first three are evaluations on the report's tasks: the share of plans without a "
     "collision, of goals the agent reached along its plan with collisions allowed, and the agent's "
     "success without a plan. The rest are the training traversals' (the iteration's sub-tasks; K is the "
@@ -163,7 +217,47 @@ DIAGNOSTICS_TEXT = (
 )
 
 
-def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str, reps: int | None = None) -> str:
+def final_text(final_evaluations: int | None, short: bool = False) -> str:
+    """How the page's "final" was computed, in words (the comparison's rule, or --final-evaluations K);
+    `short`: one clause, for a look at one seed each."""
+    if short:
+        if final_evaluations is None:
+            return "Final = the success at the env-step budget, linear between the evaluations on either side"
+        return (
+            f"Final = the mean of the last {final_evaluations} evaluations due at or before the env-step budget "
+            f"(--final-evaluations {final_evaluations})"
+        )
+    if final_evaluations is None:
+        return (
+            "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method "
+            "of a comparison), linear between its evaluations on either side; a seed whose evaluations end "
+            "before it (still running) or a sweep without one: its last evaluation; one first evaluated "
+            "after it: its first. Not simply the last evaluation: a trial stops at the first iteration end "
+            "past the budget, so long iterations would buy extra env steps."
+        )
+    last = (
+        "each seed's last evaluation"
+        if final_evaluations == 1
+        else f"the mean of each seed's last {final_evaluations} evaluations"
+    )
+    return (
+        f"Final = {last} at or before the env-step budget (stop.env_steps, the same for every method of a "
+        f"comparison; --final-evaluations {final_evaluations}), read at the last of them. An evaluation "
+        "counts at the cadence point it was due at (eval_every_env_steps): it runs at the end of the first "
+        "iteration past its point, so the one due at the budget runs a little after it and is the "
+        "evaluation at the budget; none due after it counts. A seed with fewer such evaluations has no "
+        "final (named under Missing); a sweep without a budget: its last ones. Not the curve at the budget (the "
+        "report's default)."
+    )
+
+
+def summary_text(
+    configs: list[ConfigSummary],
+    tasks: str,
+    tasks_why: str,
+    reps: int | None = None,
+    final_evaluations: int | None = None,
+) -> str:
     windows = []
     for metric, short in tables.SHORT.items():
         m = next((c.metrics[metric] for c in configs if metric in c.metrics), None)
@@ -173,20 +267,15 @@ def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str, reps:
     which = f"Validation tasks only ({tasks_why}). " if tasks == VALIDATION else "Test tasks only. "
     if one_seed_each(configs):
         return (
-            "One seed per configuration: a look at how the runs went, not a comparison (no spread, no "
-            f"confidence interval, no probability of improvement: a comparison runs {stats.MIN_SEEDS_FOR_CI} "
-            f"seeds or more, as sweeps/fair_maze.yaml does). {which}Final = the success at the env-step "
-            "budget, linear between the evaluations on either side; AUC = the area under the success "
-            "curve over the env steps " + (", ".join(windows) or "none") + ", divided by their length; "
-            "steps to a threshold = the first evaluation at or above it."
+            one_seed_words(configs)
+            + f" {which}"
+            + final_text(final_evaluations, short=True)
+            + "; AUC = the area under the success curve over the env steps "
+            + (", ".join(windows) or "none")
+            + ", divided by their length; steps to a threshold = the first evaluation at or above it."
         )
     return (
-        which
-        + "Final = each seed's success at the env-step budget (stop.env_steps, the same for every method "
-        "of a comparison), linear between its evaluations on either side; a seed whose evaluations end "
-        "before it (still running) or a sweep without one: its last evaluation; one first evaluated "
-        "after it: its first. Not simply the last evaluation: a trial stops at the first iteration end "
-        "past the budget, so long iterations would buy extra env steps. Rows that only repeat an earlier "
+        which + final_text(final_evaluations) + " Rows that only repeat an earlier "
         "evaluation are left out everywhere. AUC = area under each seed's success curve, linear between "
         "evaluations, over one env-step window for every configuration (from the latest first evaluation "
         "to the earliest last evaluation among the finished seeds, and at the budget at the latest: no "
@@ -204,9 +293,54 @@ def summary_text(configs: list[ConfigSummary], tasks: str, tasks_why: str, reps:
         "'not reached' means that figure is infinite; (k/n) = seeds that reached it. Env steps: mean over "
         "seeds at the last result. Privileges: from the runs' tags ('-': runs older than the tag): "
         + "; ".join(f"{k} = {v}" for k, v in DESCRIPTIONS.items())
-        + "; collision checks, resets, map queries: cumulative counts at the last result, mean over seeds "
-        "('-': not logged). FAILED/KILLED runs are excluded; RUNNING runs count with what they have so far. "
-        "A configuration is one algorithm, config key, env and env config: seeds are pooled only within it."
+        + "; collision checks, resets, map queries: cumulative counts, mean over seeds ('-': not logged), "
+        "each seed's read where its final success is read (at the same evaluations, weighted alike: a "
+        "method that checks only inside evaluations counts those of the evaluations its final comes "
+        "from, and no later one). FAILED/KILLED runs are excluded; RUNNING runs count with what they have "
+        "so far. A configuration is one algorithm, config key, env and env config: seeds are pooled only "
+        "within it."
+    )
+
+
+def one_seed_words(configs: list[ConfigSummary]) -> str:
+    """The opening of a one-seed report: one configuration or several; a demo, or a sweep that has not
+    got further yet (some of its runs have no figures: they failed, or have not evaluated yet)."""
+    waiting = sum(len(c.all_trials) - c.n_seeds for c in configs)
+    if len(configs) == 1:
+        head = "One configuration, one seed with evaluations: a look at how the run went"
+    else:
+        head = "One seed per configuration: a look at how the runs went"
+    head += ", not a comparison (no spread, no confidence interval, no probability of improvement"
+    if waiting:
+        return (
+            head + f"). The sweep is incomplete: {waiting} more run(s) without figures yet (or unfinished), "
+            "listed under Missing; its comparison needs "
+            f"{stats.MIN_SEEDS_FOR_CI} seeds or more per configuration."
+        )
+    return head + (
+        f": a comparison runs {stats.MIN_SEEDS_FOR_CI} seeds or more, as sweeps/fair_maze.yaml does)."
+    )
+
+
+def highest_line(configs: list[ConfigSummary], tasks: str) -> str | None:
+    """Which configuration has the highest final success (the summary's point estimate: IQM from 5 seeds
+    on, else the mean), ties all named; beside a rule that reads it (docs/depth_k), not a ranking: the
+    intervals and the probability of improvement say whether it is separated from the rest."""
+    from .aggregate import headline_metric
+
+    metric = headline_metric(configs)
+    have = [c for c in configs if metric in c.metrics and np.isfinite(c.metrics[metric].final.point)]
+    if len(have) < 2:
+        return None
+    top = max(c.metrics[metric].final.point for c in have)
+    best = [c for c in have if c.metrics[metric].final.point == top]
+    what = best[0].metrics[metric].final.estimator
+    names = " and ".join(c.label for c in best)
+    return (
+        f"Highest final {tasks} success ({what}, the table's point estimate): {names}, {top:.3f}"
+        + (" (tied)" if len(best) > 1 else "")
+        + ". The highest point is not a separation: the intervals and the probability of improvement say "
+        "whether it stands apart."
     )
 
 
@@ -236,6 +370,7 @@ def document(
     below,
     tasks_why: str,
     reps: int | None = None,
+    final_evaluations: int | None = None,
 ):
     statuses: dict[str, int] = {}
     for t in sweep.trials:
@@ -268,8 +403,10 @@ def document(
         doc.append(("h2", "Left out of the figures"))
         doc.append(("ul", left_out))
     doc.append(("h2", "Summary"))
-    doc.append(("p", summary_text(configs, sweep.tasks, tasks_why, reps)))
+    doc.append(("p", summary_text(configs, sweep.tasks, tasks_why, reps, final_evaluations)))
     doc.append(("table", tables.headline_table(frame)))
+    if not one_seed_each(configs) and (top := highest_line(configs, sweep.tasks)):
+        doc.append(("p", top))
     details = tables.details_table(frame)
     if details.rows:
         doc.append(("h3", "Details by success metric"))

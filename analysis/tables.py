@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from copilot_ray.keys import (
@@ -38,6 +39,7 @@ from .aggregate import (
     headline_metric,
     improvement_pairs,
 )
+from .load import natural_key
 
 # success: what every algorithm reports (copilot/eval/success); planned / direct: where an algorithm has them
 SHORT = {EVAL_SUCCESS: "success", SUCCESS_PLANNED: "planned", SUCCESS_DIRECT: "direct"}
@@ -96,7 +98,8 @@ def _metric_columns(m: MetricSummary | None, short: str) -> dict[str, object]:
 
 
 def write_csv(frame: pd.DataFrame, path: Path) -> Path:
-    frame.to_csv(path, index=False)
+    """The frame as CSV, without its "_"-led columns (the page's own copies of figures)."""
+    frame.drop(columns=[c for c in frame.columns if str(c).startswith("_")]).to_csv(path, index=False)
     return path
 
 
@@ -288,25 +291,36 @@ def _duration(seconds: float) -> str:
 # ---------------------------------------------------------------------------------------------- P(X > Y)
 
 
+ALSO_CONFIDENCE = 0.99  # the second reading beside each P: a Bonferroni-style bound for several comparisons
+
+
 def improvement_frame(
-    configs: list[ConfigSummary], reps: int = stats.DEFAULT_REPS, seed: int = 0, over: str = "best"
+    configs: list[ConfigSummary],
+    reps: int = stats.DEFAULT_REPS,
+    seed: int = 0,
+    over: str = "best",
+    reference: ConfigSummary | None = None,
 ) -> pd.DataFrame:
-    """One row per pair of a CO-PILOT default configuration and the best other method (over="best") or
-    each other configuration (over="each"): P(CO-PILOT's beats it) on final success and on the success
-    AUC, from the seeds' scores (`stats.improvement`)."""
+    """One row per pair (`improvement_pairs`: CO-PILOT's default, or the --reference configuration,
+    against the best other or each other one): P(reference beats it) on final success and on the
+    success AUC, from the seeds' scores (`stats.improvement`), with the reading of its 95 % CI and, beside
+    it, of its 99 % CI (`_99` columns)."""
     metric = headline_metric(configs)
     rows = []
-    for x, y in improvement_pairs(configs, metric, over):
+    for x, y in improvement_pairs(configs, metric, over, reference):
         mx, my = x.metrics[metric], y.metrics[metric]
-        row: dict[str, object] = {"copilot": x.label, "other": y.label, "metric": metric}
+        row: dict[str, object] = {"reference": x.label, "other": y.label, "metric": metric}
         # a privileged CO-PILOT (after_failure restart) is paired too: its privileges stay beside it
-        row["copilot_privileges"], row["other_privileges"] = x.privileges, y.privileges
+        row["reference_privileges"], row["other_privileges"] = x.privileges, y.privileges
         for what, a, b in (("final", mx.finals, my.finals), ("auc", mx.aucs, my.aucs)):
             imp = stats.improvement(a, b, reps=reps, seed=seed)
             row[f"p_{what}"] = imp.p  # (its interval only from MIN_SEEDS_FOR_CI seeds a side: NaN below)
             row[f"p_{what}_low"], row[f"p_{what}_high"] = imp.low, imp.high
             row[f"p_{what}_text"] = imp.text()
             row[f"p_{what}_reading"] = imp.reading()
+            wide = stats.improvement(a, b, reps=reps, seed=seed, confidence=ALSO_CONFIDENCE)
+            row[f"p_{what}_low_99"], row[f"p_{what}_high_99"] = wide.low, wide.high
+            row[f"p_{what}_reading_99"] = wide.reading()
         row["final_ci_apart"] = ci_apart(mx.final, my.final)
         rows.append(row)
     return pd.DataFrame(rows)
@@ -324,32 +338,144 @@ def ci_apart(x: stats.SeedSummary, y: stats.SeedSummary) -> str:
     return f"no: they overlap ([{x.low:.3f}, {x.high:.3f}] and [{y.low:.3f}, {y.high:.3f}])"
 
 
-def improvement_table(frame: pd.DataFrame) -> Table:
+def improvement_table(frame: pd.DataFrame, reference: bool = False) -> Table:
+    """The P(X > Y) rows as the page shows them; `reference`: X was named by --reference (else it is
+    CO-PILOT's default)."""
+    who = "reference (--reference; privileges)" if reference else "CO-PILOT (default preset; privileges)"
+    apart = (
+        "final success CIs apart (the reference's above)"
+        if reference
+        else "final success CIs apart (CO-PILOT's above)"
+    )
     table = Table(
         [
-            "CO-PILOT (default preset; privileges)",
+            who,
             "other (privileges)",
             "P(final success higher)",
-            "reading (final)",
+            "reading (final; 99% CI)",
             "P(AUC higher)",
-            "reading (AUC)",
-            "final success CIs apart (CO-PILOT's above)",
+            "reading (AUC; 99% CI)",
+            apart,
         ]
     )
     for _, r in frame.iterrows():
         table.rows.append(
             [
-                f"{r['copilot']} ({r['copilot_privileges']})",
+                f"{r['reference']} ({r['reference_privileges']})",
                 f"{r['other']} ({r['other_privileges']})",
                 str(r["p_final_text"]),
-                str(r["p_final_reading"]),
+                _readings(r, "final"),
                 str(r["p_auc_text"]),
-                str(r["p_auc_reading"]),
+                _readings(r, "auc"),
                 str(r["final_ci_apart"]),
             ]
         )
     return table
 
 
+def _readings(r, what: str) -> str:
+    """The 95 % CI's reading, and the 99 % CI's beside it where there is one: "ahead (99%: not separated)"."""
+    first, wide = str(r[f"p_{what}_reading"]), str(r.get(f"p_{what}_reading_99", ""))
+    if not wide or wide.startswith("no reading"):
+        return first
+    return f"{first} (99%: {wide})"
+
+
 def improvement_markdown(frame: pd.DataFrame) -> str:
     return improvement_table(frame).markdown()
+
+
+# ---------------------------------------------------------------------------------------------- paired
+
+
+PAIRED_FIGURES = (("final", "finals"), ("auc", "aucs"))  # (name, MetricSummary field): primary, secondary
+
+
+def paired_frame(
+    configs: list[ConfigSummary], over: str = "best", reference: ConfigSummary | None = None
+) -> pd.DataFrame:
+    """--paired: for each pair the probability of improvement compares (`improvement_pairs`), on final
+    success (the primary figure) and on its AUC (the secondary), the per-seed differences reference -
+    other over the seeds both have (seed for seed), the exact two-sided Wilcoxon signed-rank test over
+    them (`stats.signed_rank_test`), and Holm's adjusted p over every test in the frame (one family: the
+    comparisons made against the reference, both figures). The reading at alpha 0.05 on the adjusted p:
+    "ahead" (the reference higher: W+ > W-), "behind", or "not separated"."""
+    metric = headline_metric(configs)
+    rows = []
+    for x, y in improvement_pairs(configs, metric, over, reference):
+        mx, my = x.metrics[metric], y.metrics[metric]
+        for what, field_name in PAIRED_FIGURES:
+            a = dict(zip(mx.seeds, getattr(mx, field_name), strict=True))
+            b = dict(zip(my.seeds, getattr(my, field_name), strict=True))
+            common = sorted(
+                (s for s in a if s in b and np.isfinite(a[s]) and np.isfinite(b[s])), key=natural_key
+            )
+            diffs = np.array([a[s] - b[s] for s in common])
+            test = stats.signed_rank_test(diffs)
+            rows.append(
+                {
+                    "reference": x.label,
+                    "other": y.label,
+                    "metric": metric,
+                    "figure": what,
+                    "n_pairs": len(common),
+                    "seeds": " ".join(str(s) for s in common),
+                    "differences": "; ".join(f"{s}: {d:+.6g}" for s, d in zip(common, diffs, strict=True)),
+                    "_differences": diffs.tolist(),  # the page rounds these, not the text above
+                    "median_difference": float(np.median(diffs)) if len(diffs) else math.nan,
+                    "zeros_dropped": test.zeros,
+                    "w_plus": test.w_plus,
+                    "w_minus": test.w_minus,
+                    "W": test.statistic,
+                    "p": test.p,
+                    "p_method": test.method,
+                    "unpaired_seeds": " ".join(str(s) for s in sorted(set(a) ^ set(b), key=natural_key)),
+                }
+            )
+    frame = pd.DataFrame(rows)
+    if frame.empty:
+        return frame
+    frame["p_holm"] = stats.holm(frame["p"].to_numpy())
+    frame["reading"] = [_paired_reading(r) for _, r in frame.iterrows()]
+    return frame
+
+
+def _paired_reading(r) -> str:
+    if r["n_pairs"] == 0:
+        return "no test: no seed in common"
+    if not np.isfinite(r["p_holm"]) or r["p_holm"] >= stats.PAIRED_ALPHA:
+        return "not separated"
+    return "ahead" if r["w_plus"] > r["w_minus"] else "behind"
+
+
+def paired_table(frame: pd.DataFrame) -> Table:
+    table = Table(
+        [
+            "reference",
+            "other",
+            "figure",
+            "per-seed difference (reference - other)",
+            "pairs (zeros dropped)",
+            "W (W+, W-)",
+            "p (exact, two-sided)",
+            "Holm-adjusted p",
+            f"reading (alpha {stats.PAIRED_ALPHA:g})",
+        ]
+    )
+    for _, r in frame.iterrows():
+        seeds = str(r["seeds"]).split()
+        diffs = "; ".join(f"{s}: {d:+.3f}" for s, d in zip(seeds, r["_differences"], strict=True))
+        table.rows.append(
+            [
+                str(r["reference"]),
+                str(r["other"]),
+                str(r["figure"]),
+                diffs or "-",
+                f"{r['n_pairs']} ({r['zeros_dropped']})",
+                "-" if not np.isfinite(r["W"]) else f"{r['W']:g} ({r['w_plus']:g}, {r['w_minus']:g})",
+                _num(r["p"], ".4f"),
+                _num(r["p_holm"], ".4f"),
+                str(r["reading"]),
+            ]
+        )
+    return table

@@ -977,13 +977,14 @@ def test_privileges_and_budgets_beside_every_result(honest):
     cp, sac, ppo = (frame.loc[f"algorithm={a}"] for a in ("copilot", "sac", "ppo"))
     assert cp["privileges"] == "collision_checks, map_queries, reset_to_state"
     assert sac["privileges"] == "none" and ppo["privileges"] == "-"
-    # final cumulative counts, mean over seeds: 100 * (1..5), 1..5, 10 * (1..5)
-    assert (cp["collision_checks"], cp["resets"], cp["map_queries"]) == (300, 3, 30)
+    # cumulative counts, mean over seeds, read where the final is (the last evaluation, at 3000: the row at
+    # 4000 only repeats it): 3/4 of 100 * (1..5), 1..5, 10 * (1..5)
+    assert (cp["collision_checks"], cp["resets"], cp["map_queries"]) == (225, 2.25, 22.5)
     assert (sac["collision_checks"], sac["resets"], sac["map_queries"]) == (0, 0, 0)
     assert np.isnan(ppo["collision_checks"]) and cp["env_steps"] == 4000
     md = (honest["out"] / "summary.md").read_text()
     assert (
-        "| algorithm=copilot | 5 | collision_checks, map_queries, reset_to_state | 4,000 | 300 | 3 | 30 |"
+        "| algorithm=copilot | 5 | collision_checks, map_queries, reset_to_state | 4,000 | 225 | 2 | 22 |"
         in md
     )
     assert "| algorithm=sac | 5 | none | 4,000 | 0 | 0 | 0 |" in md
@@ -1011,7 +1012,8 @@ def test_probability_of_improvement_in_the_report(honest):
     section = report.split("## Probability of improvement over the best other method")[1].split("## ")[0]
     assert (
         "| algorithm=copilot (collision_checks, map_queries, reset_to_state) | algorithm=sac (none) "
-        "| 1.00 [95% CI 1.00, 1.00] | ahead | 1.00 [95% CI 1.00, 1.00] | ahead | yes: " in section
+        "| 1.00 [95% CI 1.00, 1.00] | ahead (99%: ahead) | 1.00 [95% CI 1.00, 1.00] | ahead (99%: ahead) | yes: "
+        in section
     )
     assert report.index("## Summary") < report.index("## Probability of improvement")
     imp = pd.read_csv(honest["out"] / "improvement.csv")
@@ -1824,3 +1826,355 @@ def test_a_plan_of_its_own_is_what_the_algorithm_declares():
     assert not plans_of_its_own(trial("her", zeros, zeros))
     assert plans_of_its_own(trial("retired_method", some, zeros))
     assert not plans_of_its_own(trial("retired_method", zeros, zeros))
+
+
+# ---------------------------------------------------------------------------------------------- issue 67/68
+# --final-evaluations K, --reference CONFIG, the 99 % reading, --paired, counts read with the final
+
+
+def _depth_sweep(curves_by_k, budget=3000.0, steps=(1000.0, 2000.0, 3000.0, 3100.0), statuses=None):
+    """In memory: CO-PILOT configurations K = k (config key tree_depth=k), seeds 1..n, evaluated at
+    `steps` (the last one past the budget), each seed's success curve given."""
+    from analysis.load import Sweep, Trial
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    trials = []
+    for k, seeds in curves_by_k.items():
+        for i, values in enumerate(seeds):
+            seed = str(i + 1)
+            tags = {ALGORITHM_TAG: "copilot", K_TAG: str(k), SEED_TAG: seed, ENV_TAG: "maze-point"}
+            status = (statuses or {}).get((k, seed), "FINISHED")
+            t = Trial(f"K{k}s{seed}", f"K{k}s{seed}", status, f"tree_depth={k}", seed, tags, budget=budget)
+            if values is not None:
+                t.curves[EVAL_SUCCESS] = (np.array(steps[: len(values)]), np.array(values, dtype=float))
+            trials.append(t)
+    return Sweep("sqlite:///nowhere.db", "depth", "1", None, "depth", trials)
+
+
+def test_final_evaluations_is_the_mean_of_the_last_k_at_or_before_the_budget():
+    """Budget 3000, evaluations at 1000, 2000, 3000 and 3100 (past it): with K = 2 a seed's final is the
+    mean of its 2000 and 3000 evaluations, read at 3000 (never the one at 3100); a seed with one
+    evaluation at or before the budget has none, and Missing names it. Without K: the curve at 3000."""
+    from analysis.aggregate import final_reading, summarise, value_at
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    five = [[0.1, 0.2 + i / 10, 0.4 + i / 10, 0.9] for i in range(5)]
+    sweep = _depth_sweep({5: five, 3: [*five[:4], [0.3]]})
+    configs, missing = summarise(sweep, reps=20_000, final_evaluations=2)
+    by = {c.label: c.metrics[EVAL_SUCCESS] for c in configs}
+    expected = [(0.2 + i / 10 + 0.4 + i / 10) / 2 for i in range(5)]
+    assert by["K=5"].finals.tolist() == pytest.approx(expected)
+    assert by["K=5"].final_step == 3000.0 and by["K=5"].final_evaluations == 2
+    assert by["K=5"].final.point == pytest.approx(stats.iqm(np.array(expected)))
+    assert np.isnan(by["K=3"].finals[-1]) and by["K=3"].final.n == 4  # seed 5: one evaluation
+    assert (
+        "configuration K=3, seed 5: 1 evaluation(s) due at or before the budget, fewer than "
+        "--final-evaluations 2: no final success (left out of the final's figures)"
+    ) in missing.lines()
+    # K = 1: the last evaluation at or before the budget; default: the curve at the budget
+    assert value_at((np.array([1000.0, 3100.0]), np.array([0.2, 0.9])), 3000.0, 1) == (0.2, 1000.0)
+    default, _ = summarise(sweep, reps=20_000)
+    assert default[1].metrics[EVAL_SUCCESS].finals.tolist() == pytest.approx([0.4 + i / 10 for i in range(5)])
+    index, weights, at = final_reading(np.array([1000.0, 2000.0, 3000.0, 3100.0]), 2500.0)
+    assert index.tolist() == [1, 2] and weights.tolist() == [0.5, 0.5] and at == 2500.0
+    with pytest.raises(ValueError, match="final_evaluations=0 is invalid"):
+        summarise(sweep, final_evaluations=0)
+
+
+def test_final_evaluations_count_each_evaluation_at_the_point_it_was_due():
+    """Evaluated every 10k env steps, a run evaluates at the end of the first iteration past each point:
+    the privilege-matched CO-PILOT seed 1's last four at 170,297, 181,425, 191,198 and 200,035. With a
+    200k budget the one due at 200k ran 35 env steps past it; it is the evaluation "at 200k", so K = 3
+    reads the three due at 180k, 190k and 200k (docs/depth_k's rule), not 170k-190k. A run that logged
+    no env-step cadence counts each evaluation at its own env step."""
+    from analysis.aggregate import evaluations_up_to, summarise
+    from copilot_ray.keys import EVAL_SUCCESS
+
+    steps = (170297.0, 181425.0, 191198.0, 200035.0, 210044.0)
+    sweep = _depth_sweep({5: [[0.60, 0.70, 0.80, 0.90, 0.95]] * 5}, budget=200000.0, steps=steps)
+    for t in sweep.trials:
+        t.params["eval_every_env_steps"] = "10000"
+    (c,), _ = summarise(sweep, reps=20_000, final_evaluations=3)
+    assert c.metrics[EVAL_SUCCESS].finals.tolist() == pytest.approx([0.8] * 5)  # (0.7 + 0.8 + 0.9) / 3
+    assert c.metrics[EVAL_SUCCESS].final_step == 200035.0
+    assert evaluations_up_to(np.array(steps), 200000.0, 10000.0) == 4
+    assert evaluations_up_to(np.array(steps), 200000.0) == 3
+    for t in sweep.trials:
+        del t.params["eval_every_env_steps"]
+    (c,), _ = summarise(sweep, reps=20_000, final_evaluations=3)
+    assert c.metrics[EVAL_SUCCESS].finals.tolist() == pytest.approx([0.7] * 5)  # 170k-190k
+
+
+def test_counts_are_read_where_the_final_is_read():
+    """SoRB with the map spends its checks inside evaluations: rows every 400 env steps repeat the count,
+    which jumps at each evaluation (190,164 and 200,326). With a 200k budget the final is read 9,836 /
+    10,162 of the way to the evaluation past it; its checks are read with the same weights at the same
+    two evaluations (not interpolated between the rows at 199,926 and 200,326, which holds 81 % of the
+    last evaluation's checks back). With K = 2: the mean over the two evaluations at or before it."""
+    from analysis.aggregate import summarise
+    from analysis.figures import checks_at
+    from copilot_ray.keys import EVAL_SUCCESS, PRIVILEGE_COLLISION_CHECKS
+
+    evals = np.array([180062.0, 190164.0, 200326.0])
+    sweep = _depth_sweep({5: [[0.67, 0.73, 0.90]] * 5}, budget=200000.0, steps=tuple(evals))
+    rows = np.array([180062.0, 189764.0, 190164.0, 199926.0, 200326.0])
+    counts = np.array([5231781.0, 5231781.0, 5541573.0, 5541573.0, 5854677.0])
+    for t in sweep.trials:
+        t.curves[PRIVILEGE_COLLISION_CHECKS] = (rows, counts)
+        t.latest[PRIVILEGE_COLLISION_CHECKS] = counts[-1]
+    w = (200000 - 190164) / (200326 - 190164)
+    (c,), _ = summarise(sweep, reps=20_000)
+    assert c.metrics[EVAL_SUCCESS].finals[0] == pytest.approx(0.73 + w * (0.90 - 0.73))
+    assert c.privilege_counts[PRIVILEGE_COLLISION_CHECKS] == pytest.approx(5541573 + w * 313104)
+    assert c.privilege_counts[PRIVILEGE_COLLISION_CHECKS] != pytest.approx(5541573 + 74 / 400 * 313104)
+    # the figure of success against checks pairs them the same way along the whole curve
+    assert checks_at(c, np.array([200000.0]))[0] == pytest.approx(5541573 + w * 313104)
+    (c,), _ = summarise(sweep, reps=20_000, final_evaluations=2)
+    assert c.privilege_counts[PRIVILEGE_COLLISION_CHECKS] == pytest.approx((5231781 + 5541573) / 2)
+
+
+def test_a_reference_configuration_is_found_by_label_config_key_variant_or_label_parts():
+    from analysis.aggregate import UnknownConfigurationError, find_configuration, improvement_pairs, summarise
+    from copilot_ray.keys import EVAL_SUCCESS, VARIANT_TAG
+
+    sweep = _depth_sweep({k: [[0.1, 0.2, 0.1 * k, 0.9]] * 5 for k in (3, 4, 5)})
+    configs, _ = summarise(sweep, reps=20_000)
+    assert [c.label for c in configs] == ["K=3", "K=4", "K=5"]
+    five = find_configuration(configs, "tree_depth=5")
+    assert five.label == "K=5" and find_configuration(configs, "K=5") is five
+    assert [(x.label, y.label) for x, y in improvement_pairs(configs, EVAL_SUCCESS, "each", five)] == [
+        ("K=5", "K=3"),
+        ("K=5", "K=4"),
+    ]
+    # best: the other configuration with the highest final (here K = 4), whatever its algorithm
+    assert [y.label for _, y in improvement_pairs(configs, EVAL_SUCCESS, "best", five)] == ["K=4"]
+    with pytest.raises(
+        UnknownConfigurationError,
+        match=r"'tree_depth=7' is no configuration here; the labels are: 'K=3'; 'K=4'; 'K=5'",
+    ):
+        find_configuration(configs, "tree_depth=7")
+    for t in sweep.trials:
+        if t.tags[K_TAG] == "4":
+            t.tags[VARIANT_TAG] = "frozen_planner"
+    configs, _ = summarise(sweep, reps=20_000)
+    assert find_configuration(configs, "frozen_planner").label == "variant=frozen_planner, K=4"
+    assert find_configuration(configs, "variant=frozen_planner").label == "variant=frozen_planner, K=4"
+
+
+def _depth_store(root: Path, finals_by_k: dict[int, list[float]], budget: int = 3000) -> str:
+    """An MLflow store of one all-CO-PILOT sweep: K = k under config key tree_depth=k, seeds 1..n, each
+    evaluated at 1000, 2000, 3000 (fresh rows), its final at 3000 given, earlier ones below it."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    from copilot_ray.keys import BUDGET_PARAM, EVAL_FRESH, EVAL_SUCCESS
+
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("depth", artifact_location=(root / "art").as_uri())
+    pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "depth"}).info.run_id
+    client.log_param(pid, BUDGET_PARAM, budget)
+    now = int(time.time() * 1000)
+    for k, finals in finals_by_k.items():
+        for i, final in enumerate(finals):
+            seed = str(i + 1)
+            tags = {PARENT_TAG: pid, ROLE_TAG: ROLE_TRIAL, SWEEP_TAG: "depth", SEED_TAG: seed, K_TAG: str(k)}
+            tags |= {CONFIG_KEY_TAG: f"tree_depth={k}", ALGORITHM_TAG: "copilot", ENV_TAG: "maze-point"}
+            rid = client.create_run(exp_id, run_name=f"K{k}s{seed}", tags=tags).info.run_id
+            values = [final / 4, final / 2, final]
+            ms = [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS[:3], values, strict=True)]
+            ms += [Metric(EVAL_FRESH, 1.0, now, s) for s in STEPS[:3]]
+            client.log_batch(rid, metrics=ms)
+            client.set_terminated(rid, "FINISHED")
+    return uri
+
+
+def test_report_reference_final_evaluations_and_the_99_reading(tmp_path, capsys):
+    """An all-CO-PILOT sweep (the depth sweep's shape): --reference tree_depth=5 --improvement-over each
+    gives P(K=5 > K=j) for each j with its 95 % and 99 % readings; --final-evaluations 2 is said on the
+    page; bad values exit 2 naming the flag and the value."""
+    finals = {
+        3: [0.30, 0.32, 0.34, 0.36, 0.38],
+        4: [0.50, 0.61, 0.66, 0.71, 0.80],
+        5: [0.60, 0.62, 0.64, 0.68, 0.70],
+    }
+    uri = _depth_store(tmp_path, finals)
+    out = tmp_path / "report"
+    base = ["depth", "--tracking-uri", uri, "--out", str(out), "--no-log"]
+    argv = [*base, "--reference", "tree_depth=5", "--improvement-over", "each", "--final-evaluations", "2"]
+    assert main(argv) == 0
+    imp = pd.read_csv(out / "improvement.csv")
+    assert imp["reference"].tolist() == ["K=5", "K=5"] and imp["other"].tolist() == ["K=3", "K=4"]
+    mean2 = {k: [(f / 2 + f) / 2 for f in v] for k, v in finals.items()}  # the 2000 and 3000 evaluations
+    for _, r in imp.iterrows():
+        k = int(r["other"][2:])
+        at95 = stats.improvement(mean2[5], mean2[k])
+        at99 = stats.improvement(mean2[5], mean2[k], confidence=0.99)
+        assert (r["p_final"], r["p_final_low"], r["p_final_high"]) == pytest.approx(
+            (at95.p, at95.low, at95.high)
+        )
+        assert (r["p_final_low_99"], r["p_final_high_99"]) == pytest.approx((at99.low, at99.high))
+        assert (r["p_final_reading"], r["p_final_reading_99"]) == (at95.reading(), at99.reading())
+    assert imp.loc[0, "p_final_reading"] == "ahead"  # K=5 beats K=3 in every pair
+    report = (out / "report.md").read_text()
+    assert "## Probability of improvement over each other configuration" in report
+    assert "a seed of the reference configuration, K=5 (--reference)" in report
+    assert "| K=5 (-) | K=3 (-) | 1.00 [95% CI 1.00, 1.00] | ahead (99%: ahead) |" in report
+    assert "Final = the mean of each seed's last 2 evaluations at or before the env-step budget" in report
+    assert "--final-evaluations 2" in report
+    # the depth page's "depth with the highest IQM" of the primary figure, from the summary's point
+    iqm4, iqm5 = (stats.iqm(np.array(mean2[k])) for k in (4, 5))
+    assert iqm4 > iqm5
+    assert f"Highest final test success (IQM, the table's point estimate): K=4, {iqm4:.3f}." in report
+    summary = pd.read_csv(out / "summary.csv").set_index("configuration")
+    assert summary.loc["K=4", "success_final"] == pytest.approx(iqm4)
+
+    capsys.readouterr()
+    assert main([*base, "--reference", "tree_depth=7"]) == 2
+    err = capsys.readouterr().err
+    assert "--reference tree_depth=7" in err and "the labels are: 'K=3'; 'K=4'; 'K=5'" in err
+    assert (out / "improvement.csv").exists()  # refused before --out was touched: the report stays
+    for bad in ("0", "-1", "two"):
+        with pytest.raises(SystemExit) as done:
+            main([*base, "--final-evaluations", bad])
+        assert done.value.code == 2
+        assert "--final-evaluations" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*base, "--final-evaluations", "0"])
+    assert "--final-evaluations 0 is invalid" in capsys.readouterr().err
+
+
+def test_signed_rank_test_exact_on_hand_computed_cases():
+    """Two-sided, exact: 8 positive differences give the smallest p, 2 / 2^8; 5 give 2 / 2^5 = 0.0625
+    (no difference of five pairs reaches 0.05); a zero is dropped before ranking; tied |d| take their
+    average rank and every sign pattern is enumerated (by hand below: 16 patterns of ranks 1.5, 1.5, 3,
+    4, W+ = 6: 6 of them at or above it)."""
+    from scipy.stats import wilcoxon
+
+    eight = stats.signed_rank_test(np.arange(1, 9) / 100)
+    assert (eight.p, eight.statistic, eight.w_plus, eight.n) == (pytest.approx(2 / 256), 0.0, 36.0, 8)
+    assert stats.signed_rank_test(np.arange(1, 6) / 10).p == pytest.approx(0.0625)
+    zero = stats.signed_rank_test([0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    assert (zero.n, zero.zeros, zero.p) == (5, 1, pytest.approx(0.0625))
+    tied = stats.signed_rank_test([0.1, 0.1, 0.2, -0.3])
+    assert (tied.w_plus, tied.w_minus, tied.statistic) == (6.0, 4.0, 4.0)
+    assert tied.p == pytest.approx(2 * 6 / 16) and "tied" in tied.method
+    # without ties it is scipy's exact test, whatever the signs
+    d = np.array([0.05, -0.12, 0.3, 0.07, -0.01, 0.22])
+    assert stats.signed_rank_test(d).p == pytest.approx(wilcoxon(d, method="exact").pvalue)
+    # W- = 1 + 4 = 5; subsets of ranks 1..6 summing to <= 5: {}, 1, 2, 3, 12, 4, 13, 5, 14, 23: 10 of 64
+    assert stats.signed_rank_test(d).p == pytest.approx(2 * 10 / 64)
+    assert stats.signed_rank_test([0.0, 0.0]).p == 1.0
+    # float noise splits neither a zero nor a tie: 0.3 - 0.1 - 0.2 is 0; 0.45 - 0.375 ties 0.525 - 0.6
+    assert abs(0.45 - 0.375) != abs(0.525 - 0.6) and 0.3 - 0.1 - 0.2 != 0  # as floats they differ
+    noisy = stats.signed_rank_test([0.3 - 0.1 - 0.2, 0.45 - 0.375, 0.525 - 0.6, 0.01])
+    assert (noisy.zeros, noisy.n, noisy.w_plus, noisy.w_minus) == (1, 3, 3.5, 2.5) and "tied" in noisy.method
+    assert np.isnan(stats.signed_rank_test([]).p)
+    # Holm: m = 3 tests (the NaN is none); 0.01 x 3, then max(0.03, 0.03 x 2), then max(0.06, 0.04)
+    np.testing.assert_allclose(stats.holm([0.01, 0.04, 0.03, np.nan]), [0.03, 0.06, 0.06, np.nan])
+
+
+def test_paired_comparison_seed_for_seed_with_holm(tmp_path):
+    """--paired: K=5 beats K=3 on every one of 8 shared seeds, on final and AUC: p = 2/256 each, Holm
+    over the family (K=3 and K=4, final and AUC) keeps them below 0.05: ahead. K=4 shares only seeds
+    1-5 (its 6-8 never ran)."""
+    from analysis.aggregate import find_configuration, summarise
+    from analysis.tables import paired_frame, paired_table
+
+    up = [[0.1, 0.2, 0.5 + s / 100, 0.9] for s in range(8)]
+    down = [[0.05, 0.1, 0.3 + s / 100, 0.9] for s in range(8)]
+    mixed = [[0.1, 0.2, v, 0.9] for v in (0.6, 0.4, 0.7, 0.45, 0.5)]
+    configs, _ = summarise(_depth_sweep({3: down, 4: mixed, 5: up}))
+    frame = paired_frame(configs, "each", find_configuration(configs, "K=5"))
+    rows = {(r["other"], r["figure"]): r for _, r in frame.iterrows()}
+    final3 = rows[("K=3", "final")]
+    assert final3["n_pairs"] == 8 and final3["seeds"] == "1 2 3 4 5 6 7 8"
+    assert final3["_differences"] == pytest.approx([0.2] * 8)
+    assert (final3["W"], final3["p"]) == (0.0, pytest.approx(2 / 256))
+    four = rows[("K=4", "final")]
+    assert four["n_pairs"] == 5 and four["unpaired_seeds"] == "6 7 8"
+    assert four["_differences"] == pytest.approx([-0.1, 0.11, -0.18, 0.08, 0.04])
+    p = frame["p"].to_numpy()
+    np.testing.assert_allclose(frame["p_holm"], stats.holm(p))
+    assert final3["reading"] == "ahead" and rows[("K=3", "auc")]["reading"] == "ahead"
+    assert four["reading"] == "not separated"
+    assert frame.loc[frame["other"] == "K=3", "p_holm"].max() < 0.05
+    cells = paired_table(frame).rows[0]
+    assert cells[3].startswith("1: +0.200; 2: +0.200") and cells[-1] == "ahead"
+
+
+def test_report_paired_csv_and_page(tmp_path):
+    finals = {3: [0.30, 0.32, 0.34, 0.36, 0.38], 5: [0.60, 0.62, 0.64, 0.68, 0.70]}
+    uri = _depth_store(tmp_path, finals)
+    out = tmp_path / "report"
+    argv = ["depth", "--tracking-uri", uri, "--out", str(out), "--no-log", "--reference", "K=5", "--paired"]
+    assert main(argv) == 0
+    paired = pd.read_csv(out / "paired.csv")
+    assert paired["figure"].tolist() == ["final", "auc"] and "_differences" not in paired.columns
+    assert paired["p"].tolist() == pytest.approx([0.0625, 0.0625])  # five positive differences
+    assert paired["p_holm"].tolist() == pytest.approx([0.125, 0.125])
+    assert paired["reading"].tolist() == ["not separated", "not separated"]
+    report = (out / "report.md").read_text()
+    assert "## Paired comparison, seed for seed (--paired)" in report
+    assert "with 5 pairs no difference can reach alpha 0.05" in report
+    assert "| K=5 | K=3 | final | 1: +0.300; 2: +0.300; 3: +0.300; 4: +0.320; 5: +0.320 | 5 (0) |" in report
+
+
+def test_a_lone_configuration_of_an_interrupted_sweep_is_not_told_of_others(tmp_path):
+    """One configuration, seed 1 evaluated, seed 2 still running without an evaluation: not "one seed per
+    configuration", not "fewer seeds than the others" (there are none); the sweep is said incomplete."""
+    from analysis.aggregate import summarise
+    from analysis.report_page import summary_text
+
+    sweep = _depth_sweep({1: [[0.1, 0.2, 0.3], None]}, statuses={(1, "2"): "RUNNING"})
+    configs, missing = summarise(sweep, reps=20_000)
+    lines = missing.lines()
+    assert not any("fewer seeds than the others" in line for line in lines)
+    assert any(
+        "configuration tree_depth=1 lacks seeds 2 (its runs of them ended unfinished or have no evaluation yet"
+        in line
+        for line in lines
+    )
+    text = summary_text(configs, "test", "")
+    assert text.startswith("One configuration, one seed with evaluations: a look at how the run went")
+    assert "per configuration" not in text.split(".")[0]
+    assert "The sweep is incomplete: 1 more run(s) without figures yet" in text
+    # two configurations, one lacking a seed the other has: "fewer seeds than the others" is right
+    sweep = _depth_sweep({1: [[0.1, 0.2, 0.3], None], 2: [[0.1, 0.2, 0.3], [0.2, 0.3, 0.4]]})
+    assert any("fewer seeds than the others" in line for line in summarise(sweep, reps=20_000)[1].lines())
+
+
+def test_a_carried_store_unpacked_elsewhere_finds_its_artifacts(tmp_path):
+    """The store names its artifacts by the absolute paths of the machine that ran it; moved with them
+    (a carried archive unpacked in another folder), the tree snapshots and the spec are still found."""
+    import shutil
+
+    import mlflow
+
+    from analysis.load import RunArtifacts, load_sweep, load_tree_snapshots, spec_artifacts
+    from copilot_ray.keys import RESOLVED_SPEC_ARTIFACT
+
+    ran = tmp_path / "main-at-abc1234"
+    results = ran / "results"
+    results.mkdir(parents=True)
+    uri = f"sqlite:///{results / 'x.db'}"
+    client = mlflow.MlflowClient(uri)
+    exp_id = client.create_experiment("moved", artifact_location=(results / "part" / "mlartifacts").as_uri())
+    pid = client.create_run(exp_id, tags={ROLE_TAG: ROLE_SWEEP, SWEEP_TAG: "moved"}).info.run_id
+    client.log_text(pid, "name: moved\n", RESOLVED_SPEC_ARTIFACT)
+    rid = _child(client, exp_id, pid, "tree_depth=3", 3, "0")
+    _metrics(client, rid, [0.1, 0.2], STEPS[:2])
+    npz = tmp_path / "npz" / TREES_DIR
+    npz.mkdir(parents=True)
+    _tree_npz(npz / "trees_iter000005.npz", 5, np.random.default_rng(0))
+    client.log_artifacts(rid, str(npz), TREES_DIR)
+    client.set_terminated(rid, "FINISHED")
+
+    unpacked = tmp_path / "elsewhere" / "store"
+    shutil.move(str(ran), str(unpacked))  # `tar xzf store.tar.gz -C elsewhere/store`: results/ inside
+    moved = f"sqlite:///{unpacked / 'results' / 'x.db'}"
+    (trial,) = load_sweep(moved, "moved").trials
+    assert trial.tree_artifacts == [f"{TREES_DIR}/trees_iter000005.npz"]
+    assert load_tree_snapshots(moved, rid, trial.tree_artifacts)[0].depth == 3
+    assert spec_artifacts(moved, pid) == [RESOLVED_SPEC_ARTIFACT]
+    assert RunArtifacts(moved, rid).moved == unpacked / "results" / "part" / "mlartifacts" / rid / "artifacts"

@@ -1,7 +1,9 @@
 """Every command the README shows still works: specs load, flags parse and pass their checks, a report
 command names an experiment that a shipped spec writes into the store it points at, and a benchmark's
 flags are flags of that benchmark. (The commands themselves run elsewhere: the quick start in CI, the
-sweeps for hours.) Nothing here starts Ray."""
+sweeps for hours.) A report drawn from a store the repository ships (`tar xzf docs/.../store.tar.gz -C
+DIR`, then the report on DIR's store) does run here, as on a clone: unpacked into a temporary folder, its
+tables compared with the shipped report's. Nothing here starts Ray."""
 
 from __future__ import annotations
 
@@ -17,12 +19,12 @@ README = (ROOT / "README.md").read_text()
 
 # A code block's line that is a command; an indented list item's prose that names one is not.
 COMMAND_START = re.compile(
-    r"(?:[A-Z_]+=\S+ )*(?:\.venv/bin/python|python|bash|cd|pip|\.ci/|mlflow|tar|git)\b"
+    r"(?:[A-Z_]+=\S+ )*(?:\.venv/bin/python|python|bash|cd|pip|\.ci/|mlflow|tar|git|mkdir)\b"
 )
 
 
-def _commands() -> list[str]:
-    """Commands in the README's code blocks (4-space indented) and inline code, continuations joined."""
+def _block_commands() -> list[str]:
+    """Commands in the README's code blocks (4-space indented), continuations joined."""
     lines, out, pending = README.splitlines(), [], ""
     for line in lines:
         if line.startswith("    ") and not line.strip().startswith("#"):
@@ -34,7 +36,12 @@ def _commands() -> list[str]:
                 continue
             pending = ""
             out.append(text.split("  #")[0].strip())
-    out += re.findall(r"`((?:PYTHONPATH=\. )?\.venv/bin/python [^`]+)`", README)
+    return out
+
+
+def _commands() -> list[str]:
+    """Python commands in the README's code blocks and inline code."""
+    out = _block_commands() + re.findall(r"`((?:PYTHONPATH=\. )?\.venv/bin/python [^`]+)`", README)
     return [c for c in out if "python" in c]
 
 
@@ -58,10 +65,108 @@ BENCHMARKS = [c for c in COMMANDS if "benchmarks/" in c and "<" not in c]
 CARRIES = [c for c in COMMANDS if "-m copilot_ray.carry " in c]
 PROGRESSES = [c for c in COMMANDS if "-m copilot_ray.progress " in c]
 PINNED_RUNS = _script_commands("scripts/run_at_commit.sh")
+# `tar xzf ARCHIVE -C DIR`: a store the repository ships, unpacked where a report reads it (folder ->
+# its archives: two may unpack into one folder, a comparison's store and a part's beside it)
+UNPACKS: dict[str, list[str]] = {}
+for _c in _block_commands():
+    if _m := re.fullmatch(r"tar xzf (\S+\.tar\.gz) -C (\S+)", _c):
+        UNPACKS.setdefault(_m.group(2), []).append(_m.group(1))
+
+
+def _unpacked(uri: str | None) -> tuple[str, str] | None:
+    """(the unpack folder, the store's path inside it) when `uri` reads a store a README `tar xzf` puts
+    there; None otherwise."""
+    for folder in UNPACKS:
+        prefix = f"sqlite:///$PWD/{folder}/"
+        if uri is not None and uri.startswith(prefix):
+            return folder, uri[len(prefix) :]
+    return None
+
+
+def _raw_args(command: str, marker: str) -> list[str]:
+    return shlex.split(command.split(marker, 1)[1])
+
+
+def _stores(args: list[str]) -> list[int]:
+    """The positions in `args` of every store URI (--tracking-uri, --also-from)."""
+    return [i + 1 for i, a in enumerate(args) if a in ("--tracking-uri", "--also-from")]
+
+
+SHIPPED_REPORTS = [
+    c
+    for c in REPORTS
+    if any(_unpacked(a) for a in _raw_args(c, "-m analysis.report ") if a.startswith("sqlite:"))
+]
 
 
 def test_the_readme_shows_each_kind_of_command():
     assert SWEEPS and REPORTS and TRAINS and BENCHMARKS and CARRIES and PROGRESSES and PINNED_RUNS
+    assert UNPACKS and SHIPPED_REPORTS
+
+
+@pytest.mark.parametrize("folder", sorted(UNPACKS))
+def test_unpack_commands_name_a_shipped_archive_into_an_ignored_folder(folder):
+    """Each archive is in the repository; the folder is one git ignores (a store is not committed
+    twice), and a `mkdir -p` of the README makes it first (tar -C needs it)."""
+    import subprocess
+
+    for archive in UNPACKS[folder]:
+        assert (ROOT / archive).is_file(), archive
+    ignored = subprocess.run(["git", "check-ignore", "-q", folder], cwd=ROOT)
+    assert ignored.returncode == 0, f"{folder} is not ignored by git"
+    assert any(c.startswith("mkdir -p") and folder in c.split() for c in _block_commands())
+
+
+@pytest.mark.parametrize("command", SHIPPED_REPORTS)
+def test_a_report_of_a_shipped_store_works_on_a_clone(command, tmp_path):
+    """As a clone would: every store the command reads is in an archive the README unpacks into its
+    folder, and the command says --no-log (the store's runs name another machine's artifact paths, and
+    its sweep runs are the record: not the reader's to log into). A command whose --out is a shipped
+    report (docs/.../report) is run on the archives unpacked into a temporary folder: exit 0, and that
+    report's figures and readings come out again (the shipped report is what the command makes). One
+    that writes elsewhere is checked this far only."""
+    import tarfile
+
+    import pandas as pd
+
+    from analysis.report import main, parse_args
+
+    args = _raw_args(command, "-m analysis.report ")
+    assert "--no-log" in args
+    parse_args([a.replace("$PWD", str(ROOT)) for a in args])
+    for i in _stores(args):
+        folder, store = _unpacked(args[i])
+        names = set()
+        for archive in UNPACKS[folder]:
+            with tarfile.open(ROOT / archive) as packed:
+                names |= set(packed.getnames())
+        assert store in names, f"no archive unpacked into {folder} holds {store}"
+    shipped = ROOT / args[args.index("--out") + 1]
+    if not (shipped / "report.md").is_file():
+        return
+    for folder in {_unpacked(args[i])[0] for i in _stores(args)}:
+        for archive in UNPACKS[folder]:
+            with tarfile.open(ROOT / archive) as packed:
+                packed.extractall(tmp_path / folder, filter="data")
+    for i in _stores(args):
+        folder, store = _unpacked(args[i])
+        args[i] = f"sqlite:///{tmp_path / folder / store}"
+    args[args.index("--out") + 1] = str(tmp_path / "report")
+    assert main(args) == 0
+    for name, key, columns in (
+        ("summary.csv", "configuration", ["n_seeds", "success_final", "success_final_low", "success_auc"]),
+        ("improvement.csv", "other", ["p_final", "p_final_reading", "p_auc", "p_auc_reading"]),
+    ):
+        if not (shipped / name).is_file():
+            assert not (tmp_path / "report" / name).is_file()
+            continue
+        mine = pd.read_csv(tmp_path / "report" / name).set_index(key)
+        theirs = pd.read_csv(shipped / name).set_index(key)
+        pd.testing.assert_frame_equal(mine[columns], theirs[columns], check_exact=False, rtol=1e-9)
+    counts = ["collision_checks", "resets", "map_queries"]
+    mine = pd.read_csv(tmp_path / "report" / "summary.csv").set_index("configuration")
+    theirs = pd.read_csv(shipped / "summary.csv").set_index("configuration")
+    pd.testing.assert_frame_equal(mine[counts], theirs[counts], check_exact=False, rtol=1e-9)
 
 
 @pytest.mark.parametrize("command", CARRIES)
@@ -146,8 +251,11 @@ def test_report_commands_name_an_experiment_a_shipped_spec_writes_there(command)
         if uri is None:
             continue
         # a pinned worktree beside this checkout (scripts/run_at_commit.sh: ../<checkout>-at-<sha7>) keeps
-        # a spec's store at the same path under it
+        # a spec's store at the same path under it, and so does a shipped archive unpacked into a folder
+        # (`tar xzf ... -C FOLDER`, the store packed from that worktree)
         here = re.sub(r"/\.\./[^/]+-at-[0-9a-f]{7}/", "/", uri)
+        for folder in UNPACKS:
+            here = here.replace(f"{ROOT}/{folder}/", f"{ROOT}/", 1)
         assert (name, here) in stores, f"no shipped spec writes {name!r} into {uri}"
 
 
