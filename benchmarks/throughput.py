@@ -309,7 +309,9 @@ def main() -> None:
         print("  ".join(f"{c!s:>11}" for c in cells) + "  " + shares)
     if args.write:
         data = json.loads(THROUGHPUT_FILE.read_text())
-        source = f"benchmarks/throughput.py {shlex.join(portable(sys.argv[1:]))} on {time.strftime('%Y-%m-%d')}"
+        source = (
+            f"benchmarks/throughput.py {shlex.join(portable(sys.argv[1:]))} on {time.strftime('%Y-%m-%d')}"
+        )
         if args.from_store:
             source += f" (its runs' commits: {', '.join(_commits(args))})"
         for r in rows:
