@@ -363,7 +363,8 @@ def gpu_section(reader: Reader, commit: str, machine: str) -> dict | None:
     day = time.strftime("%Y-%m-%d")
     how = (
         f"scripts/device_check.sh at {commit} on {day}: benchmarks/device_throughput.py, two CO-PILOT trials "
-        "sharing the GPU, 2 CPUs each, evaluation every 3200 env steps on 100 validation + 100 test tasks"
+        "sharing the GPU, 2 CPUs each, tree_depth 3 (shorter iterations than the default 5; env steps/s hardly "
+        "depend on it), evaluation every 3200 env steps on 100 validation + 100 test tasks"
     )
     section = {
         "what": "env steps per second of one trial with its learner on a GPU, on maze-point four-rooms (one SAC "

@@ -3,6 +3,7 @@ stepped, and how its store comes back to another machine and resumes there.
 
     python3 benchmarks/device_sweep.py prepare ROOT [--cpu]    # ROOT/device_stacked.yaml (ROOT: new)
     python3 benchmarks/device_sweep.py rate ROOT [--figures FILE]  # seed env steps/s of its trials so far
+    python3 benchmarks/device_sweep.py pack ROOT ARCHIVE [--figures FILE]   # carry, and the rates
     python3 benchmarks/device_sweep.py unpack ARCHIVE           # a packed store back at its ROOT
 
 `prepare` writes the spec into ROOT, the folder the sweep is started from (`cd ROOT && python3 -m
@@ -15,6 +16,12 @@ to 2 stacked seeds, 1 CPU a trial, one trial at a time and 2 iterations (a rehea
 `rate` reads each trial's Tune results (ROOT/results/device_stacked/tune/...): the seed env steps (all its
 seeds) per second over the iterations after the first (the first builds every seed and warms its
 planner up), and how long that first one took; a trial with a single iteration has no rate.
+
+`pack` packs the sweep's results by `python -m copilot_ray.carry` into ARCHIVE; when that is over
+PACK_LIMIT (a file comes back from a device call at 16 MiB at most; an experiment in flight carries its
+unfinished trials' checkpoints, 16 seeds' replay buffers among them) it packs again `--report-only`
+(the store and small artifacts, no Tune folders) and says so. Then it prints the rates (and appends them
+to --figures). Its exit status is carry's.
 
 `unpack` extracts an archive of `python -m copilot_ray.carry` into the ROOT its carry.json names (refused
 when ROOT/results exists) and writes ROOT/device_stacked.yaml from the resolved copy inside, so that
@@ -119,6 +126,23 @@ def rate_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
+PACK_LIMIT = 15 * 2**20
+
+
+def pack(root: Path, archive: Path, limit: int = PACK_LIMIT) -> int:
+    from copilot_ray import carry
+
+    spec = root / f"{NAME}.yaml"
+    code = carry.main([str(spec), str(archive), "--root", str(root)])
+    if code == 0 and archive.stat().st_size > limit:
+        print(
+            f"{archive} is {archive.stat().st_size / 2**20:.1f} MiB, over the {limit / 2**20:.0f} MiB a file comes "
+            "back with: packed again --report-only (the store and small artifacts; no Tune folders)"
+        )
+        code = carry.main([str(spec), str(archive), "--root", str(root), "--report-only"])
+    return code
+
+
 def unpack(archive: Path) -> Path:
     with tarfile.open(archive) as tar:
         manifest = next((m for m in tar.getmembers() if m.name.endswith("/carry.json")), None)
@@ -150,17 +174,23 @@ def main(argv=None) -> int:
         default=None,
         help="append the rows as JSON lines (benchmarks/device_figures.py)",
     )
+    d = sub.add_parser("pack", help="carry the sweep under ROOT into ARCHIVE (--report-only when too large)")
+    d.add_argument("root", type=Path)
+    d.add_argument("archive", type=Path)
+    d.add_argument("--figures", type=Path, default=None, help="append the trials' rates as JSON lines")
     c = sub.add_parser("unpack", help="a packed store back at the ROOT it was packed from")
     c.add_argument("archive", type=Path)
     args = p.parse_args(argv)
     if args.command == "prepare":
         print(prepare(args.root.resolve(), args.cpu))
-    elif args.command == "rate":
+    elif args.command in ("rate", "pack"):
+        code = pack(args.root.resolve(), args.archive.resolve()) if args.command == "pack" else 0
         rows = trial_rates(args.root.resolve())
         print("\n".join(rate_lines(rows)))
         if args.figures:
             with open(args.figures, "a") as f:
                 f.writelines(json.dumps({"source": "device_sweep", **row}) + "\n" for row in rows)
+        return code
     else:
         root = unpack(args.archive)
         print(

@@ -61,7 +61,15 @@ from throughput import PHASES, phase_shares  # noqa: E402  (the same phases and 
 
 
 def _config(
-    algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float, current=True
+    algorithm: str,
+    layout: str,
+    eval_every: int,
+    warm_start,
+    seed: int,
+    cpus: int,
+    gpus: float,
+    current=True,
+    settings: dict | None = None,
 ):
     from copilot_ray.registry import RunContext, get_algorithm
 
@@ -80,14 +88,30 @@ def _config(
     if not current:
         # The paths before the fused update and the lean loop: RLlib's batches and env runner.
         values.update(fused_update=False, lean_traversal=False)
+    values.update(settings or {})
     return get_algorithm(algorithm).build_config(values, run)
 
 
 class Trial:
     """One algorithm in one actor: builds it, trains it for a while, returns per-iteration records."""
 
-    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current=True):
-        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus, current).build_algo()
+    def __init__(
+        self,
+        algorithm,
+        layout,
+        eval_every,
+        warm_start,
+        seed,
+        cpus,
+        gpus,
+        kind,
+        log,
+        current=True,
+        settings=None,
+    ):
+        self.algo = _config(
+            algorithm, layout, eval_every, warm_start, seed, cpus, gpus, current, settings
+        ).build_algo()
         self.label = {"kind": kind, "trial": seed}
         self.log = log
 
@@ -341,6 +365,15 @@ SUITE = {
 }
 
 
+def _setting(text: str) -> tuple[str, object]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
+    import yaml
+
+    return key, yaml.safe_load(value)
+
+
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--algorithm", default="copilot", help="a registered RLlib algorithm (default copilot)")
@@ -378,6 +411,15 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=None,
         help="CO-PILOT's planner_warm_start (phases before the first env step, in the first iteration only, "
         "which the rates leave out; default: the setting's own, 1000, ~100 s)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        type=_setting,
+        metavar="KEY=VALUE",
+        help="an algorithm setting for every trial (repeatable; e.g. tree_depth=3: shorter iterations, so a "
+        "trial cut off after a minute still has a rate)",
     )
     p.add_argument("--budget", type=int, default=200_000, help="env steps per trial for trials/hour")
     p.add_argument("--log", default=None, help="append every trial's iterations to this JSON-lines file")
@@ -541,7 +583,9 @@ def main(argv=None) -> int:
         ray.shutdown()
     print(
         f"{args.algorithm} on maze-point {args.layout}, evaluation every {args.eval_every} env steps "
-        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial; {wall:.0f} s of training, "
+        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial"
+        + "".join(f", {k}={v}" for k, v in args.set)
+        + f"; {wall:.0f} s of training, "
         f"{time.perf_counter() - started:.0f} s in all"
     )
     print("\n".join(summary_lines(by_trial, devices, args.budget, errors)))
@@ -570,6 +614,7 @@ def run_trials(args, kinds) -> tuple[dict, dict, dict, float]:
                 kind,
                 log,
                 current,
+                dict(args.set),
             )
             actors.append(((kind, i), actor))
     devices, errors, records = {}, {}, {}

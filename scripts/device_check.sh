@@ -34,7 +34,8 @@ repo="$PWD"
 out="${1:-${OUT:-$repo/device_check_out}}"
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
-python_bin="${PYTHON:-python3}"
+python_bin="$(command -v "${PYTHON:-python3}")" || { echo "error: no ${PYTHON:-python3} here" >&2; exit 2; }
+case "$python_bin" in /*) ;; *) python_bin="$repo/$python_bin" ;; esac # steps run from other folders
 TOTAL=480 # seconds: the whole command (a call's 10 minutes less the machine's start and the transfers)
 
 # STEPS: name and cap in seconds; their sum is at most TOTAL (tests/test_device_check.py checks).
@@ -125,7 +126,7 @@ step stacked_update "$py benchmarks/stacked_update.py --seeds 1 16 64 --seconds 
 # --------------------------------------------------------------------------------------------- trials
 step trials "$py benchmarks/device_throughput.py --update-paths plain --updates-seconds 3 --trials 2 \
   --gpus-per-trial 0.5 --cpu-baseline --batches-baseline --cpus-per-trial $per_trial --seconds 45 \
-  --warm-start 5 --log $out/trials.jsonl --figures $out/figures.jsonl"
+  --warm-start 5 --set tree_depth=3 --log $out/trials.jsonl --figures $out/figures.jsonl"
 if [ -s "$out/trials.jsonl" ]; then # the trials' iterations as logged: the figures of a step cut off
   say "# the trial step's log, summarised: $py benchmarks/device_throughput.py --summarise $out/trials.jsonl"
   $py benchmarks/device_throughput.py --summarise "$out/trials.jsonl" 2>&1 | tee -a "$log"
@@ -139,12 +140,7 @@ $py benchmarks/device_sweep.py prepare "$sweep_root" $prepare >>"$log" 2>&1
 step sweep "cd $sweep_root && timeout --signal TERM --kill-after 10 $((CAP[sweep] - 25)) $py -m copilot_ray.sweep device_stacked.yaml"
 
 # ----------------------------------------------------------------------------------------------- pack
-step pack "$py -m copilot_ray.carry device_stacked.yaml /tmp/device_sweep.tar.gz --root $sweep_root \
-  && if [ \$(stat -c %s /tmp/device_sweep.tar.gz) -gt $((15 * 1024 * 1024)) ]; then \
-       echo \"in flight: \$((\$(stat -c %s /tmp/device_sweep.tar.gz) / 1048576)) MiB, over the 16 MiB a file comes back with: packed --report-only\"; \
-       $py -m copilot_ray.carry device_stacked.yaml $out/device_sweep.tar.gz --root $sweep_root --report-only; \
-     else mv /tmp/device_sweep.tar.gz $out/device_sweep.tar.gz; fi; \
-  $py benchmarks/device_sweep.py rate $sweep_root --figures $out/figures.jsonl"
+step pack "$py benchmarks/device_sweep.py pack $sweep_root $out/device_sweep.tar.gz --figures $out/figures.jsonl"
 
 # -------------------------------------------------------------------------------------- stacked trial
 if [ "$cuda" = 1 ]; then

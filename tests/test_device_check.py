@@ -233,6 +233,24 @@ def test_the_device_sweep_is_a_valid_stacked_gpu_spec_and_its_cpu_cut_is_small(t
         device_sweep.prepare(tmp_path / "root", cpu=True)
 
 
+def test_pack_packs_again_report_only_when_the_archive_could_not_come_back(tmp_path, monkeypatch):
+    from copilot_ray import carry
+
+    calls = []
+
+    def fake_carry(argv):
+        calls.append(argv)
+        Path(argv[1]).write_bytes(b"x" * (100 if "--report-only" in argv else 5000))
+        return 0
+
+    monkeypatch.setattr(carry, "main", fake_carry)
+    archive = tmp_path / "a.tar.gz"
+    assert device_sweep.pack(tmp_path, archive, limit=1000) == 0
+    assert [c[-1] for c in calls] == [str(tmp_path), "--report-only"] and archive.stat().st_size == 100
+    calls.clear()
+    assert device_sweep.pack(tmp_path, archive, limit=10_000) == 0 and len(calls) == 1
+
+
 def test_the_sweeps_rates_come_from_its_trials_tune_results(tmp_path):
     from copilot_ray import keys
 
@@ -265,9 +283,7 @@ def test_the_sweeps_rates_come_from_its_trials_tune_results(tmp_path):
 def test_the_spec_the_check_runs_is_the_shipped_file():
     data = yaml.safe_load((ROOT / "sweeps" / "device_stacked.yaml").read_text())
     assert data["name"] == device_sweep.NAME
-    assert (
-        "benchmarks/device_sweep.py prepare" in SCRIPT and "copilot_ray.carry device_stacked.yaml" in SCRIPT
-    )
+    assert "benchmarks/device_sweep.py prepare" in SCRIPT and "benchmarks/device_sweep.py pack" in SCRIPT
 
 
 def test_the_device_sweep_cut_packed_and_unpacked_at_its_root_resumes_here(

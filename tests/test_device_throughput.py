@@ -165,7 +165,10 @@ class _FakeRay:
 
 
 class _FakeTrial:
-    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current=True):
+    def __init__(
+        self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current, settings
+    ):
+        assert settings == {"tree_depth": 3}
         if kind == "cpu before":
             raise RuntimeError("could not build\nsecond line")
         self.kind = kind
@@ -182,7 +185,9 @@ class _FakeTrial:
 def test_a_trial_that_raises_takes_only_its_own_figures(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "ray", _FakeRay())
     monkeypatch.setattr(device_throughput, "Trial", _FakeTrial)
-    args = device_throughput.parse_args(["--seconds", "1", "--log", str(tmp_path / "t.jsonl")])
+    args = device_throughput.parse_args(
+        ["--seconds", "1", "--log", str(tmp_path / "t.jsonl"), "--set", "tree_depth=3"]
+    )
     kinds = [("gpu", 1.0, 1, True), ("cpu baseline", 0.0, 1, True), ("cpu before", 0.0, 1, False)]
     by_trial, devices, errors, _ = device_throughput.run_trials(args, kinds)
     assert errors == {
