@@ -12,7 +12,8 @@
 #   trials          the update alone (no compiler) and its captured agreement, then two CO-PILOT trials
 #                   sharing the GPU beside a CPU twin and a CPU trial on the old paths (device_throughput.py)
 #   sweep           sweeps/device_stacked.yaml: 2 configurations x 16 seeds stacked per trial, tracked in
-#                   MLflow, from /tmp/copilot_device_sweep (benchmarks/device_sweep.py), SIGTERM at its cap
+#                   MLflow, from /tmp/copilot_device_sweep (benchmarks/device_sweep.py); SIGTERM 45 s
+#                   before its cap, so that Tune saves its state and stops the trials within it
 #   pack            its store by `python -m copilot_ray.carry` into OUT/device_sweep.tar.gz (--report-only
 #                   when the in-flight archive is over 15 MiB: a file back from OUT is at most 16 MiB)
 #   stacked_trial   one seed's trial alone on the GPU, then 64 seeds stacked in one trial (stacked_trial.py)
@@ -42,11 +43,11 @@ TOTAL=480 # seconds: the whole command (a call's 10 minutes less the machine's s
 STEPS=(
   "install 40"
   "stacked_update 40"
-  "trials 120"
-  "sweep 150"
-  "pack 15"
-  "stacked_trial 45"
-  "compile 45"
+  "trials 110"
+  "sweep 165"
+  "pack 30"
+  "stacked_trial 35"
+  "compile 35"
   "figures 20"
 )
 declare -A CAP
@@ -125,7 +126,7 @@ step stacked_update "$py benchmarks/stacked_update.py --seeds 1 16 64 --seconds 
 
 # --------------------------------------------------------------------------------------------- trials
 step trials "$py benchmarks/device_throughput.py --update-paths plain --updates-seconds 3 --trials 2 \
-  --gpus-per-trial 0.5 --cpu-baseline --batches-baseline --cpus-per-trial $per_trial --seconds 45 \
+  --gpus-per-trial 0.5 --cpu-baseline --batches-baseline --cpus-per-trial $per_trial --seconds 40 \
   --warm-start 5 --set tree_depth=3 --log $out/trials.jsonl --figures $out/figures.jsonl"
 if [ -s "$out/trials.jsonl" ]; then # the trials' iterations as logged: the figures of a step cut off
   say "# the trial step's log, summarised: $py benchmarks/device_throughput.py --summarise $out/trials.jsonl"
@@ -137,7 +138,7 @@ fi
 # ---------------------------------------------------------------------------------------------- sweep
 rm -rf "$sweep_root"
 $py benchmarks/device_sweep.py prepare "$sweep_root" $prepare >>"$log" 2>&1
-step sweep "cd $sweep_root && timeout --signal TERM --kill-after 10 $((CAP[sweep] - 25)) $py -m copilot_ray.sweep device_stacked.yaml"
+step sweep "cd $sweep_root && timeout --signal TERM --kill-after 25 $((CAP[sweep] - 45)) $py -m copilot_ray.sweep device_stacked.yaml"
 
 # ----------------------------------------------------------------------------------------------- pack
 step pack "$py benchmarks/device_sweep.py pack $sweep_root $out/device_sweep.tar.gz --figures $out/figures.jsonl"
