@@ -347,7 +347,7 @@ class Reader:
             value, text = self.value(f)
             if text is None:
                 text = self.why_not(f)
-            target = f" [target {f.target}]" if f.target and value is not None else ""
+            target = f" [target {f.target}]" if f.target and value is not None and self.cuda else ""
             out.append(f"figure {f.key}: {f.label}: {text}{target}")
             records.append({"key": f.key, "label": f.label, "value": value, "unit": f.unit, "line": text})
         return out, records

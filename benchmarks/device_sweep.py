@@ -144,18 +144,25 @@ def pack(root: Path, archive: Path, limit: int = PACK_LIMIT) -> int:
 
 
 def unpack(archive: Path) -> Path:
+    root, _ = unpack_with_parts(archive)
+    return root
+
+
+def unpack_with_parts(archive: Path) -> tuple[Path, dict[str, str]]:
+    """(the root it went back to, each part's state as packed: finished, unfinished, not started)."""
     with tarfile.open(archive) as tar:
         manifest = next((m for m in tar.getmembers() if m.name.endswith("/carry.json")), None)
         if manifest is None:
             raise SystemExit(f"error: {archive} holds no carry.json: not an archive of copilot_ray.carry")
-        root = Path(json.loads(tar.extractfile(manifest).read())["root"])
+        packed = json.loads(tar.extractfile(manifest).read())
+        root = Path(packed["root"])
         if (root / "results").exists():
             raise SystemExit(f"error: {root / 'results'} exists: move it aside to unpack {archive} there")
         root.mkdir(parents=True, exist_ok=True)
         tar.extractall(root, filter="data")
     resolved = root / "results" / NAME / "spec.yaml"
     (root / f"{NAME}.yaml").write_text(resolved.read_text())
-    return root
+    return root, packed.get("parts", {})
 
 
 def main(argv=None) -> int:
@@ -192,11 +199,15 @@ def main(argv=None) -> int:
                 f.writelines(json.dumps({"source": "device_sweep", **row}) + "\n" for row in rows)
         return code
     else:
-        root = unpack(args.archive)
-        print(
-            f"unpacked {args.archive} into {root}; resume: cd {root} && PYTHONPATH={REPO} {sys.executable} "
-            f"-m copilot_ray.sweep {NAME}.yaml --resume"
-        )
+        root, parts = unpack_with_parts(args.archive)
+        python = f"PYTHONPATH={REPO} {sys.executable}"
+        print(f"unpacked {args.archive} into {root}: " + ", ".join(f"{k} {v}" for k, v in parts.items()))
+        if any(state != "finished" for state in parts.values()):
+            print(f"resume: cd {root} && {python} -m copilot_ray.sweep {NAME}.yaml --resume")
+        else:
+            print(
+                f"finished: nothing to resume; read it: {python} -m copilot_ray.progress {root / NAME}.yaml --root {root}"
+            )
     return 0
 
 

@@ -160,7 +160,7 @@ fi
 # -------------------------------------------------------------------------------------------- figures
 step figures "$py benchmarks/device_figures.py $out --write"
 if [ "$cuda" != 1 ] && [ -s "${DEVICE_IMPORT_LOG:-/nonexistent}" ]; then
-  say "# imports the GPU machine would refuse (module: distribution, as the guard saw them; each one's caller went on without it):"
+  say "# imports the GPU machine would refuse (processes, distribution, module, as the guard saw them; each one's caller went on without it):"
   cut -f2,3 "$DEVICE_IMPORT_LOG" | sort | uniq -c | tee -a "$log"
   rm -f "$DEVICE_IMPORT_LOG"
 fi
