@@ -61,7 +61,15 @@ from throughput import PHASES, phase_shares  # noqa: E402  (the same phases and 
 
 
 def _config(
-    algorithm: str, layout: str, eval_every: int, warm_start, seed: int, cpus: int, gpus: float, current=True
+    algorithm: str,
+    layout: str,
+    eval_every: int,
+    warm_start,
+    seed: int,
+    cpus: int,
+    gpus: float,
+    current=True,
+    settings: dict | None = None,
 ):
     from copilot_ray.registry import RunContext, get_algorithm
 
@@ -80,14 +88,30 @@ def _config(
     if not current:
         # The paths before the fused update and the lean loop: RLlib's batches and env runner.
         values.update(fused_update=False, lean_traversal=False)
+    values.update(settings or {})
     return get_algorithm(algorithm).build_config(values, run)
 
 
 class Trial:
     """One algorithm in one actor: builds it, trains it for a while, returns per-iteration records."""
 
-    def __init__(self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current=True):
-        self.algo = _config(algorithm, layout, eval_every, warm_start, seed, cpus, gpus, current).build_algo()
+    def __init__(
+        self,
+        algorithm,
+        layout,
+        eval_every,
+        warm_start,
+        seed,
+        cpus,
+        gpus,
+        kind,
+        log,
+        current=True,
+        settings=None,
+    ):
+        self.algo = _config(
+            algorithm, layout, eval_every, warm_start, seed, cpus, gpus, current, settings
+        ).build_algo()
         self.label = {"kind": kind, "trial": seed}
         self.log = log
 
@@ -121,15 +145,19 @@ class Trial:
 
 
 def rates(records: list[dict]) -> dict | None:
-    """Env steps/s, updates/s and phase shares over the iterations after the first (None: fewer than 2)."""
+    """Env steps/s (with and without the evaluation phase), updates/s and phase shares over the iterations
+    after the first (None: fewer than 2)."""
     if len(records) < 2:
         return None
     later = records[1:]
     wall = sum(r["wall_s"] for r in later)
     steps = records[-1]["env_steps"] - records[0]["env_steps"]
     spent = {p: sum(r[p] for r in later) for p in PHASES}
+    evaluation = spent["eval_s"]
     return {
         "env_steps_per_s": steps / wall,
+        # the same iterations less their evaluation phase: the rate a trial evaluating less often tends to
+        "env_steps_per_s_without_eval": steps / (wall - evaluation) if wall > evaluation else None,
         "updates_per_s": sum(r["updates"] for r in later) / wall,
         "shares": phase_shares(spent, wall),
         "iterations": len(later),
@@ -141,29 +169,57 @@ UPDATE_BATCH = 256
 UPDATE_STEPS_PER_CALL = 64
 
 
-def update_rows(seconds: float, threads: int) -> list[str]:
+# `--update-paths`: "plain" rows need no compiler (seconds to warm up); "compiled" ones compile first
+# (a minute or more on a GPU), so a check runs them after the trials.
+UPDATE_PATHS = {
+    "plain": [
+        ("cpu", "batches"),
+        ("cpu", "fused eager"),
+        ("cuda", "batches"),
+        ("cuda", "fused eager"),
+        ("cuda", "fused captured"),
+    ],
+    "compiled": [("cuda", "fused compiled + captured")],
+}
+UPDATE_PATHS["all"] = UPDATE_PATHS["plain"] + UPDATE_PATHS["compiled"]
+AGREEMENT_PATHS = {"plain": ["fused captured"], "compiled": ["fused compiled + captured"]}
+AGREEMENT_PATHS["all"] = AGREEMENT_PATHS["plain"] + AGREEMENT_PATHS["compiled"]
+
+
+def _figure(figures: str | None, **record) -> None:
+    """One JSON line per figure as it is measured (`--figures`): what benchmarks/device_figures.py reads,
+    so a run cut off keeps every row it finished."""
+    if figures:
+        with open(figures, "a") as f:
+            f.write(json.dumps({"source": "device_throughput", **record}) + "\n")
+
+
+def _first_line(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
+
+
+def update_rows(seconds: float, threads: int, paths: str = "all", figures: str | None = None) -> list[str]:
     """The SAC update alone, per device and path (module docstring): one printed line per row."""
     import torch
 
-    rows = [("cpu", "batches"), ("cpu", "fused eager")]
+    rows = [(d, p) for d, p in UPDATE_PATHS[paths] if d == "cpu" or torch.cuda.is_available()]
     lines = []
-    if torch.cuda.is_available():
-        rows += [("cuda", "batches"), ("cuda", "fused eager"), ("cuda", "fused captured")]
-        rows += [("cuda", "fused compiled + captured")]
-    else:
-        lines.append("update alone on the GPU: skipped, torch sees no CUDA device on this machine")
+    if not torch.cuda.is_available() and any(d == "cuda" for d, _ in UPDATE_PATHS[paths]):
+        lines.append("update alone on the GPU: skipped: no CUDA device (torch sees none on this machine)")
         print(lines[-1], flush=True)
     for device, path in rows:
         try:
-            line = _update_row(device, path, seconds, threads)
+            line, rate, warm = _update_row(device, path, seconds, threads)
+            _figure(figures, figure="update alone", device=device, path=path, updates_per_s=rate, warm_s=warm)
         except Exception as exc:  # one failing row (e.g. a compiler missing) must not lose the others
-            line = f"update alone, {device}, {path}: failed: {type(exc).__name__}: {str(exc).splitlines()[0]}"
+            line = f"update alone, {device}, {path}: failed: {_first_line(exc)}"
+            _figure(figures, figure="update alone", device=device, path=path, error=_first_line(exc))
         lines.append(line)
         print(line, flush=True)
     return lines
 
 
-def agreement_rows(threads: int) -> list[str]:
+def agreement_rows(threads: int, paths: str = "all", figures: str | None = None) -> list[str]:
     """On a GPU: the captured (and compiled + captured) fused update against the eager one, from the same
     parameters, replay and seed, over 8 steps (3 eager warm-up calls, the capture, 4 replays): the largest
     parameter difference, which float noise keeps far below 1e-3."""
@@ -172,13 +228,15 @@ def agreement_rows(threads: int) -> list[str]:
     if not torch.cuda.is_available():
         return []
     lines = []
-    for path in ("fused captured", "fused compiled + captured"):
+    for path in AGREEMENT_PATHS[paths]:
         try:
             diff = _largest_difference("fused eager", path, threads)
             verdict = "agrees" if diff < 1e-3 else "DISAGREES"
             line = f"{path} against fused eager on the GPU, 8 steps: {verdict} (largest parameter difference {diff:.2e})"
+            _figure(figures, figure="agreement", path=path, largest_difference=diff, agrees=diff < 1e-3)
         except Exception as exc:
-            line = f"{path} against fused eager on the GPU: failed: {type(exc).__name__}: {str(exc).splitlines()[0]}"
+            line = f"{path} against fused eager on the GPU: failed: {_first_line(exc)}"
+            _figure(figures, figure="agreement", path=path, error=_first_line(exc))
         lines.append(line)
         print(line, flush=True)
     return lines
@@ -247,7 +305,7 @@ def _update_setup(device: str, path: str, threads: int):
     return learner_group, replay
 
 
-def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
+def _update_row(device: str, path: str, seconds: float, threads: int) -> tuple[str, float, float]:
     import numpy as np
     import torch
 
@@ -282,10 +340,11 @@ def _update_row(device: str, path: str, seconds: float, threads: int) -> str:
     name = (
         torch.cuda.get_device_name(learner.device) if learner.device.type == "cuda" else f"{threads} threads"
     )
-    return (
+    line = (
         f"update alone, {device} ({name}), {path}: {rate:.0f} updates/s ({1000 / rate:.2f} ms each; "
         f"{steps} steps in {seconds:.0f} s, warm-up {warm:.1f} s)"
     )
+    return line, rate, warm
 
 
 def _cuda_available() -> bool:
@@ -306,6 +365,15 @@ SUITE = {
 }
 
 
+def _setting(text: str) -> tuple[str, object]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
+    import yaml
+
+    return key, yaml.safe_load(value)
+
+
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--algorithm", default="copilot", help="a registered RLlib algorithm (default copilot)")
@@ -323,6 +391,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--updates-seconds", type=float, default=0.0, help="time the update alone, per row (0: not at all)"
     )
     p.add_argument(
+        "--update-paths",
+        choices=sorted(UPDATE_PATHS),
+        default="all",
+        help="the update-alone rows: plain (no compiler), compiled (torch.compile first), or all (default)",
+    )
+    p.add_argument("--updates-only", action="store_true", help="the update-alone rows only: no trials")
+    p.add_argument(
         "--suite",
         action="store_true",
         help="the one-command GPU check: --updates-seconds 8 --trials 1 --gpus-per-trial 1 --cpu-baseline "
@@ -337,8 +412,23 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="CO-PILOT's planner_warm_start (phases before the first env step, in the first iteration only, "
         "which the rates leave out; default: the setting's own, 1000, ~100 s)",
     )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        type=_setting,
+        metavar="KEY=VALUE",
+        help="an algorithm setting for every trial (repeatable; e.g. tree_depth=3: shorter iterations, so a "
+        "trial cut off after a minute still has a rate)",
+    )
     p.add_argument("--budget", type=int, default=200_000, help="env steps per trial for trials/hour")
     p.add_argument("--log", default=None, help="append every trial's iterations to this JSON-lines file")
+    p.add_argument(
+        "--figures",
+        default=None,
+        metavar="FILE",
+        help="append every update-alone row as a JSON line (benchmarks/device_figures.py reads it)",
+    )
     p.add_argument(
         "--summarise", default=None, metavar="FILE", help="print the summary of a --log file; run nothing"
     )
@@ -367,6 +457,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     # GPU trials only count where they run (without a GPU they are skipped, saying so).
     trials = args.trials if args.gpus_per_trial == 0 or _cuda_available() else 0
     cpus = args.cpus_per_trial * (trials + int(args.cpu_baseline) + int(args.batches_baseline))
+    if args.updates_only:
+        cpus = 0
     if args.cpus_per_trial >= 1 and cpus > (os.cpu_count() or 1):
         bad.append(
             ("--cpus-per-trial", args.cpus_per_trial, f"trials x CPUs ({cpus}) over {os.cpu_count()} cores")
@@ -380,24 +472,33 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-def summary_lines(by_trial: dict[tuple[str, int], list[dict]], devices: dict, budget: int) -> list[str]:
-    """Per trial kind (in the order met): the rates of its trials that have one, and those that do not."""
+def summary_lines(
+    by_trial: dict[tuple[str, int], list[dict]], devices: dict, budget: int, errors: dict | None = None
+) -> list[str]:
+    """Per trial kind (in the order met): the rates of its trials that have one, and those that do not;
+    a trial that raised is named with its error, and its kind's other trials keep their figures."""
+    errors = errors or {}
     lines = []
-    for kind in dict.fromkeys(k for k, _ in by_trial):
+    for kind in dict.fromkeys(k for k, _ in [*by_trial, *errors]):
         trials = {t: r for (k, t), r in by_trial.items() if k == kind}
         rows = [x for x in (rates(r) for r in trials.values()) if x is not None]
         short = sorted(t for t, r in trials.items() if len(r) < 2)
         seen = sorted({devices[(kind, t)] for t in trials if (kind, t) in devices})
         head = f"{kind}: {len(trials)} trial(s), learner on {', '.join(seen) or '?'}"
+        for (k, t), error in sorted(errors.items()):
+            if k == kind:
+                lines.append(f"{kind}: trial {t} failed: {error}")
         if not rows:
             lines.append(f"{head}: no rate (no trial finished 2 iterations)")
             continue
+        without = [r["env_steps_per_s_without_eval"] for r in rows if r["env_steps_per_s_without_eval"]]
         per_trial = statistics.mean(r["env_steps_per_s"] for r in rows)
         aggregate = per_trial * len(trials)  # the trials without a rate ran too: count them at the mean
         shares = {p: statistics.mean(r["shares"][p] for r in rows) for p in rows[0]["shares"]}
         lines.append(
-            f"{head}: {per_trial:.0f} env steps/s per trial (min {min(r['env_steps_per_s'] for r in rows):.0f}), "
-            f"{aggregate:.0f} in aggregate, "
+            f"{head}: {per_trial:.0f} env steps/s per trial (min {min(r['env_steps_per_s'] for r in rows):.0f}"
+            + (f"; without evaluation {statistics.mean(without):.0f}" if without else "")
+            + f"), {aggregate:.0f} in aggregate, "
             f"{statistics.mean(r['updates_per_s'] for r in rows):.0f} SAC updates/s per trial, "
             f"{aggregate * 3600 / budget:.2f} trials/hour at {budget} env steps; "
             f"iterations measured {min(r['iterations'] for r in rows)}-{max(r['iterations'] for r in rows)}, "
@@ -414,26 +515,31 @@ def summary_lines(by_trial: dict[tuple[str, int], list[dict]], devices: dict, bu
     return lines
 
 
-def read_log(path: str) -> tuple[dict[tuple[str, int], list[dict]], dict]:
-    """A --log file back as {(kind, trial): records in order} and {(kind, trial): device}."""
+def read_log(path: str) -> tuple[dict[tuple[str, int], list[dict]], dict, dict]:
+    """A --log file back as {(kind, trial): records in order}, {(kind, trial): device} and
+    {(kind, trial): error} for the trials that raised."""
     by_trial: dict[tuple[str, int], list[dict]] = {}
-    devices = {}
+    devices, errors = {}, {}
     with open(path) as f:
         for line in f:
             if not line.strip():
                 continue
             row = json.loads(line)
             key = (row.pop("kind"), int(row.pop("trial")))
+            if "error" in row:  # the trial raised: its iterations so far stay, the error is said
+                errors[key] = row["error"]
+                by_trial.setdefault(key, [])
+                continue
             devices[key] = row.pop("device")
             by_trial.setdefault(key, []).append(row)
-    return by_trial, devices
+    return by_trial, devices, errors
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.summarise is not None:
-        by_trial, devices = read_log(args.summarise)
-        print("\n".join(summary_lines(by_trial, devices, args.budget)))
+        by_trial, devices, errors = read_log(args.summarise)
+        print("\n".join(summary_lines(by_trial, devices, args.budget, errors)))
         return 0
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     import ray
@@ -447,7 +553,24 @@ def main(argv=None) -> int:
         + f"; torch {torch.__version__}, ray {ray.__version__}",
         flush=True,
     )
+    if args.updates_seconds > 0:
+        update_rows(args.updates_seconds, args.cpus_per_trial, args.update_paths, args.figures)
+        agreement_rows(args.cpus_per_trial, args.update_paths, args.figures)
+        print(f"({time.perf_counter() - started:.0f} s so far)", flush=True)
+    if args.updates_only:
+        return 0
     gpus = args.gpus_per_trial if has_gpu else 0.0
+    kinds = []
+    if args.gpus_per_trial > 0 and not has_gpu:
+        print(f"gpu trial(s): skipped: no CUDA device (torch sees none on this machine; {args.trials} asked)")
+    else:
+        kinds.append(("gpu" if gpus > 0 else "cpu", gpus, args.trials, True))
+    if args.cpu_baseline:
+        kinds.append(("cpu baseline", 0.0, 1, True))
+    if args.batches_baseline:
+        kinds.append(("cpu before", 0.0, 1, False))
+    if not kinds:
+        return 0
     ray.init(
         num_cpus=os.cpu_count(),
         num_gpus=1 if gpus > 0 else None,
@@ -455,53 +578,71 @@ def main(argv=None) -> int:
         log_to_driver=False,
     )
     try:
-        if args.updates_seconds > 0:
-            update_rows(args.updates_seconds, args.cpus_per_trial)
-            agreement_rows(args.cpus_per_trial)
-            print(f"({time.perf_counter() - started:.0f} s so far)", flush=True)
-        kinds = []
-        if args.gpus_per_trial > 0 and not has_gpu:
-            print(f"gpu trial(s): skipped, torch sees no CUDA device on this machine ({args.trials} asked)")
-        else:
-            kinds.append(("gpu" if gpus > 0 else "cpu", gpus, args.trials, True))
-        if args.cpu_baseline:
-            kinds.append(("cpu baseline", 0.0, 1, True))
-        if args.batches_baseline:
-            kinds.append(("cpu before", 0.0, 1, False))
-        actors = []
-        for kind, kind_gpus, n, current in kinds:
-            remote = ray.remote(num_cpus=args.cpus_per_trial, num_gpus=kind_gpus)(Trial)
-            for i in range(n):
-                actor = remote.remote(
-                    args.algorithm,
-                    args.layout,
-                    args.eval_every,
-                    args.warm_start,
-                    i,
-                    args.cpus_per_trial,
-                    kind_gpus,
-                    kind,
-                    args.log and os.path.abspath(args.log),
-                    current,
-                )
-                actors.append(((kind, i), actor))
-        if not actors:
-            return 0
-        devices = ray.get([a.device.remote() for _, a in actors])
-        t0 = time.perf_counter()
-        records = ray.get([a.train_for.remote(args.seconds) for _, a in actors])
-        wall = time.perf_counter() - t0
+        by_trial, devices, errors, wall = run_trials(args, kinds)
     finally:
         ray.shutdown()
     print(
         f"{args.algorithm} on maze-point {args.layout}, evaluation every {args.eval_every} env steps "
-        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial; {wall:.0f} s of training, "
+        f"(100 validation + 100 test tasks), {args.cpus_per_trial} CPUs per trial"
+        + "".join(f", {k}={v}" for k, v in args.set)
+        + f"; {wall:.0f} s of training, "
         f"{time.perf_counter() - started:.0f} s in all"
     )
-    by_trial = {key: r for (key, _), r in zip(actors, records, strict=True)}
-    seen = {key: d for (key, _), d in zip(actors, devices, strict=True)}
-    print("\n".join(summary_lines(by_trial, seen, args.budget)))
+    print("\n".join(summary_lines(by_trial, devices, args.budget, errors)))
     return 0
+
+
+def run_trials(args, kinds) -> tuple[dict, dict, dict, float]:
+    """Every kind's trials as actors, side by side, each until `--seconds` have passed: (records by
+    trial, devices, errors, wall seconds). A trial that raises (its actor lost, a CUDA error) is an error
+    of its own, said as it happens and written to the log; the others' figures stay."""
+    import ray
+
+    log = args.log and os.path.abspath(args.log)
+    actors = []
+    for kind, kind_gpus, n, current in kinds:
+        remote = ray.remote(num_cpus=args.cpus_per_trial, num_gpus=kind_gpus)(Trial)
+        for i in range(n):
+            actor = remote.remote(
+                args.algorithm,
+                args.layout,
+                args.eval_every,
+                args.warm_start,
+                i,
+                args.cpus_per_trial,
+                kind_gpus,
+                kind,
+                log,
+                current,
+                dict(args.set),
+            )
+            actors.append(((kind, i), actor))
+    devices, errors, records = {}, {}, {}
+
+    def failed(key, exc) -> None:
+        errors[key] = _first_line(exc)
+        records[key] = []
+        print(f"{key[0]}: trial {key[1]} failed: {errors[key]}", flush=True)
+        if log:
+            with open(log, "a") as f:
+                f.write(json.dumps({"kind": key[0], "trial": key[1], "error": errors[key]}) + "\n")
+
+    for key, actor in actors:  # one at a time: an actor that failed to build fails alone
+        try:
+            devices[key] = ray.get(actor.device.remote())
+        except Exception as exc:  # noqa: BLE001 - any failure of one trial is that trial's
+            failed(key, exc)
+    t0 = time.perf_counter()
+    pending = {actor.train_for.remote(args.seconds): key for key, actor in actors if key not in errors}
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        key = pending.pop(ready[0])
+        try:
+            records[key] = ray.get(ready[0])
+        except Exception as exc:  # noqa: BLE001
+            failed(key, exc)
+    by_trial = {key: records[key] for key, _ in actors}
+    return by_trial, devices, errors, time.perf_counter() - t0
 
 
 if __name__ == "__main__":

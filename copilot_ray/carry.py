@@ -1,6 +1,6 @@
 """Pack a sweep file's results into one archive that another machine (or session) resumes from.
 
-    python -m copilot_ray.carry SPEC.yaml OUT.tar.gz [--root DIR] [--final-checkpoints]
+    python -m copilot_ray.carry SPEC.yaml OUT.tar.gz [--root DIR] [--final-checkpoints | --report-only]
 
 A comparison runs for longer than one machine may live. The archive holds what ``--resume`` needs:
 
@@ -15,9 +15,17 @@ A comparison runs for longer than one machine may live. The archive holds what `
   others go as empty folders, so that every folder Tune's state names still exists when Tune deletes
   it by path as the trial goes on;
 * the sweep's log, ``<storage>/<file stem>.log``, when there is one;
+* with ``--report-only``, no Tune folder at all: the store and the small artifacts, what a report reads
+  (``analysis.report``, ``progress``) and what a results page commits. ``--resume`` from it skips the
+  finished parts and starts the unfinished ones over (their unfinished runs discarded first).
 * ``<storage>/carry.json``: the folder and the commit it was packed from, which
   ``scripts/run_at_commit.sh --carry`` checks: a store continues only at the commit that began it, and
   at the same path (Tune's state and every trial's config name absolute paths).
+
+It prints what the archive holds (the store, the checkpoints of unfinished trials, the rest). An experiment
+in flight carries its unfinished trials' latest checkpoints (their replay buffers with them: megabytes a
+seed), which only ``--resume`` needs: commit such an archive at most once, at a session's end, and the
+finished store (which has none) once; a results page's store is best packed ``--report-only``.
 
 Stop the sweep first (SIGTERM: Tune saves its state). ``--root`` (default: the current folder) is the
 folder the sweep was started from, e.g. the worktree of ``scripts/run_at_commit.sh``: SPEC is read there
@@ -164,16 +172,20 @@ def _checkpoint_folder(path: Path) -> Path | None:
     return None
 
 
-def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool = False) -> list[PartState]:
+def pack(
+    spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool = False, report_only: bool = False
+) -> list[PartState]:
     """Writes the archive (see the module's doc) and returns each part's state as packed."""
     specs = load_specs(spec_path)  # relative storage and store paths resolve against the current folder
     db = _store_file(specs, root)
     states = part_states(specs)
     # The Tune folders of finished parts stay behind (--resume skips those parts by the store).
-    finished_tune = {sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if st.finished}
+    finished_tune = {
+        sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if st.finished or report_only
+    }
     restores: dict[Path, Path] = {}
     for spec, state in zip(specs, states, strict=True):
-        if not state.finished:
+        if not state.finished and not report_only:
             restores |= _checkpoints_tune_restores((root / sweep_root(spec) / "tune").resolve())
 
     def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
@@ -200,6 +212,7 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
         "commit": tracking.git_commit(root),
         "spec": str(spec_path),
         "parts": {s.name: s.label for s in states},
+        "report_only": report_only,
     }
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, tarfile.open(out, "w:gz") as archive:
@@ -215,6 +228,50 @@ def pack(spec_path: str | Path, out: Path, root: Path, final_checkpoints: bool =
     return states
 
 
+# What an archive's members are, in the order `contents` names them.
+KINDS = (
+    "the MLflow store",
+    "checkpoints of unfinished trials (for --resume only)",
+    "Tune's state and trial logs",
+    "run artifacts",
+    "logs and the rest",
+)
+
+
+def contents(archive: Path) -> dict[str, int]:
+    """Bytes (unpacked) per kind of member (KINDS) of an archive `pack` wrote."""
+    sizes = dict.fromkeys(KINDS, 0)
+    with tarfile.open(archive) as tar:
+        for member in tar.getmembers():
+            if not member.isfile():
+                continue
+            parts = Path(member.name).parts
+            if member.name.endswith(".db") and "tune" not in parts and "mlartifacts" not in parts:
+                kind = KINDS[0] if not member.name.endswith("optuna.db") else KINDS[4]
+            elif "tune" in parts and any(p.startswith("checkpoint_") for p in parts):
+                kind = KINDS[1]
+            elif "tune" in parts:
+                kind = KINDS[2]
+            elif "mlartifacts" in parts:
+                kind = KINDS[3]
+            else:
+                kind = KINDS[4]
+            sizes[kind] += member.size
+    return sizes
+
+
+def contents_line(archive: Path) -> str:
+    sizes = contents(archive)
+    held = ", ".join(f"{kind} {n / 1e6:.1f} MB" for kind, n in sizes.items() if n)
+    line = f"holds (unpacked): {held or 'nothing'}"
+    if sizes[KINDS[1]]:
+        line += (
+            "; an experiment in flight: commit such an archive only at a session's end, and the finished "
+            "store once (or pack --report-only, without Tune's folders)"
+        )
+    return line
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog=python_module("copilot_ray.carry"), description=__doc__.split("\n\n")[0])
     p.add_argument(
@@ -222,8 +279,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("out", help="the archive to write (.tar.gz)")
     p.add_argument("--root", default=".", help="the folder the sweep was started from (default: here)")
-    p.add_argument(
+    which = p.add_mutually_exclusive_group()
+    which.add_argument(
         "--final-checkpoints", action="store_true", help="keep the final checkpoints logged as run artifacts"
+    )
+    which.add_argument(
+        "--report-only",
+        action="store_true",
+        help="no Tune folders: the store and small artifacts a report reads (unfinished parts restart on --resume)",
     )
     return p.parse_args(argv)
 
@@ -242,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = spec if spec.is_absolute() else root / spec  # the file as it ran there, not this checkout's
     try:
         with contextlib.chdir(root):  # the spec's relative storage and store resolve where it was started
-            states = pack(spec, out, root, args.final_checkpoints)
+            states = pack(spec, out, root, args.final_checkpoints, args.report_only)
     except SpecError as err:
         for line in err.problems:
             print(line, file=sys.stderr)
@@ -253,6 +316,7 @@ def main(argv: list[str] | None = None) -> int:
     for state in states:
         print(state.line())
     print(f"packed {out} ({out.stat().st_size / 1e6:.1f} MB) from {root}")
+    print(contents_line(out))
     return 0
 
 

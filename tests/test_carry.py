@@ -12,6 +12,7 @@ import tarfile
 from pathlib import Path
 from types import SimpleNamespace
 
+import pytest
 import yaml
 
 from copilot_ray import carry, sweep, tracking
@@ -146,3 +147,30 @@ def test_the_spec_is_read_where_the_sweep_ran(tmp_path, monkeypatch, capsys):
     printed = capsys.readouterr().out
     assert "cut: unfinished, with its Tune folder" in printed and f"packed {out}" in printed
     assert "results/cut/tune/cut/trial_1/checkpoint_000002/state.pkl" in _names(out)
+
+
+def test_it_says_what_the_archive_holds_and_report_only_leaves_every_tune_folder_out(tmp_path, capsys):
+    """An experiment in flight carries its unfinished trials' checkpoints (for --resume only), and says so;
+    --report-only packs what a report reads: the store and the artifacts, no Tune folder at all."""
+    path, _, _ = _three_parts(tmp_path)
+    out = tmp_path / "in_flight.tar.gz"
+    assert carry.main([str(path), str(out), "--root", str(tmp_path)]) == 0
+    held = capsys.readouterr().out.strip().splitlines()[-1]
+    assert held.startswith("holds (unpacked): the MLflow store ")
+    assert "checkpoints of unfinished trials (for --resume only) 0.0 MB" in held
+    assert "an experiment in flight: commit such an archive only at a session's end" in held
+    sizes = carry.contents(out)
+    assert sizes["checkpoints of unfinished trials (for --resume only)"] == len(b"weights")
+    assert sizes["run artifacts"] == 2 * len("trial: {}\n")  # the final checkpoints are not there
+
+    report = tmp_path / "report.tar.gz"
+    assert carry.main([str(path), str(report), "--root", str(tmp_path), "--report-only"]) == 0
+    held = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "checkpoints" not in held and "in flight" not in held
+    names = _names(report)
+    assert not any("/tune" in n for n in names)
+    assert "results/carried.db" in names and "results/cut/mlartifacts/run1/artifacts/config.yaml" in names
+    with tarfile.open(report) as tar:
+        assert json.loads(tar.extractfile("results/carry.json").read())["report_only"] is True
+    with pytest.raises(SystemExit):  # the two ask for opposite things
+        carry.parse_args([str(path), str(report), "--report-only", "--final-checkpoints"])

@@ -110,3 +110,111 @@ def test_without_a_gpu_the_skipped_gpu_trial_takes_no_cores(monkeypatch, capsys)
     with pytest.raises(SystemExit) as done:  # with a GPU its trial needs a third core
         device_throughput.parse_args(["--suite", "--cpus-per-trial", "1"])
     assert done.value.code == 2 and "trials x CPUs (3) over 2 cores" in capsys.readouterr().err
+
+
+def test_the_rate_without_evaluation_leaves_the_evaluation_phase_out():
+    records = [
+        _record(1_000, 500.0, 900, 100.0, 80.0, 5.0),
+        _record(3_000, 10.0, 2_000, 6.0, 5.0, 4.0),
+        _record(5_000, 10.0, 2_000, 6.0, 5.0, 4.0),
+    ]
+    r = device_throughput.rates(records)
+    assert r["env_steps_per_s"] == pytest.approx(4_000 / 20)
+    assert r["env_steps_per_s_without_eval"] == pytest.approx(4_000 / 12)
+    line = device_throughput.summary_lines({("gpu", 0): records}, {("gpu", 0): "cuda:0"}, 200_000)[0]
+    assert "200 env steps/s per trial (min 200; without evaluation 333)" in line
+
+
+class _Ref:
+    def __init__(self, fn):
+        self.fn = fn
+
+
+class _FakeRay:
+    """Enough of ray for run_trials: actors built in this process, results got one at a time."""
+
+    def remote(self, **resources):
+        def wrap(cls):
+            class Handle:
+                def __init__(self, *args):
+                    try:
+                        self.obj, self.error = cls(*args), None
+                    except Exception as exc:  # a real actor fails at its first call
+                        self.obj, self.error = None, exc
+
+                def __getattr__(self, name):
+                    def call(*a):
+                        def run():
+                            if self.error is not None:
+                                raise self.error
+                            return getattr(self.obj, name)(*a)
+
+                        return _Ref(run)
+
+                    return type("M", (), {"remote": staticmethod(call)})
+
+            return type("Remote", (), {"remote": staticmethod(Handle)})
+
+        return wrap
+
+    def get(self, ref):
+        return ref.fn()
+
+    def wait(self, refs, num_returns=1):
+        return refs[:1], refs[1:]
+
+
+class _FakeTrial:
+    def __init__(
+        self, algorithm, layout, eval_every, warm_start, seed, cpus, gpus, kind, log, current, settings
+    ):
+        assert settings == {"tree_depth": 3}
+        if kind == "cpu before":
+            raise RuntimeError("could not build\nsecond line")
+        self.kind = kind
+
+    def device(self):
+        return "cuda:0" if self.kind == "gpu" else "cpu"
+
+    def train_for(self, seconds):
+        if self.kind == "gpu":
+            raise RuntimeError("CUDA error: an illegal memory access")
+        return [_record(1_000, 50.0, 900, 40.0, 30.0, 5.0), _record(3_000, 10.0, 2_000, 8.0, 6.0, 1.0)]
+
+
+def test_a_trial_that_raises_takes_only_its_own_figures(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "ray", _FakeRay())
+    monkeypatch.setattr(device_throughput, "Trial", _FakeTrial)
+    args = device_throughput.parse_args(
+        ["--seconds", "1", "--log", str(tmp_path / "t.jsonl"), "--set", "tree_depth=3"]
+    )
+    kinds = [("gpu", 1.0, 1, True), ("cpu baseline", 0.0, 1, True), ("cpu before", 0.0, 1, False)]
+    by_trial, devices, errors, _ = device_throughput.run_trials(args, kinds)
+    assert errors == {
+        ("gpu", 0): "RuntimeError: CUDA error: an illegal memory access",
+        ("cpu before", 0): "RuntimeError: could not build",
+    }
+    lines = device_throughput.summary_lines(by_trial, devices, 200_000, errors)
+    assert "gpu: trial 0 failed: RuntimeError: CUDA error" in lines[0]
+    assert any(line.startswith("cpu baseline: 1 trial(s), learner on cpu: 200 env steps/s") for line in lines)
+    # the log says so too, and reads back the same
+    again = device_throughput.read_log(str(tmp_path / "t.jsonl"))
+    assert again[2] == errors
+
+
+def test_update_paths_choose_the_rows_and_each_row_is_a_figure(monkeypatch, tmp_path, capsys):
+    import json
+
+    monkeypatch.setattr(device_throughput, "_update_row", lambda d, p, s, t: (f"row {d} {p}", 100.0, 0.5))
+    figures = tmp_path / "f.jsonl"
+    cuda = pytest.importorskip("torch").cuda.is_available()
+    lines = device_throughput.update_rows(1.0, 1, "plain", str(figures))
+    rows = [json.loads(line) for line in figures.read_text().splitlines()]
+    assert [(r["device"], r["path"]) for r in rows][:2] == [("cpu", "batches"), ("cpu", "fused eager")]
+    if not cuda:
+        assert (
+            lines[0] == "update alone on the GPU: skipped: no CUDA device (torch sees none on this machine)"
+        )
+        assert len(rows) == 2
+        assert device_throughput.update_rows(1.0, 1, "compiled", str(figures)) == [lines[0]]
+    assert not device_throughput.parse_args(["--updates-only", "--cpus-per-trial", "10000"]).batches_baseline
