@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from copilot_ray.commands import python_module
-from copilot_ray.keys import GIT_COMMIT_TAG, SUCCESS_METRICS
+from copilot_ray.keys import GIT_COMMIT_TAG, PLANNER_WARM_START_COST, SUCCESS_METRICS
 from copilot_ray.privileges import DESCRIPTIONS
 
 from . import stats, tables, target
@@ -171,8 +171,9 @@ def paired_blocks(frame, reference=None) -> list[tuple]:
         "(Wilcoxon's treatment; the pairs column says how many), tied |differences| share their average "
         "rank, and then p is enumerated over all 2^n sign patterns of those ranks (scipy's exact table "
         "assumes no ties); every difference 0: p = 1. W = the smaller of the rank sums of positive (W+) and "
-        "negative (W-) differences. Holm's step-down correction over every test in this table (one family: "
-        "the comparisons against the reference, both figures); the reading on the adjusted p at alpha "
+        "negative (W-) differences. Holm's step-down correction over the tests of one figure (a family "
+        "per figure: the comparisons against the reference on final success, and apart from them those "
+        "on its AUC); the reading on the adjusted p at alpha "
         f"{stats.PAIRED_ALPHA:g}: ahead (the reference higher), behind, not separated. The smallest "
         f"two-sided p n pairs can give, 2 / 2^n ({floor})"
         + (
@@ -182,7 +183,33 @@ def paired_blocks(frame, reference=None) -> list[tuple]:
         )
         + ". Seeds that only one side has are left out (paired.csv: unpaired_seeds)."
     )
-    return [head, ("p", why), ("table", tables.paired_table(frame))]
+    return [head, ("p", why), ("p", _warm_start_words(frame)), ("table", tables.paired_table(frame))]
+
+
+def _warm_start_words(frame) -> str:
+    """The pairing check, said before the table: do the paired rows share each seed's planner warm start?"""
+    checks = frame.drop_duplicates(["reference", "other"])
+    broken = checks[checks["warm_start"].str.startswith("differs")]
+    unknown = checks[checks["warm_start"] == "not logged"]
+    words = (
+        "Pairing check (the warm start column): two rows pair seed for seed only if the seed ran the same "
+        "planner warm start in both; the report compares each seed's logged warm-start cost "
+        f"(`{PLANNER_WARM_START_COST}`) between them, to the bit. "
+    )
+    if not broken.empty:
+        names = "; ".join(
+            f"{r['reference']} and {r['other']}: {r['warm_start']}" for _, r in broken.iterrows()
+        )
+        return words + f"**The pairing is broken** for {names}: their paired tests do not compare twins."
+    if len(unknown) == len(checks):
+        return (
+            words + "No pair logged it (rows without a planner, or older runs): the pairing is not checked."
+        )
+    shared = ", ".join(
+        f"{r['other']}" for _, r in checks.iterrows() if r["warm_start"] == tables.WARM_START_SHARED
+    )
+    rest = f"; not logged for {', '.join(unknown['other'])}" if not unknown.empty else ""
+    return words + f"Shared at every seed with {shared}{rest}."
 
 
 def target_blocks(configs: list[ConfigSummary], tasks: str, args) -> list[tuple]:

@@ -23,6 +23,7 @@ import pandas as pd
 
 from copilot_ray.keys import (
     EVAL_SUCCESS,
+    PLANNER_WARM_START_COST,
     PRIVILEGE_COLLISION_CHECKS,
     PRIVILEGE_MAP_QUERIES,
     PRIVILEGE_RESETS,
@@ -397,9 +398,12 @@ def paired_frame(
     """--paired: for each pair the probability of improvement compares (`improvement_pairs`), on final
     success (the primary figure) and on its AUC (the secondary), the per-seed differences reference -
     other over the seeds both have (seed for seed), the exact two-sided Wilcoxon signed-rank test over
-    them (`stats.signed_rank_test`), and Holm's adjusted p over every test in the frame (one family: the
-    comparisons made against the reference, both figures). The reading at alpha 0.05 on the adjusted p:
-    "ahead" (the reference higher: W+ > W-), "behind", or "not separated"."""
+    them (`stats.signed_rank_test`), and Holm's adjusted p over the tests of one figure (a family per
+    figure: the comparisons made against the reference on final success, and those on its AUC, so that
+    the primary figure's tests are corrected among themselves only, as a rule fixed before a run states
+    them). The reading at alpha 0.05 on the adjusted p: "ahead" (the reference higher: W+ > W-),
+    "behind", or "not separated". `warm_start`: whether the pair shares each seed's planner warm start
+    (`warm_start_pairing`), the check that the seeds pair at all."""
     metric = headline_metric(configs)
     rows = []
     for x, y in improvement_pairs(configs, metric, over, reference):
@@ -430,14 +434,40 @@ def paired_frame(
                     "p": test.p,
                     "p_method": test.method,
                     "unpaired_seeds": " ".join(str(s) for s in sorted(set(a) ^ set(b), key=natural_key)),
+                    "warm_start": warm_start_pairing(x, y, common),
                 }
             )
     frame = pd.DataFrame(rows)
     if frame.empty:
         return frame
-    frame["p_holm"] = stats.holm(frame["p"].to_numpy())
+    frame["p_holm"] = np.nan
+    for _, family in frame.groupby("figure", sort=False):
+        frame.loc[family.index, "p_holm"] = stats.holm(family["p"].to_numpy())
     frame["reading"] = [_paired_reading(r) for _, r in frame.iterrows()]
     return frame
+
+
+WARM_START_SHARED = "shared"  # every common seed's warm start logged the same cost on both sides
+
+
+def warm_start_pairing(x: ConfigSummary, y: ConfigSummary, seeds: list[str]) -> str:
+    """Whether `x` and `y` share each seed's planner warm start: its logged cost
+    (`PLANNER_WARM_START_COST`, the last warm-start phase's finest layer) equal, to the bit, seed for
+    seed. CO-PILOT's rows that differ only after the warm start (a frozen or cost-blind planner) run the
+    same warm start from the same seed, so a difference means the seeds do not pair (another commit, a
+    changed planner setting). "shared"; "differs at seed s (a vs b), ..."; "not logged" (a row without
+    a planner, or older runs)."""
+
+    def costs(c: ConfigSummary) -> dict[str, float]:
+        return {
+            t.seed: t.latest[PLANNER_WARM_START_COST] for t in c.trials if PLANNER_WARM_START_COST in t.latest
+        }
+
+    a, b = costs(x), costs(y)
+    if not seeds or any(s not in a or s not in b for s in seeds):
+        return "not logged"
+    differ = [f"seed {s} ({a[s]:.6g} vs {b[s]:.6g})" for s in seeds if a[s] != b[s]]
+    return "differs at " + ", ".join(differ) if differ else WARM_START_SHARED
 
 
 def _paired_reading(r) -> str:
@@ -460,6 +490,7 @@ def paired_table(frame: pd.DataFrame) -> Table:
             "p (exact, two-sided)",
             "Holm-adjusted p",
             f"reading (alpha {stats.PAIRED_ALPHA:g})",
+            "warm start",
         ]
     )
     for _, r in frame.iterrows():
@@ -476,6 +507,7 @@ def paired_table(frame: pd.DataFrame) -> Table:
                 _num(r["p"], ".4f"),
                 _num(r["p_holm"], ".4f"),
                 str(r["reading"]),
+                str(r.get("warm_start", "not logged")),
             ]
         )
     return table

@@ -109,6 +109,8 @@ PLANNER_ROLLED_BACK = "copilot/planner/rolled_back"
 PLANNER_STD = "copilot/planner/std"
 PLANNER_APPROX_KL_MAX = "copilot/planner/approx_kl_max"
 PLANNER_NONFINITE_SKIPPED = "copilot/planner/nonfinite_skipped"
+# the warm start's last phase, finest layer: rows that share a seed's warm start log the same value
+PLANNER_WARM_START_COST = "copilot/planner/warm_start_cost"
 
 # The agent's traversals during training.
 AGENT_STEPS_LAYER = "copilot/agent/steps_layer_"

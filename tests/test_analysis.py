@@ -35,6 +35,7 @@ from copilot_ray.keys import (
     GIT_COMMIT_TAG,
     K_TAG,
     PARENT_TAG,
+    PLANNER_WARM_START_COST,
     PRESET_TAG,
     REPORT_ARTIFACT,
     ROLE_SWEEP,
@@ -1961,9 +1962,10 @@ def test_a_reference_configuration_is_found_by_label_config_key_variant_or_label
     assert find_configuration(configs, "variant=frozen_planner").label == "variant=frozen_planner, K=4"
 
 
-def _depth_store(root: Path, finals_by_k: dict[int, list[float]], budget: int = 3000) -> str:
+def _depth_store(root: Path, finals_by_k: dict[int, list[float]], budget: int = 3000, warm_start=None) -> str:
     """An MLflow store of one all-CO-PILOT sweep: K = k under config key tree_depth=k, seeds 1..n, each
-    evaluated at 1000, 2000, 3000 (fresh rows), its final at 3000 given, earlier ones below it."""
+    evaluated at 1000, 2000, 3000 (fresh rows), its final at 3000 given, earlier ones below it.
+    `warm_start(k, seed)`: the planner warm-start cost the run logs (none without it)."""
     import mlflow
     from mlflow.entities import Metric
 
@@ -1984,6 +1986,8 @@ def _depth_store(root: Path, finals_by_k: dict[int, list[float]], budget: int = 
             values = [final / 4, final / 2, final]
             ms = [Metric(EVAL_SUCCESS, v, now, s) for s, v in zip(STEPS[:3], values, strict=True)]
             ms += [Metric(EVAL_FRESH, 1.0, now, s) for s in STEPS[:3]]
+            if warm_start is not None:
+                ms.append(Metric(PLANNER_WARM_START_COST, warm_start(k, seed), now, 0))
             client.log_batch(rid, metrics=ms)
             client.set_terminated(rid, "FINISHED")
     return uri
@@ -2076,8 +2080,8 @@ def test_signed_rank_test_exact_on_hand_computed_cases():
 
 def test_paired_comparison_seed_for_seed_with_holm(tmp_path):
     """--paired: K=5 beats K=3 on every one of 8 shared seeds, on final and AUC: p = 2/256 each, Holm
-    over the family (K=3 and K=4, final and AUC) keeps them below 0.05: ahead. K=4 shares only seeds
-    1-5 (its 6-8 never ran)."""
+    over each figure's family (K=3 and K=4 on final; apart from them, on AUC) keeps them below 0.05:
+    ahead. K=4 shares only seeds 1-5 (its 6-8 never ran)."""
     from analysis.aggregate import find_configuration, summarise
     from analysis.tables import paired_frame, paired_table
 
@@ -2094,30 +2098,60 @@ def test_paired_comparison_seed_for_seed_with_holm(tmp_path):
     four = rows[("K=4", "final")]
     assert four["n_pairs"] == 5 and four["unpaired_seeds"] == "6 7 8"
     assert four["_differences"] == pytest.approx([-0.1, 0.11, -0.18, 0.08, 0.04])
-    p = frame["p"].to_numpy()
-    np.testing.assert_allclose(frame["p_holm"], stats.holm(p))
+    for figure in ("final", "auc"):  # a family per figure, as a rule fixed before a run states them
+        family = frame[frame["figure"] == figure]
+        assert len(family) == 2
+        np.testing.assert_allclose(family["p_holm"], stats.holm(family["p"].to_numpy()))
+    assert not np.allclose(frame["p_holm"], stats.holm(frame["p"].to_numpy()))  # not one family of four
     assert final3["reading"] == "ahead" and rows[("K=3", "auc")]["reading"] == "ahead"
     assert four["reading"] == "not separated"
     assert frame.loc[frame["other"] == "K=3", "p_holm"].max() < 0.05
     cells = paired_table(frame).rows[0]
-    assert cells[3].startswith("1: +0.200; 2: +0.200") and cells[-1] == "ahead"
+    assert cells[3].startswith("1: +0.200; 2: +0.200") and cells[-2:] == ["ahead", "not logged"]
 
 
 def test_report_paired_csv_and_page(tmp_path):
     finals = {3: [0.30, 0.32, 0.34, 0.36, 0.38], 5: [0.60, 0.62, 0.64, 0.68, 0.70]}
-    uri = _depth_store(tmp_path, finals)
+    uri = _depth_store(tmp_path, finals, warm_start=lambda k, seed: 1.0 + int(seed) / 7)
     out = tmp_path / "report"
     argv = ["depth", "--tracking-uri", uri, "--out", str(out), "--no-log", "--reference", "K=5", "--paired"]
     assert main(argv) == 0
     paired = pd.read_csv(out / "paired.csv")
     assert paired["figure"].tolist() == ["final", "auc"] and "_differences" not in paired.columns
     assert paired["p"].tolist() == pytest.approx([0.0625, 0.0625])  # five positive differences
-    assert paired["p_holm"].tolist() == pytest.approx([0.125, 0.125])
+    # one test per figure's family: Holm leaves each p as it is
+    assert paired["p_holm"].tolist() == pytest.approx([0.0625, 0.0625])
+    assert paired["warm_start"].tolist() == ["shared", "shared"]
     assert paired["reading"].tolist() == ["not separated", "not separated"]
     report = (out / "report.md").read_text()
     assert "## Paired comparison, seed for seed (--paired)" in report
     assert "with 5 pairs no difference can reach alpha 0.05" in report
     assert "| K=5 | K=3 | final | 1: +0.300; 2: +0.300; 3: +0.300; 4: +0.320; 5: +0.320 | 5 (0) |" in report
+    assert "Shared at every seed with K=3." in report and "pairing is broken" not in report
+
+
+def test_paired_rows_whose_warm_starts_differ_are_said_broken(tmp_path):
+    """The pairing check: seed 2's warm start differs between K=5 and K=3 (another commit, another planner
+    setting): the paired frame and the page say so, before the table, naming the seed and both costs; a
+    row that logs no warm start is "not logged"."""
+    from analysis import report_page
+    from analysis.aggregate import find_configuration, summarise
+    from analysis.tables import paired_frame
+
+    up = [[0.1, 0.2, 0.5 + s / 100, 0.9] for s in range(3)]
+    down = [[0.05, 0.1, 0.3 + s / 100, 0.9] for s in range(3)]
+    configs, _ = summarise(_depth_sweep({3: down, 4: down, 5: up}))
+    by = {c.label: c for c in configs}
+    for label in ("K=3", "K=5"):
+        for t in by[label].trials:
+            t.latest[PLANNER_WARM_START_COST] = 2.5 if (label, t.seed) == ("K=3", "2") else 1.25
+    frame = paired_frame(configs, "each", find_configuration(configs, "K=5"))
+    checks = dict(zip(frame["other"], frame["warm_start"], strict=False))
+    assert checks == {"K=3": "differs at seed 2 (1.25 vs 2.5)", "K=4": "not logged"}
+    blocks = report_page.paired_blocks(frame, by["K=5"])
+    said = [text for kind, text in blocks if kind == "p"]
+    assert "**The pairing is broken** for K=5 and K=3: differs at seed 2 (1.25 vs 2.5)" in said[1]
+    assert [kind for kind, _ in blocks] == ["h2", "p", "p", "table"]  # said before the table
 
 
 def test_a_lone_configuration_of_an_interrupted_sweep_is_not_told_of_others(tmp_path):

@@ -23,9 +23,9 @@ COMMAND_START = re.compile(
 )
 
 
-def _block_commands() -> list[str]:
+def _block_commands(text: str = README) -> list[str]:
     """Commands in the README's code blocks (4-space indented), continuations joined."""
-    lines, out, pending = README.splitlines(), [], ""
+    lines, out, pending = text.splitlines(), [], ""
     for line in lines:
         if line.startswith("    ") and not line.strip().startswith("#"):
             if not pending and not COMMAND_START.match(line.strip()):
@@ -235,7 +235,23 @@ def _shipped_stores() -> dict[tuple[str, str], str]:
     return out
 
 
-@pytest.mark.parametrize("command", REPORTS)
+# The report commands of the experiment pages (docs/<experiment>/README.md: the command a rule fixed before
+# the run says will read it), their worktree placeholder (`../<checkout folder>-at-<sha>`) filled as
+# scripts/run_at_commit.sh names one.
+PAGE_REPORTS = [
+    re.sub(r"\.\./[^/]*-at-<[^>]+>", "../main-at-0000000", c)
+    for page in sorted((ROOT / "docs").glob("*/README.md"))
+    for c in _block_commands(page.read_text())
+    if "-m analysis.report " in c
+]
+
+
+def test_the_experiment_pages_show_their_report_commands():
+    pages = "\n".join(PAGE_REPORTS)
+    assert "copilot-depth-k" in pages and "copilot-cotraining" in pages
+
+
+@pytest.mark.parametrize("command", REPORTS + PAGE_REPORTS)
 def test_report_commands_name_an_experiment_a_shipped_spec_writes_there(command):
     from analysis.report import parse_args
 

@@ -275,7 +275,7 @@ class CoPilotCurriculum:
         self._warm_started = True
         return {
             keys.PLANNER_PREFIX + "warm_start_s": time.perf_counter() - t0,
-            keys.PLANNER_PREFIX + "warm_start_cost": built.stats["cost_layer_" + str(self.depth)],
+            keys.PLANNER_WARM_START_COST: built.stats["cost_layer_" + str(self.depth)],
         }
 
     # ------------------------------------------------------------------------------ checkpoints
