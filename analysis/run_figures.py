@@ -16,12 +16,14 @@ import numpy as np  # noqa: E402
 from copilot_ray.keys import (  # noqa: E402
     AGENT_SUBTASK_SUCCESS_LAYER,
     ALGORITHM_TAG,
+    DIAG_EUCLIDEAN_ERROR,
     DIAG_Q_MEAN,
     DIAG_SEGMENT_LENGTH_LAYER,
     DIAG_SEGMENT_UNREACHABLE_LAYER,
     DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
     DIAG_SUCCESS_AFTER_FAILED,
     DIAG_SUCCESS_AFTER_REACHED,
+    DIAG_TAU_HAT_ERROR,
     PLANNED_COLLISION_FREE,
     REACHED_PLANNED,
     SUCCESS_DIRECT,
@@ -160,6 +162,14 @@ _DIAG_PANELS = (
     ),
     ("critic's mean Q", ((DIAG_Q_MEAN, "-", "mean Q"),), ANY),
     (
+        "time costs: tau_hat against the agent's steps",
+        (
+            (DIAG_TAU_HAT_ERROR, "-", "tau_hat, mean |error|"),
+            (DIAG_EUCLIDEAN_ERROR, ":", "Euclidean, mean |error|"),
+        ),
+        TREE,
+    ),
+    (
         "{tasks}: planned path collision-free / followed",
         (
             (PLANNED_COLLISION_FREE, ":", "plan collision-free"),
@@ -184,6 +194,7 @@ _DIAG_Y_LABELS = {
     "sub-goals inside obstacles": "share of sub-goals",
     "segments longer than one sub-task can cover": "share of segments",
     "critic's mean Q": "mean Q (return units)",
+    "time costs: tau_hat against the agent's steps": "env steps (new sub-tasks, before the refit)",
 }
 
 

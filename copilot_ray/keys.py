@@ -133,6 +133,12 @@ DIAG_FIRST_SUBTASK_TRIVIAL = "copilot/diag/first_subtask_trivial"
 DIAG_SUBTASK_COLLIDED = "copilot/diag/subtask_collided"
 DIAG_DTAU_TUPLE_LENGTH_MEAN = "copilot/diag/dtau_tuple_length_mean"
 DIAG_DTAU_TUPLE_LENGTH_MAX = "copilot/diag/dtau_tuple_length_max"
+# How well the planner's time cost tracks the agent's: a repetition's new D_tau tuples scored before
+# tau_hat is refit on them (held out), in env steps: mean |tau_hat - measured|, mean (tau_hat - measured),
+# and the Euclidean cost's mean |distance / step distance - measured| beside it (what alpha = 1 plans on).
+DIAG_TAU_HAT_ERROR = "copilot/diag/tau_hat_error_steps"
+DIAG_TAU_HAT_BIAS = "copilot/diag/tau_hat_bias_steps"
+DIAG_EUCLIDEAN_ERROR = "copilot/diag/euclidean_error_steps"
 
 # Planners scored as motion planners (copilot_ray.planning.path_metrics; the paper's Fig. 4b/4c): every
 # method that produces paths (RRT*, SGT-PG, CO-PILOT's finest layer) logs these on the same test tasks.

@@ -23,6 +23,7 @@ from copilot_ray.keys import (
     ALPHA_SCHEDULE_TAG,
     B_TAG,
     CONFIG_KEY_TAG,
+    DIAG_EUCLIDEAN_ERROR,
     DIAG_Q_MEAN,
     DIAG_REACHABLE_LENGTH_LAYER,
     DIAG_SEGMENT_LENGTH_LAYER,
@@ -30,6 +31,7 @@ from copilot_ray.keys import (
     DIAG_SUBGOAL_IN_OBSTACLE_LAYER,
     DIAG_SUCCESS_AFTER_FAILED,
     DIAG_SUCCESS_AFTER_REACHED,
+    DIAG_TAU_HAT_ERROR,
     ENV_STEPS,
     ENV_TAG,
     GIT_COMMIT_TAG,
@@ -91,6 +93,8 @@ DIAG = {
     DIAG_SUCCESS_AFTER_REACHED: [0.5, 0.6, 0.8, 0.9],
     DIAG_SUCCESS_AFTER_FAILED: [0.1, 0.2, 0.4, 0.6],
     DIAG_Q_MEAN: [0.1, 0.3, 0.5, 0.6],
+    DIAG_TAU_HAT_ERROR: [9.0, 6.0, 4.0, 3.0],
+    DIAG_EUCLIDEAN_ERROR: [5.0, 5.0, 4.5, 4.5],
     eval_by_action(SUCCESS_PLANNED, "sampled"): [0.2, 0.4, 0.7, 0.9],
 }
 
@@ -307,6 +311,10 @@ def test_every_diagnostics_panel_says_what_its_y_axis_is(store, tmp_path, monkey
     labels = {ax.get_title().replace("\n", " "): ax.get_ylabel() for ax in fig.axes if ax.get_title()}
     assert labels and all(labels.values()), labels
     assert labels["critic's mean Q"] == "mean Q (return units)"
+    assert (
+        labels["time costs: tau_hat against the agent's steps"]
+        == "env steps (new sub-tasks, before the refit)"
+    )
 
 
 def test_diagnostics_draw_a_flat_methods_lines_only_where_they_mean_what_the_panel_says():

@@ -58,6 +58,9 @@ EXPECTED_METRICS = [
     ("copilot", "planner", "cost_layer_2"),
     ("copilot", "planner", "approx_kl_max"),
     ("copilot", "planner", "nonfinite_skipped"),
+    # how well tau_hat tracks the agent's time costs (the new sub-tasks, before its refit)
+    ("copilot", "diag", "tau_hat_error_steps"),
+    ("copilot", "diag", "euclidean_error_steps"),
     ("copilot", "agent", "steps_layer_0"),
     ("copilot", "agent", "steps_layer_2"),
     ("copilot", "agent", "success_layer_1"),

@@ -75,8 +75,9 @@ def test_an_iteration_of_the_curriculum_returns_its_metrics_and_traverses_the_fi
     np.testing.assert_allclose(trees[:, 0], starts[:2])
     assert metrics[keys.ALPHA] == 0.5 and keys.PLANNER_APPROX_KL_MAX in metrics
     assert curriculum.collision_checks > checks
+    tracked = {keys.DIAG_TAU_HAT_ERROR, keys.DIAG_TAU_HAT_BIAS, keys.DIAG_EUCLIDEAN_ERROR}
     learned = curriculum.learn(_subtasks(trees), rng)
-    assert set(learned) == {keys.COST_MODEL_LOSS} and curriculum.alpha_clock.episode == 1
+    assert set(learned) == {keys.COST_MODEL_LOSS, *tracked} and curriculum.alpha_clock.episode == 1
     assert curriculum.summary()[keys.DTAU_SIZE] == 200 + 8
     assert set(curriculum.learned_parts()) == {"planner", "cost_model"}
 
@@ -143,3 +144,39 @@ def test_a_warm_start_paused_by_a_stop_and_resumed_from_its_state_ends_in_the_un
     for a, b in zip(resumed.planner.parameters(), whole.planner.parameters(), strict=True):
         np.testing.assert_array_equal(a.detach().numpy(), b.detach().numpy())
     assert resumed.prepare(2, rng) == {}  # done: the next iteration has no warm start
+
+
+def test_tau_hat_is_scored_on_the_new_tuples_before_it_is_refit_on_them():
+    """The tracking diagnostic, by hand: two segments of length 3 and 4 at 2 distance units per step
+    (1.5 and 2 steps as the crow flies), each taking the agent 5 steps; a tau_hat of 12 units (6 steps) is
+    1 step off on average and over (bias +1), the Euclidean cost 3.25 under. In a curriculum it scores
+    tau_hat as it was before the refit on those tuples."""
+    from copilot_ray.planning.curriculum import tau_hat_tracking
+
+    starts = np.zeros((2, 2))
+    ends = np.array([[3.0, 0.0], [0.0, 4.0]])
+    steps = np.array([5.0, 5.0])
+    got = tau_hat_tracking(
+        lambda a, b: np.full(len(a), 12.0),
+        lambda a, b: np.linalg.norm(b - a, axis=-1),
+        starts,
+        ends,
+        steps,
+        2.0,
+    )
+    assert got == {
+        keys.DIAG_TAU_HAT_ERROR: pytest.approx(1.0),
+        keys.DIAG_TAU_HAT_BIAS: pytest.approx(1.0),
+        keys.DIAG_EUCLIDEAN_ERROR: pytest.approx(3.25),
+    }
+    assert tau_hat_tracking(None, None, starts[:0], ends[:0], steps[:0], 2.0) == {}
+
+    curriculum, rng = _curriculum()
+    curriculum.prepare(1, rng)
+    starts, goals = (x[:4] for x in curriculum.env.tasks("train"))
+    trees, _ = curriculum.trees(starts, goals, 2, rng)
+    subtasks = _subtasks(trees)
+    before = curriculum.cost_model.predict(subtasks["start"], subtasks["end"])
+    step = float(curriculum.env.nominal_step_distance)
+    learned = curriculum.learn(subtasks, rng)
+    assert learned[keys.DIAG_TAU_HAT_ERROR] == pytest.approx(float(np.mean(np.abs(before / step - 5))))

@@ -188,19 +188,20 @@ class CoPilotCurriculum:
         return trees, metrics
 
     def learn(self, subtasks: Mapping[str, np.ndarray], rng: np.random.Generator) -> dict[str, float]:
-        """D_tau gets the repetition's sub-tasks, tau_hat is refit, the alpha schedule advances."""
+        """D_tau gets the repetition's sub-tasks, tau_hat is refit, the alpha schedule advances. Before
+        the refit the new tuples score tau_hat (`tau_hat_tracking`): they are not yet fit on."""
         env, c = self.env, self.settings["cost_model"]
-        self.cost_model.add_steps(
-            *dtau_tuples(
-                subtasks,
-                self.settings["failed_subtask_cost"],
-                env.goal_distance,
-                float(env.nominal_step_distance),
-            )
+        step_distance = float(env.nominal_step_distance)
+        starts, ends, steps = dtau_tuples(
+            subtasks, self.settings["failed_subtask_cost"], env.goal_distance, step_distance
         )
-        loss = self.cost_model.fit(c["fit_steps"], c["batch_size"], rng)
+        metrics = tau_hat_tracking(
+            self.cost_model.predict, env.goal_distance, starts, ends, steps, step_distance
+        )
+        self.cost_model.add_steps(starts, ends, steps)
+        metrics[keys.COST_MODEL_LOSS] = self.cost_model.fit(c["fit_steps"], c["batch_size"], rng)
         self.alpha_clock.advance()
-        return {keys.COST_MODEL_LOSS: loss}
+        return metrics
 
     def summary(self) -> dict[str, float]:
         return {keys.DTAU_SIZE: len(self.cost_model.dataset)}
@@ -297,6 +298,23 @@ class CoPilotCurriculum:
         self.phases.count = int(state.get("planner_phases", 0))
         self._checks.count = int(state.get("planner_checks", 0))
         self._warm_started = bool(state.get("warm_started", True))
+
+
+def tau_hat_tracking(predict, distance, starts, ends, steps, step_distance: float) -> dict[str, float]:
+    """How far tau_hat (`predict`, distance units) is from the env steps the agent took on the tuples
+    (start, end, steps), and how far the Euclidean cost is: the diagnostic of whether the agent's time
+    costs give the planner something the Euclidean cost does not (both in env steps). Empty for no
+    tuple."""
+    if len(steps) == 0:
+        return {}
+    measured = np.asarray(steps, np.float64)
+    off = predict(starts, ends) / step_distance - measured
+    euclidean = np.asarray(distance(starts, ends), np.float64) / step_distance - measured
+    return {
+        keys.DIAG_TAU_HAT_ERROR: float(np.mean(np.abs(off))),
+        keys.DIAG_TAU_HAT_BIAS: float(np.mean(off)),
+        keys.DIAG_EUCLIDEAN_ERROR: float(np.mean(np.abs(euclidean))),
+    }
 
 
 def dtau_tuples(subtasks: Mapping[str, np.ndarray], failed_subtask_cost: str, distance, step_distance: float):
