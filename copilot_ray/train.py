@@ -498,6 +498,7 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
     try:
         with ticking("building the algorithm (RLlib's env runner and learner)"):
             algo = config.build_algo()
+        algo.log_to(checkpoint_dir)  # the planner's trees beside the run's checkpoint, not in ~/ray_results
         steps = 0
         if saved:
             with ticking(f"restoring the checkpoint {relative_path(checkpoint_dir)}"):

@@ -256,13 +256,15 @@ def test_a_second_run_started_in_the_same_second_gets_its_own_folder(tmp_path, m
 @pytest.mark.ray
 def test_train_with_no_tracking_flag_records_a_run_in_the_default_store(tmp_path):
     """No --tracking-uri: the run is in results/train/mlflow.db, its checkpoint in a folder named after
-    it, tagged with its privileges."""
+    it, tagged with its privileges; nothing is written in the home folder (no ~/ray_results)."""
     import mlflow
 
     tiny = ["--layout", "empty", "--tree-depth", "1", "--repetitions", "1", "--task-batch-size", "2",
             "--tau-max", "5", "--planner-warm-start", "0", "--eval-num-tasks", "5", "--stop-iters", "1",
             "--cost-model-init-euclidean", "500", "--num-steps-sampled-before-learning-starts", "10"]  # fmt: skip
-    env = {**__import__("os").environ, "RAY_AUTH_MODE": "disabled"}
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {**__import__("os").environ, "RAY_AUTH_MODE": "disabled", "HOME": str(home)}
     done = subprocess.run(
         [sys.executable, "-m", "copilot_ray.train", *tiny],
         cwd=tmp_path,
@@ -285,6 +287,8 @@ def test_train_with_no_tracking_flag_records_a_run_in_the_default_store(tmp_path
         assert run.info.run_name in folders  # the checkpoint folder, named after the run
         assert run.data.params["checkpoint_dir"].endswith(run.info.run_name)
         assert run.data.tags["copilot.privileges"] == "collision_checks"
+    assert list(home.iterdir()) == []
+    assert not (tmp_path / "results" / "rllib").exists()  # train's algorithm writes into the run's folder
 
 
 # A tiny run that checks wiring: one repetition is 2 tasks x 3 sub-tasks x 5 steps = 30 env steps, and
