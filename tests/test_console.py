@@ -40,7 +40,7 @@ NOTICES = [
 ]
 OWN = [
     "[088dd_00000] tree_depth=1       K=1 b=1 alpha=paper_per_task seed=0  started",
-    "iter    1  env_steps        30  success planned 0.00 direct 0.00  alpha 0.90  wall     5.7s",
+    "iter    1  env_steps        30  test success planned 0.00 direct 0.00  alpha 0.90  wall     5.7s",
     "| configuration | seeds | validation success |",
     "error: --tracking-uri 'sqlite:///x' is invalid: there is no store file x",
 ]

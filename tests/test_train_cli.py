@@ -235,6 +235,16 @@ def test_a_default_results_folder_that_cannot_be_made_is_refused(tmp_path, monke
     ]
 
 
+def test_an_iteration_line_names_the_test_tasks_it_reads():
+    """train's iteration line shows the test tasks' success (a sweep's lines show the validation tasks'),
+    and says so."""
+    from copilot_ray import keys, train
+
+    result = {keys.TRAINING_ITERATION: 3, keys.SUCCESS_PLANNED: 0.5, keys.SUCCESS_DIRECT: 0.25}
+    line = train.progress_line(result, started=0.0)
+    assert "test success planned 0.50 direct 0.25" in line
+
+
 def test_every_problem_is_reported_at_once(capsys):
     assert train.main(["--seed", "-1", "--tree-depth", "99", "--layout", "nope"]) == 2
     err = capsys.readouterr().err
