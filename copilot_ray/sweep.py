@@ -46,6 +46,7 @@ from typing import Any
 import yaml
 
 from copilot_ray import tracking
+from copilot_ray.cluster_address import address_problem
 from copilot_ray.commands import python_module, relative_path
 from copilot_ray.console import quiet_console
 from copilot_ray.keys import (
@@ -509,6 +510,8 @@ def main(argv: list[str] | None = None) -> int:
     problems = []
     if args.tracking_uri is not None and (why := tracking_uri_problem(args.tracking_uri)) is not None:
         problems.append(f"--tracking-uri {args.tracking_uri!r} is invalid: {why}")
+    if args.address and (why := address_problem(args.address)) is not None:
+        problems.append(f"--address {args.address!r} is invalid: {why}")
     try:
         specs = load_specs(args.spec)
     except SpecError as err:

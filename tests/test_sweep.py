@@ -149,6 +149,27 @@ def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path, check):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml"]
 
 
+@pytest.mark.parametrize(
+    ("address", "why"),
+    [
+        ("127.0.0.1:1", "nothing answers at 127.0.0.1:1 ("),
+        ("ray://127.0.0.1:1", "nothing answers at 127.0.0.1:1 ("),
+        ("nope.invalid:6379", "nope.invalid is not a known host"),
+        ("nope", "must be auto, HOST:PORT or ray://HOST:PORT"),
+    ],
+)
+@pytest.mark.parametrize("check", [True, False], ids=["--check", "run"])
+def test_an_address_where_no_cluster_answers_is_refused_before_ray(tmp_path, address, why, check):
+    """A mistyped --address: Ray's own connect waited for its cluster for over ten minutes (--check
+    too); now one line naming the flag and value, exit 2 within seconds, no Ray, nothing written."""
+    proc = _storage_run(_smoke_copy(tmp_path), *(["--check"] if check else []), "--address", address)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith(f"--address {address!r} is invalid: {why}"), line
+    assert "RAY_IMPORTED False" in proc.stdout and "starting Ray" not in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["smoke.yaml"]
+
+
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
 def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
     from copilot_ray.sweep import main
