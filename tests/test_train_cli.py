@@ -210,6 +210,7 @@ def test_check_prints_the_plan_and_the_time_to_expect_and_starts_and_writes_noth
     assert "evaluations: 100 validation + 100 test tasks after every iteration; >= 13 in the run" in readme
     assert f"MLflow: experiment 'copilot-train' at sqlite:///{tmp_path}/results/train/mlflow.db" in readme
     assert "checkpoint: results/train/maze-point-K5-b5-s0-<start time>/" in readme
+    assert "the planner's trees go there too" in readme  # not a folder in ~/ray_results
     assert f"wall time: about {duration_text(1000 * phase + 200_000 / rate)} " in readme
     assert f"1,000 phases x {phase:.2f} s" in readme and "measured_throughput.json" in readme
     # paper_literal: no warm start; 4 iterations end it before its 300k env steps
