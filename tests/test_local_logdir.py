@@ -8,7 +8,10 @@ from pathlib import Path
 from ray.train.constants import DEFAULT_STORAGE_PATH
 from ray.tune import Trainable
 
-from copilot_ray.algorithms.local_logdir import LOCAL_ROOT, LocalLogdir
+from copilot_ray.algorithms import local_logdir
+from copilot_ray.algorithms.local_logdir import LocalLogdir
+
+SHIPPED = local_logdir.LOCAL_ROOT  # read at collection, before conftest's fixture moves it for a test
 
 
 class _Tiny(LocalLogdir, Trainable):
@@ -18,12 +21,14 @@ class _Tiny(LocalLogdir, Trainable):
 
 def test_outside_tune_the_folder_is_under_results_and_made_only_when_written(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    assert SHIPPED == Path("results") / "rllib"  # relative: under the working directory of the build
+    monkeypatch.setattr(local_logdir, "LOCAL_ROOT", SHIPPED)
     home_results = Path(DEFAULT_STORAGE_PATH)
     before = set(home_results.iterdir()) if home_results.is_dir() else set()
     first, second = _Tiny(), _Tiny()  # two builds in one second: two folders
     for built in (first, second):
         folder = Path(built.logdir)
-        assert folder.parent == tmp_path / LOCAL_ROOT and folder.name.startswith("_Tiny-")
+        assert folder.parent == tmp_path / SHIPPED and folder.name.startswith("_Tiny-")
         assert not folder.exists()  # nothing written yet, nothing made
     assert first.logdir != second.logdir
     assert not (tmp_path / "results").exists()
