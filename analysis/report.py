@@ -106,7 +106,7 @@ from .load import (
     natural_key,
     resolve_tracking_uri,
 )
-from .report_page import command_line, one_seed_each  # noqa: F401 (command_line: this module's, where callers look)
+from .report_page import TEST_BESIDE_VALIDATION, command_line, one_seed_each  # noqa: F401 (command_line: this module's, where callers look)
 
 MAX_TREE_FIGURES = 8
 # A method whose final success on the VALIDATION tasks is above this gets `stats.MIN_SEEDS_FOR_CI` seeds in
@@ -306,8 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     several = len({t.tags.get(ALGORITHM_TAG) for t in sweep.trials}) > 1
     tasks = sweep.tasks
     tasks_why = _VALIDATION_ASKED if args.tasks == VALIDATION else _VALIDATION_WHY
-    if tasks == VALIDATION:
-        print(f"tasks: {tasks} ({tasks_why})")
+    print(f"tasks: {tasks} ({tasks_why if tasks == VALIDATION else TEST_BESIDE_VALIDATION})")
     if any(c.metrics for c in configs):
         figs += _comparison_figures(configs, sweep, out, axes_shown, several, left_out)
     else:

@@ -278,6 +278,13 @@ def final_text(final_evaluations: int | None, short: bool = False) -> str:
     )
 
 
+# The test tasks' figures beside the sweep's own console: said on the console and the page, since the same
+# runs' summary table and progress lines show the validation tasks' and their figures differ.
+TEST_BESIDE_VALIDATION = (
+    "the sweep's summary table and progress lines show the validation tasks' figures of the same runs"
+)
+
+
 def summary_text(
     configs: list[ConfigSummary],
     tasks: str,
@@ -291,7 +298,11 @@ def summary_text(
         if m is not None:
             lo, hi = m.auc_window
             windows.append(f"{short} [{lo:,.0f}, {hi:,.0f}]" if np.isfinite(lo) else f"{short}: none")
-    which = f"Validation tasks only ({tasks_why}). " if tasks == VALIDATION else "Test tasks only. "
+    which = (
+        f"Validation tasks only ({tasks_why}). "
+        if tasks == VALIDATION
+        else f"Test tasks only ({TEST_BESIDE_VALIDATION}). "
+    )
     if one_seed_each(configs):
         return (
             one_seed_words(configs)

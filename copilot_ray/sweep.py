@@ -46,6 +46,7 @@ from typing import Any
 import yaml
 
 from copilot_ray import tracking
+from copilot_ray.cluster_address import address_problem
 from copilot_ray.commands import python_module, relative_path
 from copilot_ray.console import quiet_console
 from copilot_ray.keys import (
@@ -79,6 +80,7 @@ from copilot_ray.sweep_summary import (
     rows_from_grid,
     summary_keys,
     summary_metrics,
+    summary_note,
     summary_table,
 )
 from copilot_ray.trials.description import config_key, env_params
@@ -427,10 +429,9 @@ def report_sweep(
     summary = summary_table(rows, searched)
     errored = any(r.status == "error" for r in rows)
     status = "interrupted" if interrupted else ("errored" if errored else "finished")
+    note = summary_note(rows, searched)
     header = (
-        f"# sweep {spec.name}: {status}\n\n{len(rows)} trial(s), wall {wall:.0f}s (this session). "
-        "Success = last evaluation of each trial on the validation tasks (the report shows the test tasks'); "
-        "mean over seeds, [range] with fewer than 5 seeds, ± sample std with 5 or more.\n\n"
+        f"# sweep {spec.name}: {status}\n\n{len(rows)} trial(s), wall {wall:.0f}s (this session). {note}\n\n"
     )
     mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
     tracking.end_sweep_run(
@@ -438,6 +439,7 @@ def report_sweep(
     )
     _say("")
     _say(summary)
+    _say(note)
     _say("")
     _say(f"Tune results: {', '.join(tune_paths)}")
     _say(f"MLflow store: {uri} (experiment {spec.experiment!r}, parent run {parent_id})")
@@ -508,6 +510,8 @@ def main(argv: list[str] | None = None) -> int:
     problems = []
     if args.tracking_uri is not None and (why := tracking_uri_problem(args.tracking_uri)) is not None:
         problems.append(f"--tracking-uri {args.tracking_uri!r} is invalid: {why}")
+    if args.address and (why := address_problem(args.address)) is not None:
+        problems.append(f"--address {args.address!r} is invalid: {why}")
     try:
         specs = load_specs(args.spec)
     except SpecError as err:

@@ -188,17 +188,49 @@ def _over_seeds(values: Sequence[float]) -> str:
     return f"{mean:.2f} ± {std:.2f}"
 
 
+def _shown(rows: Sequence[TrialRow], searched: bool) -> list[str]:
+    """The summary's figures some trial logged (CO-PILOT's validation pair as dashes where none did)."""
+    return [
+        key
+        for key in summary_keys(searched)
+        if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
+    ] or [validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT)]
+
+
+def summary_note(rows: Sequence[TrialRow], searched: bool = False) -> str:
+    """What the summary's figures are: which tasks each column reads, since the report beside it shows the
+    test tasks' (a search's report the validation tasks'), and how a configuration's seeds are pooled."""
+    shown = _shown(rows, searched)
+    validation = [SUMMARY_METRICS[k] for k in shown if not k.startswith(PATHS_PREFIX)]
+    paths = [SUMMARY_METRICS[k] for k in shown if k.startswith(PATHS_PREFIX)]
+    parts = []
+    if validation:
+        report = (
+            "a report of searches alone reads these too, one with a later stage the test tasks'"
+            if searched
+            else "the report reads the test tasks' instead, so its figures differ"
+        )
+        parts.append(
+            f"{', '.join(validation)}: each trial's last evaluation on the VALIDATION tasks ({report})"
+        )
+    if paths:
+        parts.append(
+            f"{', '.join(paths)}: the planner's paths on the test tasks at its last result, as in the report"
+        )
+    return (
+        "; ".join(parts)
+        + f"; mean over seeds, [range] with fewer than {MIN_SEEDS_FOR_SPREAD} seeds, ± sample std with "
+        f"{MIN_SEEDS_FOR_SPREAD} or more."
+    )
+
+
 def summary_table(rows: Sequence[TrialRow], searched: bool = False) -> str:
     """A markdown table per configuration: seeds, the mean over seeds of the final success with their range
     (fewer than 5 seeds) or ± their sample std (`searched`: a search's, without test-task figures)."""
     groups: dict[str, list[TrialRow]] = {}
     for row in rows:
         groups.setdefault(row.config_key, []).append(row)
-    shown = [
-        key
-        for key in summary_keys(searched)
-        if any(not math.isnan(r.figures.get(key, math.nan)) for r in rows)
-    ] or [validation_key(SUCCESS_PLANNED), validation_key(SUCCESS_DIRECT)]
+    shown = _shown(rows, searched)
     header = ["configuration", "seeds", *(SUMMARY_METRICS[key] for key in shown)]
     header += ["env steps", "wall s/trial", "status"]
     lines = [header]

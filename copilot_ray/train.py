@@ -308,7 +308,8 @@ def progress_line(result: dict[str, Any], started: float) -> str:
 
     return (
         f"iter {result[keys.TRAINING_ITERATION]:4d}  env_steps {int(steps):9d}  "
-        f"success planned {fmt(keys.SUCCESS_PLANNED)} direct {fmt(keys.SUCCESS_DIRECT)}  "
+        # the test tasks' (what a report of train's store shows), named so: a sweep's lines show validation
+        f"test success planned {fmt(keys.SUCCESS_PLANNED)} direct {fmt(keys.SUCCESS_DIRECT)}  "
         f"alpha {fmt(keys.ALPHA)}  wall {time.time() - started:7.1f}s"
     )
 
@@ -498,6 +499,7 @@ def _run(args: argparse.Namespace, config, console, saved: dict[str, Any] | None
     try:
         with ticking("building the algorithm (RLlib's env runner and learner)"):
             algo = config.build_algo()
+        algo.log_to(checkpoint_dir)  # the planner's trees beside the run's checkpoint, not in ~/ray_results
         steps = 0
         if saved:
             with ticking(f"restoring the checkpoint {relative_path(checkpoint_dir)}"):

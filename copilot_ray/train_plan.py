@@ -60,7 +60,8 @@ def format_train_plan(
         "a warm-start phase or a repetition, so a resumed run keeps these bounds",
         "  " + _evaluations(v, est),
         f"  MLflow: {tracking}" if tracking else "  MLflow: none (--no-tracking)",
-        f"  checkpoint: {checkpoint} (at the end, and on Ctrl-C or SIGTERM; --resume continues from it)",
+        f"  checkpoint: {checkpoint} (at the end, and on Ctrl-C or SIGTERM; --resume continues from it; "
+        "the planner's trees go there too)",
         _wall_time(algorithm, v, budget, iterations),
     ]
     return "\n".join(lines)

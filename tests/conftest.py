@@ -18,6 +18,15 @@ atexit.register(shutil.rmtree, _STORE_TEMPLATE, True)
 stores.copy_a_migrated_store_into_new_stores(_STORE_TEMPLATE)
 
 
+@pytest.fixture(autouse=True)
+def _local_logdirs(tmp_path_factory, monkeypatch):
+    """An algorithm a test builds outside Tune keeps its folder (the planner's trees) in a temp folder of
+    its own, not in the checkout's results/ (test_local_logdir checks the default itself)."""
+    from copilot_ray.algorithms import local_logdir
+
+    monkeypatch.setattr(local_logdir, "LOCAL_ROOT", tmp_path_factory.mktemp("rllib"))
+
+
 @pytest.fixture(scope="session")
 def ray_session():
     """One local two-core Ray for the whole test session (ARCHITECTURE.md, "Conventions")."""

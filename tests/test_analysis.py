@@ -1384,10 +1384,11 @@ def test_figures_without_data_are_not_drawn(tmp_path):
     assert "final_success.png: not drawn" in report and "return_vs_env_steps.png: no run logged" in report
 
 
-def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_test_tasks(tmp_path):
+def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_test_tasks(tmp_path, capsys):
     """A report on sweeps that searched (parent param searcher = optuna) shows the validation figures, and
-    nothing measured on the test tasks (tables, export); a grid sweep's report shows the test figures;
-    --tasks overrides either way."""
+    nothing measured on the test tasks (tables, export); a grid sweep's report shows the test figures and
+    says, on the console and the page, that the sweep's own lines showed the validation tasks' of the same
+    runs; --tasks overrides either way."""
     import mlflow
     from mlflow.entities import Metric
 
@@ -1432,9 +1433,14 @@ def test_a_search_is_reported_on_its_validation_tasks_and_a_comparison_on_its_te
         "No tree figure in a validation report: sub-goal tree snapshots (copilot_trees/*.npz) are drawn on test tasks."
         in text
     )
+    capsys.readouterr()
     summary, csv, text = report("comparison")
     assert "| final test success | test success AUC |" in summary and "mean 0.970" in summary
-    assert "Test tasks only" in text and csv.metric.eq(EVAL_SUCCESS).any()
+    beside = (
+        "the sweep's summary table and progress lines show the validation tasks' figures of the same runs"
+    )
+    assert f"Test tasks only ({beside})" in text and csv.metric.eq(EVAL_SUCCESS).any()
+    assert f"tasks: test ({beside})" in capsys.readouterr().out
     assert csv.metric.eq(PATH_SUCCESS).any() and (tmp_path / "comparison" / "planners.md").exists()
     summary, _, _ = report("search", "--tasks", "test")
     assert "mean 0.970" in summary

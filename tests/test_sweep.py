@@ -149,6 +149,27 @@ def test_a_tracking_uri_flag_that_cannot_be_written_is_refused(tmp_path, check):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "smoke.yaml"]
 
 
+@pytest.mark.parametrize(
+    ("address", "why"),
+    [
+        ("127.0.0.1:1", "nothing answers at 127.0.0.1:1 ("),
+        ("ray://127.0.0.1:1", "nothing answers at 127.0.0.1:1 ("),
+        ("nope.invalid:6379", "nope.invalid is not a known host"),
+        ("nope", "must be auto, HOST:PORT or ray://HOST:PORT"),
+    ],
+)
+@pytest.mark.parametrize("check", [True, False], ids=["--check", "run"])
+def test_an_address_where_no_cluster_answers_is_refused_before_ray(tmp_path, address, why, check):
+    """A mistyped --address: Ray's own connect waited for its cluster for over ten minutes (--check
+    too); now one line naming the flag and value, exit 2 within seconds, no Ray, nothing written."""
+    proc = _storage_run(_smoke_copy(tmp_path), *(["--check"] if check else []), "--address", address)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith(f"--address {address!r} is invalid: {why}"), line
+    assert "RAY_IMPORTED False" in proc.stdout and "starting Ray" not in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["smoke.yaml"]
+
+
 @pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
 def test_check_prints_the_plan_of_every_shipped_spec(path, capsys):
     from copilot_ray.sweep import main
@@ -417,6 +438,10 @@ def test_a_file_of_several_specs_runs_each_part_into_one_experiment(
         lines[0].startswith(f"sweep {path}: starting Ray")
         and (tmp_path / "results" / "p_rrt" / "console.log").is_file()
     )
+    assert any(
+        line.startswith("path success, length / RRT*: the planner's paths on the test tasks")
+        for line in lines
+    )
     report = [line.removeprefix("Report: ") for line in lines if line.startswith("Report: ")][-1]
     done = subprocess.run(
         ["bash", "-c", f"{report} --out {tmp_path / 'report'}"], capture_output=True, text=True, timeout=300
@@ -475,6 +500,23 @@ def test_summary_shows_the_columns_that_were_logged_and_no_stale_path_figure():
         k.startswith("summary/") and "path" in k for k in summary_metrics([row("a", 0, 0.7, 3.0)], True)
     )
     assert "summary/best/path_success" in summary_metrics([row("a", 0, 0.7, 3.0)])
+
+
+def test_the_summary_says_which_tasks_each_column_reads():
+    """The sweep's table shows the validation tasks' success while the report beside it shows the test
+    tasks': the note under the table (and in the parent run) says so, and that a planner's path figures
+    are the test tasks'; a search's report reads the validation tasks too."""
+    from copilot_ray.keys import EVAL_SUCCESS, PATH_SUCCESS, validation_key
+    from copilot_ray.sweep_summary import TrialRow, summary_note
+
+    agent = [TrialRow("t0", "k", 0, "finished", {validation_key(EVAL_SUCCESS): 0.4}, 1000, 10.0)]
+    note = summary_note(agent)
+    assert note.startswith("validation success: each trial's last evaluation on the VALIDATION tasks")
+    assert "the report reads the test tasks' instead" in note and "planner's paths" not in note
+    assert "a report of searches alone reads these too" in summary_note(agent, searched=True)
+    planner = [TrialRow("t0", "k", 0, "finished", {PATH_SUCCESS: 0.5}, 1000, 10.0)]
+    note = summary_note(planner)
+    assert note.startswith("path success: the planner's paths on the test tasks") and "VALIDATION" not in note
 
 
 def test_check_prints_the_store_the_run_would_use(tmp_path, capsys):

@@ -210,6 +210,7 @@ def test_check_prints_the_plan_and_the_time_to_expect_and_starts_and_writes_noth
     assert "evaluations: 100 validation + 100 test tasks after every iteration; >= 13 in the run" in readme
     assert f"MLflow: experiment 'copilot-train' at sqlite:///{tmp_path}/results/train/mlflow.db" in readme
     assert "checkpoint: results/train/maze-point-K5-b5-s0-<start time>/" in readme
+    assert "the planner's trees go there too" in readme  # not a folder in ~/ray_results
     assert f"wall time: about {duration_text(1000 * phase + 200_000 / rate)} " in readme
     assert f"1,000 phases x {phase:.2f} s" in readme and "measured_throughput.json" in readme
     # paper_literal: no warm start; 4 iterations end it before its 300k env steps
@@ -235,6 +236,16 @@ def test_a_default_results_folder_that_cannot_be_made_is_refused(tmp_path, monke
     ]
 
 
+def test_an_iteration_line_names_the_test_tasks_it_reads():
+    """train's iteration line shows the test tasks' success (a sweep's lines show the validation tasks'),
+    and says so."""
+    from copilot_ray import keys, train
+
+    result = {keys.TRAINING_ITERATION: 3, keys.SUCCESS_PLANNED: 0.5, keys.SUCCESS_DIRECT: 0.25}
+    line = train.progress_line(result, started=0.0)
+    assert "test success planned 0.50 direct 0.25" in line
+
+
 def test_every_problem_is_reported_at_once(capsys):
     assert train.main(["--seed", "-1", "--tree-depth", "99", "--layout", "nope"]) == 2
     err = capsys.readouterr().err
@@ -256,13 +267,15 @@ def test_a_second_run_started_in_the_same_second_gets_its_own_folder(tmp_path, m
 @pytest.mark.ray
 def test_train_with_no_tracking_flag_records_a_run_in_the_default_store(tmp_path):
     """No --tracking-uri: the run is in results/train/mlflow.db, its checkpoint in a folder named after
-    it, tagged with its privileges."""
+    it, tagged with its privileges; nothing is written in the home folder (no ~/ray_results)."""
     import mlflow
 
     tiny = ["--layout", "empty", "--tree-depth", "1", "--repetitions", "1", "--task-batch-size", "2",
             "--tau-max", "5", "--planner-warm-start", "0", "--eval-num-tasks", "5", "--stop-iters", "1",
             "--cost-model-init-euclidean", "500", "--num-steps-sampled-before-learning-starts", "10"]  # fmt: skip
-    env = {**__import__("os").environ, "RAY_AUTH_MODE": "disabled"}
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {**__import__("os").environ, "RAY_AUTH_MODE": "disabled", "HOME": str(home)}
     done = subprocess.run(
         [sys.executable, "-m", "copilot_ray.train", *tiny],
         cwd=tmp_path,
@@ -285,6 +298,8 @@ def test_train_with_no_tracking_flag_records_a_run_in_the_default_store(tmp_path
         assert run.info.run_name in folders  # the checkpoint folder, named after the run
         assert run.data.params["checkpoint_dir"].endswith(run.info.run_name)
         assert run.data.tags["copilot.privileges"] == "collision_checks"
+    assert list(home.iterdir()) == []
+    assert not (tmp_path / "results" / "rllib").exists()  # train's algorithm writes into the run's folder
 
 
 # A tiny run that checks wiring: one repetition is 2 tasks x 3 sub-tasks x 5 steps = 30 env steps, and

@@ -151,3 +151,55 @@ def test_the_shipped_rates_name_their_sources_without_a_machines_paths():
         sys.path.pop(0)
     argv = ["--from-store", "sqlite:////work/main-at-abc1234/results/x.db", "--concurrent", "2"]
     assert throughput.portable(argv) == ["--from-store", "x.db", "--concurrent", "2"]
+
+
+def _copilot_spec(concurrent: int, seeds: list[int], **config):
+    return parse_spec(
+        {
+            "name": "est",
+            "env": {"id": "maze-point", "config": {"layout": "four-rooms"}},
+            "algorithm": "copilot",
+            "config": {"eval_every_env_steps": 10000, **config},
+            "seeds": seeds,
+            "stop": {"env_steps": 200000},
+            "resources": {"max_concurrent_trials": concurrent, "num_env_runners": 0},
+        },
+        "est.yaml",
+    )
+
+
+def test_a_copilot_trial_s_estimate_counts_its_planner_warm_start(rates_file):
+    """A CO-PILOT trial spends its warm start before its first env step (1,000 phases at the defaults),
+    which the env-step rate leaves out (it is read after the first iteration): `--check` adds it per
+    trial, as train --check does, and says so; a spec without a warm start adds nothing."""
+    data = json.loads(rates_file.read_text())
+    data["env_steps_per_s"]["copilot"] = {"lone": 80, "side_by_side": 100}
+    data["warm_start_s_per_phase"] = {"copilot": 0.25}
+    rates_file.write_text(json.dumps(data))
+    side = _copilot_spec(2, [0, 1, 2])  # 2 waves, each a warm start of 1,000 x 0.25 s and 200k at 100/s
+    assert estimate.wall_seconds(side) == pytest.approx(2 * (1000 * 0.25 + 200000 / 100))
+    line = estimate.wall_time_line(side)
+    assert "per trial side by side + the warm start's 1,000 phases x 0.25 s = 4 min;" in line, line
+    assert "the warm start: measured_throughput.json's copilot.warm_start_s_per_phase" in line
+    cold = _copilot_spec(1, [0], planner_warm_start=0)
+    assert estimate.wall_seconds(cold) == pytest.approx(200000 / 80)
+    assert "warm start" not in estimate.wall_time_line(cold)
+    # a grid over the warm start: the mean over its configurations
+    grid = parse_spec(
+        {
+            "name": "est",
+            "env": {"id": "maze-point", "config": {"layout": "four-rooms"}},
+            "algorithm": "copilot",
+            "config": {"eval_every_env_steps": 10000},
+            "search": {"planner_warm_start": {"grid": [0, 2000]}},
+            "seeds": [0],
+            "stop": {"env_steps": 200000},
+            "resources": {"max_concurrent_trials": 1, "num_env_runners": 0},
+        },
+        "est.yaml",
+    )
+    assert estimate.wall_seconds(grid) == pytest.approx(2 * (1000 * 0.25 + 200000 / 80))
+    del data["warm_start_s_per_phase"]  # no figure: the env steps alone, and the line says so
+    rates_file.write_text(json.dumps(data))
+    assert estimate.wall_seconds(side) == pytest.approx(2 * 200000 / 100)
+    assert "warm start not counted" in estimate.wall_time_line(side)

@@ -9,7 +9,9 @@
   and its final figure would be one or two noisy points (or none).
 * Wall time: trials x budget / a measured env-steps-per-second figure (`copilot_ray/
   measured_throughput.json`, written by `benchmarks/throughput.py --write`), in waves of
-  `max_concurrent_trials`. A spec whose trials hold a GPU (`resources.gpus_per_trial` > 0) reads the
+  `max_concurrent_trials`, plus each trial's planner warm start (CO-PILOT's phases before its first env
+  step, at the file's seconds per phase): the rate is read after a trial's first iteration, so it
+  leaves the warm start out. A spec whose trials hold a GPU (`resources.gpus_per_trial` > 0) reads the
   file's GPU figures (`env_steps_per_s_gpu`, from the GPU check `scripts/device_check.sh`) and is not
   estimated without one: a CPU figure would be wrong either way.
 * `train --check` (copilot_ray/train_plan.py) reads the same file: a lone run's rate and the planner warm
@@ -27,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from copilot_ray.registry import get_algorithm
+from copilot_ray.settings import effective
 
 # (a spec is a copilot_ray.sweep_spec.models.SweepSpec; not imported: models imports this module)
 SweepSpec = Any
@@ -185,8 +188,50 @@ def wall_seconds(spec: SweepSpec) -> float | None:
     found = measured_rate(spec.algorithm, concurrent, gpu=_uses_gpu(spec))
     if found is None:
         return None
+    warm = warm_start_seconds(spec)
     # A stacked trial's seeds take turns at the env steps: its seeds' budgets one after another.
-    return math.ceil(len(spec.trial_plan()) / concurrent) * budget * spec.seeds_per_trial / found[0]
+    per_trial = budget * spec.seeds_per_trial / found[0] + (warm[0] if warm else 0.0)
+    return math.ceil(len(spec.trial_plan()) / concurrent) * per_trial
+
+
+WARM_START_SETTING = "planner_warm_start"
+
+
+def warm_start_seconds(spec: SweepSpec) -> tuple[float, float] | None:
+    """(wall seconds of a trial's planner warm start, its phases), the mean over the plan's
+    configurations, a stacked trial's seeds' warm starts one after another: (0, 0) for an algorithm or
+    plan without one, None where one is planned but no seconds per phase are measured."""
+    entry = get_algorithm(spec.algorithm)
+    if WARM_START_SETTING not in entry.settings:
+        return 0.0, 0.0
+    points = _points(spec)
+    phases = [
+        int(effective(entry.settings, spec.merged(p), entry.presets)[WARM_START_SETTING] or 0) for p in points
+    ]
+    mean = sum(phases) / len(phases)
+    if not mean:
+        return 0.0, 0.0
+    phase = measured_warm_start_phase(spec.algorithm)
+    if phase is None:
+        return None
+    return mean * phase[0] * spec.seeds_per_trial, mean
+
+
+def _warm_start_text(spec: SweepSpec) -> tuple[str, str]:
+    """How the warm start enters a trial's estimate and where its figure comes from ("" without one)."""
+    warm = warm_start_seconds(spec)
+    if warm is None:
+        return "", "; the planner's warm start not counted (no measured seconds per phase)"
+    seconds, phases = warm
+    if not seconds:
+        return "", ""
+    per_phase = seconds / phases / spec.seeds_per_trial
+    seeds = f" x {spec.seeds_per_trial} seeds" if spec.seeds_per_trial > 1 else ""
+    gpu = " (its CPU figure)" if _uses_gpu(spec) else ""
+    return (
+        f" + the warm start's {phases:,.0f} phases x {per_phase:.2f} s{seeds} = {duration_text(seconds)}",
+        f"; the warm start: {THROUGHPUT_FILE.name}'s {spec.algorithm}.{WARM_START}{gpu}",
+    )
 
 
 def total_wall_time_line(specs: list[SweepSpec]) -> str:
@@ -216,14 +261,15 @@ def wall_time_line(spec: SweepSpec) -> str:
     rate, source = found
     waves = math.ceil(len(spec.trial_plan()) / concurrent)
     stacked = spec.seeds_per_trial
-    seconds = waves * budget * stacked / rate
+    seconds = wall_seconds(spec)
     per_trial = (
         f"{budget:,} env steps" if stacked == 1 else f"{stacked} seeds x {budget:,} env steps in turns"
     )
+    warm, warm_source = _warm_start_text(spec)
     return (
         f"  wall time: about {duration_text(seconds)} ({waves} wave(s) x {per_trial} at ~{rate:.0f} env "
-        f"steps/s per trial{' side by side' if concurrent > 1 else ''}; measured on maze-point, other envs "
-        f"differ; {source}"
+        f"steps/s per trial{' side by side' if concurrent > 1 else ''}{warm}; measured on maze-point, other "
+        f"envs differ; {source}{warm_source}"
         + ("; a stack's speed-up on a GPU is not measured yet, so not counted" if stacked > 1 else "")
         + ")"
     )

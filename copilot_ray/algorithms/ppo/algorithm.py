@@ -24,6 +24,7 @@ from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LI
 from ray.tune.registry import register_env
 
 from copilot_ray import keys
+from copilot_ray.algorithms.local_logdir import LocalLogdir
 from copilot_ray.algorithms.ppo import settings as ppo_settings
 from copilot_ray.algorithms.sac.traversal_env import TraversalRules
 from copilot_ray.envs import make
@@ -136,7 +137,7 @@ class GoalPPOConfig(PPOConfig):
         super().validate()
 
 
-class GoalPPO(PPO):
+class GoalPPO(LocalLogdir, PPO):
     """RLlib's PPO plus the common evaluation (module docstring)."""
 
     @classmethod

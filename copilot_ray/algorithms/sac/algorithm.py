@@ -64,6 +64,7 @@ from copilot_ray.algorithms.gc_sac import (
     use_fast_learner,
     uses_fast_learner,
 )
+from copilot_ray.algorithms.local_logdir import LocalLogdir
 from copilot_ray.algorithms.sac import settings as agent_settings
 from copilot_ray.algorithms.sac.agent_updates import (
     FastLearnerUpdater,
@@ -350,7 +351,7 @@ class HERConfig(GoalSACConfig):
     NESTED: ClassVar[tuple[str, ...]] = ("her",)
 
 
-class GoalSAC(RunnerTraversal, PlannedEvaluation, SAC):
+class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
     """Goal-conditioned SAC on training tasks, or on the trees of its curriculum (`self.curriculum`, from
     the config: CO-PILOT's planner, the RRT* curriculum); HER when `her["n_sampled_goal"]` > 0 (module
     docstring). Logs `copilot/eval/success` = success on the test tasks: the agent following the
