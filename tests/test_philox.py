@@ -46,7 +46,9 @@ def test_random_counters_and_keys_match_the_unbounded_integer_reference():
         [torch.as_tensor(counters[:, i]) for i in range(4)], [torch.as_tensor(keys[:, i]) for i in range(2)]
     )
     got = np.stack([w.numpy() for w in out], axis=1)
-    want = np.array([_reference(tuple(map(int, c)), tuple(map(int, k))) for c, k in zip(counters, keys)])
+    want = np.array(
+        [_reference(tuple(map(int, c)), tuple(map(int, k))) for c, k in zip(counters, keys, strict=True)]
+    )
     np.testing.assert_array_equal(got, want)
     assert got.min() >= 0 and got.max() < 2**32
 
