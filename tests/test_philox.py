@@ -21,7 +21,7 @@ KNOWN_ANSWERS = [
 
 def _reference(counter, key):
     """Philox-4x32-10 with Python's unbounded ints: written from the algorithm's definition, not from
-    the module's 16-bit-halves arithmetic."""
+    the module's wrapping int64 arithmetic."""
     c, (k0, k1) = list(counter), key
     for r in range(10):
         if r:

@@ -15,7 +15,7 @@ every draw advances in place. Hence:
 sits a step out finds its stream where it left it.
 
 The words are those of Random123's `philox4x32_10` (its published known-answer vectors are tested).
-Products of two 32-bit words are formed from 16-bit halves, so nothing overflows int64.
+Few, whole-tensor operations per round: on a CPU a draw costs its operations' dispatch, not arithmetic.
 """
 
 from __future__ import annotations
@@ -32,27 +32,44 @@ KEY_BUMPS = (0x9E3779B9, 0xBB67AE85)
 ROUNDS = 10
 
 
-def _mulhilo(multiplier: int, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """(low, high) 32-bit words of multiplier * x for 32-bit x (int64 tensor), without overflow."""
-    low_half = x * (multiplier & 0xFFFF)  # < 2**48
-    high_half = x * (multiplier >> 16)  # < 2**48
-    middle = high_half + (low_half >> 16)  # the product >> 16, < 2**49
-    low = ((middle & 0xFFFF) << 16) | (low_half & 0xFFFF)
-    return low, middle >> 16
+def round_keys(k0: torch.Tensor, k1: torch.Tensor) -> torch.Tensor:
+    """The ten rounds' key words [..., ROUNDS, 2] of key (k0, k1) (Philox's Weyl sequence)."""
+    bumps = torch.arange(ROUNDS, device=k0.device, dtype=torch.int64)
+    return torch.stack(
+        (
+            (k0.unsqueeze(-1) + bumps * KEY_BUMPS[0]) & MASK32,
+            (k1.unsqueeze(-1) + bumps * KEY_BUMPS[1]) & MASK32,
+        ),
+        dim=-1,
+    )
+
+
+def philox_rounds(
+    even: torch.Tensor, odd: torch.Tensor, keys: Sequence[torch.Tensor], multipliers: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Philox-4x32-10 of counters held as words (c0, c2) `even` and (c1, c3) `odd` ([..., 2] each),
+    under the ten `round_keys` `keys` (each [..., 2], broadcast against the counters); `multipliers` is
+    `MULTIPLIERS` as a tensor. Returns the output's (even, odd) words.
+
+    Both multiplications of a round are one operation. Their 64-bit products are taken modulo 2**64
+    (int64 multiplication wraps on torch's devices; the known-answer tests check it), and the high and
+    low words read from their bits, which the wrap leaves intact."""
+    for key in keys:
+        product = even * multipliers  # (c0 * M0, c2 * M1)
+        low, high = product & MASK32, (product >> 32) & MASK32
+        # The new counter: (hi1 ^ c1 ^ k0, hi0 ^ c3 ^ k1) even, (lo1, lo0) odd.
+        even, odd = high.flip(-1) ^ odd ^ key, low.flip(-1)
+    return even, odd
 
 
 def philox4x32(counter: Sequence[torch.Tensor], key: Sequence[torch.Tensor]) -> list[torch.Tensor]:
     """Philox-4x32-10 of four counter words and two key words (int64 tensors holding 32-bit values,
     broadcast together): the four output words."""
-    c0, c1, c2, c3 = counter
-    k0, k1 = key
-    for round_ in range(ROUNDS):
-        if round_:
-            k0, k1 = (k0 + KEY_BUMPS[0]) & MASK32, (k1 + KEY_BUMPS[1]) & MASK32
-        lo0, hi0 = _mulhilo(MULTIPLIERS[0], c0)
-        lo1, hi1 = _mulhilo(MULTIPLIERS[1], c2)
-        c0, c1, c2, c3 = hi1 ^ c1 ^ k0, lo1, hi0 ^ c3 ^ k1, lo0
-    return [c0, c1, c2, c3]
+    c0, c1, c2, c3, k0, k1 = torch.broadcast_tensors(*counter, *key)
+    keys = round_keys(k0, k1).unbind(-2)
+    multipliers = torch.tensor(MULTIPLIERS, device=c0.device)
+    even, odd = philox_rounds(torch.stack((c0, c2), -1), torch.stack((c1, c3), -1), keys, multipliers)
+    return [even[..., 0], odd[..., 0], even[..., 1], odd[..., 1]]
 
 
 def _seed_words(seed: int) -> tuple[int, int]:
@@ -84,7 +101,9 @@ class PhiloxStreams:
         self._seed_low = torch.as_tensor(words[:, 0], device=self.device).unsqueeze(1)
         self._seed_high = torch.as_tensor(words[:, 1], device=self.device).unsqueeze(1)
         # Key word 1 mixes the purpose into the seed's high word (a seed below 2**32 has 0 there).
-        self._key1 = self._seed_high ^ self.purpose
+        keys = round_keys(self._seed_low, self._seed_high ^ self.purpose)  # [N, 1, ROUNDS, 2]
+        self._keys = keys.unbind(-2)  # sliced once: a round reads its key without an operation
+        self._multipliers = torch.tensor(MULTIPLIERS, dtype=torch.int64, device=self.device)
         self.counters = torch.zeros(len(self.seeds), dtype=torch.int64, device=self.device)
 
     @property
@@ -95,13 +114,20 @@ class PhiloxStreams:
         """The next `num_blocks` blocks of every stream as [N, num_blocks, 4] 32-bit words (int64), and
         the counters of the `active` streams (default all) moved past them."""
         index = self.counters.unsqueeze(1) + torch.arange(num_blocks, device=self.device)
+        # Counter words (index low, index high, 0, 0): (c0, c2) = (low, 0), (c1, c3) = (high, 0).
         zeros = torch.zeros_like(index)
-        words = philox4x32((index & MASK32, index >> 32, zeros, zeros), (self._seed_low, self._key1))
+        even, odd = philox_rounds(
+            torch.stack((index & MASK32, zeros), -1),
+            torch.stack((index >> 32, zeros), -1),
+            self._keys,
+            self._multipliers,
+        )
+        words = torch.stack((even, odd), dim=-1).flatten(-2)  # (c0, c1, c2, c3)
         if active is None:
             self.counters.add_(num_blocks)
         else:
             self.counters.add_(active.to(torch.int64) * num_blocks)
-        return torch.stack(words, dim=-1)
+        return words
 
     def words(self, n: int, active: torch.Tensor | None = None) -> torch.Tensor:
         """The next `n` 32-bit words of every stream, [N, n] (int64); a stream always uses whole blocks."""
@@ -131,8 +157,8 @@ class PhiloxStreams:
         pairs = -(-n // 2)
         u = self.uniform(2 * pairs, active).view(self.num_streams, pairs, 2)
         radius = torch.sqrt(-2.0 * torch.log(u[..., 0]))
-        angle = (2.0 * np.pi) * u[..., 1]
-        z = torch.stack((radius * torch.cos(angle), radius * torch.sin(angle)), dim=-1)
+        # (radius cos, radius sin) as the real and imaginary parts of one complex tensor: fewer operations.
+        z = torch.view_as_real(torch.polar(radius, (2.0 * np.pi) * u[..., 1]))
         return z.reshape(self.num_streams, 2 * pairs)[:, :n].reshape(self.num_streams, *shape)
 
     # ------------------------------------------------------------------ checkpoints
