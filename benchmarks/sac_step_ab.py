@@ -43,7 +43,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _module_at(rev: str, path: str, name: str) -> types.ModuleType:
     """The module at `path` as of git revision `rev`, imported under `name`."""
-    source = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, check=True, capture_output=True, text=True)
+    source = subprocess.run(
+        ["git", "show", f"{rev}:{path}"], cwd=ROOT, check=True, capture_output=True, text=True
+    )
     spec = importlib.util.spec_from_loader(name, loader=None)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
@@ -53,8 +55,14 @@ def _module_at(rev: str, path: str, name: str) -> types.ModuleType:
 
 def _learner():
     space = gym.spaces.Box(0.0, 1.0, (OBS,), np.float32)
-    cfg = SACConfig().environment(observation_space=space, action_space=gym.spaces.Box(-1.0, 1.0, (ACT,), np.float32))
-    return use_fast_learner(cfg.debugging(seed=0), hidden=(256, 256), torch_threads=None).build_learner_group()._learner
+    cfg = SACConfig().environment(
+        observation_space=space, action_space=gym.spaces.Box(-1.0, 1.0, (ACT,), np.float32)
+    )
+    return (
+        use_fast_learner(cfg.debugging(seed=0), hidden=(256, 256), torch_threads=None)
+        .build_learner_group()
+        ._learner
+    )
 
 
 def _batch() -> dict[str, torch.Tensor]:

@@ -25,7 +25,8 @@ Two update paths, the same step:
 * `update(batch=...)` (RLlib's): per minibatch `_uncompiled_update`, the finite check read on the host
   (the path before the fused update; `fused_update=False` trains through it).
 * `update_from_replay(replay, num_steps, batch_size, timesteps)` (the fused one, `fused_update=True`):
-  `num_steps` calls of `fused_step.FusedSACStep`, each sampling its batch from `replay` (a buffer on
+  `num_steps` calls of `sac_step.SACStep` (N = 1; its noise from the seed's Philox stream, whose
+  counters the learner checkpoints), each sampling its batch from `replay` (a buffer on
   this learner's device) inside the step and guarding non-finite gradients on the device. On CUDA the
   step is captured once into a CUDA graph and replayed (`cuda_graph`), optionally compiled first
   (`compile_update`); on a CPU it runs eagerly (or compiled). The loss statistics of the last step and

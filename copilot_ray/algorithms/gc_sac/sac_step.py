@@ -31,6 +31,7 @@ No `.item()`, no host-built tensor, no data-dependent shape: the step can be cap
 from __future__ import annotations
 
 import contextlib
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -51,6 +52,9 @@ TARGET_NETS = tuple("target_" + net for net in CRITIC_NETS)
 LOSS_COLUMNS = (Columns.REWARDS, Columns.TERMINATEDS, "weights", "n_step")
 # The purpose word of the seeds' reparameterisation-noise streams (`PhiloxStreams`).
 NOISE_STREAM = 1
+# For N > 1 a parameter's gradient is a strided view of the step's gradient rows, on purpose (autograd
+# accumulates into it in place); torch warns that such a layout "may impair performance".
+warnings.filterwarnings("ignore", message="grad and param do not obey the gradient layout contract")
 
 
 def _layout(module: torch.nn.Module, nets: Sequence[str], start: int = 0) -> tuple[list[tuple], int]:

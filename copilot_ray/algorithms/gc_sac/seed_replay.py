@@ -9,7 +9,7 @@ tensor and each seed's fill count in one [N] tensor. Seed i's buffer, `buffer.se
 arithmetic and checks, `transitions()` and its checkpoint format (`get_state`/`set_state`, the
 one-seed `FlatTransitionBuffer` format) are that class's own. `sample(B)` draws B uniform rows from each
 seed's own filled rows as one [N, B, ...] batch: one gather per column for all seeds and no host sync,
-so it can sit inside `seed_stack.StackedSACStep`'s captured step. Its uniforms come from the device's
+so it can sit inside `sac_step.SACStep`'s captured step. Its uniforms come from the device's
 default generator as one [N, B] draw (a seed's rows are not the rows its one-seed run would draw).
 """
 

@@ -1,6 +1,7 @@
 """The SAC updates of N seeds' agents (one `GoalSAC` each, in one process) as one stacked update.
 
-`StackedAgentUpdates(algos)` stacks the seeds' learner modules (`gc_sac.seed_stack.StackedSAC`) and
+`StackedAgentUpdates(algos)` stacks the seeds' learner modules into one `gc_sac.sac_step.SACStep` (their
+parameters and Adam state become views of its rows: a seed's learner always holds its current agent) and
 their replay (`gc_sac.seed_replay`: flat transitions, or HER's relabelling buffer for her, sorb and
 sorb_map, relabelled on the device as the one-seed fused path relabels), and gives each algorithm an
 updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
@@ -10,13 +11,14 @@ for actions answers them with one batched forward pass of the stacked actors (`S
 seed's exploration noise drawn in its own turn from its own stream) and leaves the seeds parked at their
 updates waiting. When every seed of the stack is parked at its update (or done with its iteration),
 `run(requests)` runs max(n) stacked steps,
-seed i active in its first n_i, then writes every seed's weights back into its learner's module (the
-env runners sync from there, as after any update) and logs each seed's figures on its own learner.
+seed i active in its first n_i (its learner's module is its row: the env runners sync from there, as
+after any update), and logs each seed's figures on its own learner.
 
-Random streams: each seed samples its replay rows (and HER's goals) and its SAC noise from two
-generators of its own, seeded from its seed, and an inactive seed draws nothing; so seed i's updates in a stack of any size are
-its updates in a stack of one (tested). They are not the draws of a one-seed trial's fused update,
-which samples from the device's default generator.
+Random streams: each seed's SAC noise is its Philox stream (`gc_sac.philox`, keyed by its seed: the
+stream its one-seed fused update draws from), and it samples its replay rows (and HER's goals) from a
+generator of its own, seeded from its seed; an inactive seed draws nothing. So seed i's updates in a
+stack of any size are its updates in a stack of one (tested). Its row sampling is not yet a one-seed
+trial's, which samples from the device's default generator.
 
 What the stacked path refuses (named, before anything runs): the numpy or stock update paths
 (`fused_update=False`, `fast_learner=False`), learning-rate schedules,
@@ -33,21 +35,20 @@ import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac.device_hindsight import relabelled_columns
-from copilot_ray.algorithms.gc_sac.fused_step import FINITE
 from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep
 from copilot_ray.algorithms.gc_sac.seed_replay import (
     StackedHindsightBuffer,
     StackedTransitionBuffer,
     gather_rows,
 )
-from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
 ACT, UPDATE = "act", "update"  # what a seed asks the stack for at a rendezvous
-# The streams a seed's stacked updates draw from: SeedSequence([seed, STREAM]) (distinct from the
-# algorithm's own numpy and torch streams, which it seeds with its seed alone).
-SAMPLE_STREAM, NOISE_STREAM = 1_001, 1_002
+# The stream a seed's stacked updates sample their rows from: SeedSequence([seed, SAMPLE_STREAM])
+# (distinct from the algorithm's own numpy and torch streams, which it seeds with its seed alone).
+SAMPLE_STREAM = 1_001
 
 
 def stream_generator(seed: int, stream: int, device: torch.device) -> torch.Generator:
@@ -94,17 +95,17 @@ class StackedAgentUpdates:
         modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in self.learners]
         self.modules = modules
         self.log_alphas = [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in self.learners]
-        self.agents = StackedSAC.from_modules(modules, self.log_alphas)
         cfg = algos[0].config
         module_cfg = self.learners[0].config.get_config_for_module(DEFAULT_MODULE_ID)
-        self.step = StackedSACStep(
-            self.agents,
-            {"qf": module_cfg.critic_lr, "policy": module_cfg.actor_lr, "alpha": module_cfg.alpha_lr},
+        self.step = SACStep(
+            modules,
+            self.log_alphas,
+            [learner._sac_optimizers(DEFAULT_MODULE_ID) for learner in self.learners],
             self.learners[0].target_entropy[DEFAULT_MODULE_ID],
             gamma=module_cfg.gamma,
             tau=module_cfg.tau,
             critic_loss=self.learners[0]._gc_settings["critic_loss"],
-            generators=[stream_generator(s, NOISE_STREAM, self.device) for s in self.seeds],
+            seeds=self.seeds,
         )
         self.samplers = [stream_generator(s, SAMPLE_STREAM, self.device) for s in self.seeds]
         self.action_dim = int(np.prod(modules[0].action_space.shape))
@@ -130,7 +131,7 @@ class StackedAgentUpdates:
         """{seed index: (observation, its standard-normal noise [1, A] or None for the deterministic
         action)} -> {seed index: its action (numpy)}, as its module would act on that noise."""
         n = len(self.algos)
-        dims = self.agents.shapes["pi"][0][0][1]  # the actor's input width
+        dims = int(np.prod(self.modules[0].observation_space.shape))  # the actor's input width
         obs = torch.zeros(n, 1, dims, device=self.device)
         for i, (observation, _) in requests.items():
             obs[i, 0] = torch.as_tensor(np.asarray(observation, np.float32), device=self.device)
@@ -140,25 +141,24 @@ class StackedAgentUpdates:
             noise = torch.zeros(n, 1, self.action_dim, device=self.device)
             for i, draw in noisy.items():
                 noise[i] = draw.to(self.device)
-            actions = self.agents.act(obs, noise).cpu().numpy()
+            actions = self.step.act(obs, noise).cpu().numpy()
             out.update({i: actions[i, 0] for i in noisy})
         if len(noisy) < len(requests):
-            actions = self.agents.act(obs).cpu().numpy()
+            actions = self.step.act(obs).cpu().numpy()
             out.update({i: actions[i, 0] for i in requests if i not in noisy})
         return out
 
     def update(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
         """{seed index: (gradient steps, timesteps)} -> {seed index: [its learner's results]}."""
         owed = [int(requests[i][0]) if i in requests else 0 for i in range(len(self.algos))]
+        owed_on_device = torch.as_tensor(owed, device=self.device)  # once a round: steps compare to it
         last: dict[int, dict[str, torch.Tensor]] = {}
         for t in range(max(owed)):
             drawing = [n > t for n in owed]
-            active = torch.tensor(drawing, device=self.device)
-            stats = self.step.step(self._sample(drawing), active=active, drawing=drawing)
+            stats = self.step.step(self._sample(drawing), active=owed_on_device > t)
             for i, n in enumerate(owed):
                 if n == t + 1:  # seed i's last step of this round: its figures
                     last[i] = {k: v[i].detach().clone() for k, v in stats.items() if k != FINITE}
-        self.agents.write_to(self.modules, self.log_alphas)
         skipped = self.step.skipped.cpu().tolist()
         out = {}
         for i, (n, timesteps) in requests.items():
@@ -201,11 +201,11 @@ class StackedAgentUpdates:
         return {"step": self.step.get_state(), "samplers": [g.get_state() for g in self.samplers]}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
-        """Restores `get_state`'s snapshot and writes the weights into the learners' modules."""
+        """Restores `get_state`'s snapshot (in place: the learners' modules, views of the step's rows,
+        hold it too)."""
         self.step.set_state(state["step"])
         for g, g_state in zip(self.samplers, state["samplers"], strict=True):
             g.set_state(g_state)
-        self.agents.write_to(self.modules, self.log_alphas)
         # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint,
         # so a learner counts only the steps skipped from here on (its own count restarts with it).
         for learner, skipped in zip(self.learners, self.step.skipped.cpu().tolist(), strict=True):
