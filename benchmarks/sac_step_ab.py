@@ -1,6 +1,7 @@
 """One seed's SAC update time: the agent's `SACStep` at N = 1 against the steps it replaced, interleaved.
 
     PYTHONPATH=. python benchmarks/sac_step_ab.py [--base fce44f3] [--rounds 8] [--steps 40] [--threads 1]
+        [--stack 4]
 
 At this project's sizes (actor and twin critics [256, 256], batch 256, obs 4, action 2), on the CPU.
 The replaced steps are read from git revision `--base` (the one before `SACStep`):
@@ -10,6 +11,10 @@ The replaced steps are read from git revision `--base` (the one before `SACStep`
 * "stacked MLP (base)": `seed_stack.StackedSACStep` at N = 1, the stack's own batched MLP
   (`baddbmm` over stacked weights), its own Adam: what holding one stacked module would cost;
 * "SACStep": this tree's step (the RLModule's networks by `functional_call` under `vmap`, Philox noise).
+
+With `--stack N` (N > 1) two more rows compare the two ways of holding N seeds' networks: "stacked MLP
+(base) xN" (the stack's own batched layers) and "SACStep xN" (the RLModule's networks under `vmap`);
+their ms are per stacked step (N seed-updates).
 
 Each round times `--steps` steps of every row in turn (A, B, C, then the next round), on one fixed
 batch, after 5 warm-up steps each; the order rotates every round so a load change on a shared machine
@@ -84,6 +89,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--stack", type=int, default=0, help="also time N stacked seeds both ways")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     old_fused = _module_at(args.base, "copilot_ray/algorithms/gc_sac/fused_step.py", "base_fused_step")
@@ -121,6 +127,34 @@ def main() -> None:
         "stacked MLP (base)": lambda: stacked.step(seed_axis),
         "SACStep": lambda: step.step(seed_axis),
     }
+    if args.stack > 1:
+        n = args.stack
+        learners = [_learner() for _ in range(n)]
+        many = _learner().fused_step()  # only its settings are read
+        stacked_n = old_stack.StackedSACStep(
+            old_stack.StackedSAC.from_modules(
+                [lr.module[module_id].unwrapped() for lr in learners],
+                [lr.curr_log_alpha[module_id] for lr in learners],
+            ),
+            {"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr},
+            base.target_entropy[module_id],
+            gamma=config.gamma,
+            tau=config.tau,
+            critic_loss="huber",
+        )
+        step_n = type(many)(
+            [lr.module[module_id].unwrapped() for lr in learners],
+            [lr.curr_log_alpha[module_id] for lr in learners],
+            [lr._sac_optimizers(module_id) for lr in learners],
+            base.target_entropy[module_id],
+            gamma=config.gamma,
+            tau=config.tau,
+            critic_loss="huber",
+            seeds=range(n),
+        )
+        stacked_batch = {k: v.expand(n, *v.shape[1:]).contiguous() for k, v in seed_axis.items()}
+        rows[f"stacked MLP (base) x{n}"] = lambda: stacked_n.step(stacked_batch)
+        rows[f"SACStep x{n}"] = lambda: step_n.step(stacked_batch)
     for run in rows.values():
         for _ in range(5):
             run()
