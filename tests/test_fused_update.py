@@ -168,14 +168,15 @@ def test_the_fused_step_is_rllibs_step_for_the_same_batch(critic_loss, monkeypat
 
 def test_update_from_replay_samples_its_batch_inside_the_step_and_logs_as_rllib_does():
     by_hand, from_replay = _twins()
-    replay = DeviceTransitionBuffer(100, device=from_replay._learner.device)
-    replay.add(_columns(n=40))
+    replays = [DeviceTransitionBuffer(100, device=from_replay._learner.device) for _ in range(2)]
+    for replay in replays:  # twins: each samples its own rows from the same stream
+        replay.add(_columns(n=40))
     fused = by_hand._learner.fused_step()
-    torch.manual_seed(7)
     for _ in range(4):
-        fused.step(with_seed_axis(replay.sample(16)))
-    torch.manual_seed(7)
-    result = from_replay._learner.update_from_replay(replay, 4, 16, {"num_env_steps_sampled_lifetime": 40})
+        fused.step(with_seed_axis(replays[0].sample(16)))
+    result = from_replay._learner.update_from_replay(
+        replays[1], 4, 16, {"num_env_steps_sampled_lifetime": 40}
+    )
     _assert_same(_snapshot(by_hand), _snapshot(from_replay), rtol=0, atol=0)
     module = result[DEFAULT_MODULE_ID]
     assert module["num_target_updates"].peek() == 4
@@ -239,7 +240,6 @@ def test_a_checkpoint_restores_optimizer_state_log_alpha_noise_and_the_replay_th
 
     results = []
     for learner_group, buffer in ((original, replay), (restored, restored_replay)):
-        torch.manual_seed(11)  # the replay's row sampling (the step's noise is its own stream's)
         results.append(learner_group._learner.update_from_replay(buffer, 3, 16)[DEFAULT_MODULE_ID])
         buffer.add(_columns(n=5, seed=3))
     _assert_same(_snapshot(original), _snapshot(restored), rtol=0, atol=0)

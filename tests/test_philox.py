@@ -118,3 +118,13 @@ def test_a_checkpoint_restores_the_counters_in_place_and_refuses_other_streams()
     assert torch.equal(streams.words(5), after)
     with pytest.raises(ValueError, match="does not fit these streams"):
         PhiloxStreams([4, 6], purpose=6).set_state(state)
+
+
+def test_one_stream_of_a_stack_shares_its_counter_and_draws_what_the_stack_draws_for_it():
+    stack = PhiloxStreams([3, 4, 5], purpose=7)
+    middle = stack.stream(1)
+    alone = PhiloxStreams([4], purpose=7)
+    assert torch.equal(middle.words(6), alone.words(6))
+    assert stack.counters.tolist() == [0, 2, 0]  # the stack's counter of seed 4 moved with it
+    assert torch.equal(stack.words(4)[1], alone.words(4)[0])
+    assert middle.counters.tolist() == [3]

@@ -1,7 +1,8 @@
 """`seed_replay`'s stacked buffers: N seeds' rings in one storage. Each seed keeps exactly what its own
 buffer (`DeviceTransitionBuffer`, `DeviceHindsightBuffer`) would keep, a sample gives every seed rows of
-its own (HER's relabelled within that seed's episodes), and a seed's checkpoint is the one-seed format
-(either way round)."""
+its own (HER's relabelled within that seed's episodes), the rows and goals its own one-seed buffer
+draws (one sampler: each seed's Philox stream), and a seed's checkpoint is the one-seed format (either
+way round)."""
 
 import numpy as np
 import pytest
@@ -121,7 +122,7 @@ def _her_stack(num_seeds=3, capacity=1000, **kwargs):
 
 def test_each_seeds_her_buffer_keeps_what_its_own_buffer_keeps():
     stack = _her_stack(2, capacity=12)
-    alone = DeviceHindsightBuffer(12, LAYOUT, _reached_reward)
+    alone = DeviceHindsightBuffer(12, LAYOUT, _reached_reward, seed=1)  # seed 1's: its sampler's too
     for x0, steps in ((0, 5), (100, 6), (200, 4)):  # the third wraps the ring
         _line(stack.seeds[1], x0, steps)
         _line(alone, x0, steps)
@@ -203,3 +204,31 @@ def test_a_stacked_seeds_episode_goals_stay_in_its_episode_after_its_ring_wraps(
         relabelled = goal[:, 1] != 9.0
         episode = lambda x: np.floor_divide(x - 1000 * seed, 100)  # noqa: B023, E731
         assert (episode(goal[relabelled, 0]) == episode(obs[relabelled, 0])).all()
+
+
+def test_a_stacked_seed_samples_the_rows_and_goals_its_one_seed_buffer_samples():
+    seeds = (5, 7, 9)
+    flat = StackedTransitionBuffer(3, capacity=30, device="cpu", obs_dim=2, action_dim=2, seeds=seeds)
+    her = _her_stack(3, capacity=40, seeds=seeds)
+    for i in range(len(seeds)):
+        flat.seeds[i].add(_rows(i, 0, 10 + 5 * i))
+        _line(her.seeds[i], 100 * i, 8)
+        _line(her.seeds[i], 100 * i + 50, 6)
+    flat_alone = DeviceTransitionBuffer(30, device="cpu", seed=7)
+    flat_alone.add(_rows(1, 0, 15))
+    her_alone = DeviceHindsightBuffer(40, LAYOUT, _reached_reward, seed=7)
+    _line(her_alone, 100, 8)
+    _line(her_alone, 150, 6)
+    active = torch.tensor([False, True, True])
+    for _ in range(3):  # seed 5 sits out: seeds 7 and 9 draw on, 7's draws are its own buffer's
+        for stack, alone in ((flat, flat_alone), (her, her_alone)):
+            batch, own = stack.sample(20, active=active), alone.sample(20)
+            for key, column in own.items():
+                assert torch.equal(batch[key][1], column), key
+    assert flat.sampler.counters.tolist()[0] == 0 and her.sampler.counters.tolist()[0] == 0
+    # A seed's buffer checkpoints its stream's counter; its one-seed buffer takes it, and draws on alike.
+    restored = DeviceTransitionBuffer(30, device="cpu", seed=7)
+    restored.set_state(flat.seeds[1].get_state())
+    assert torch.equal(restored.sample(20)["obs"], flat.sample(20)["obs"][1])
+    with pytest.raises(ValueError, match="does not fit these streams"):
+        DeviceTransitionBuffer(30, device="cpu", seed=8).set_state(flat.seeds[1].get_state())

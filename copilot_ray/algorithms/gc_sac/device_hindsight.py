@@ -6,7 +6,8 @@ everything the numpy buffer's does, on the device and without a host synchronisa
 inside the fused SAC step and its CUDA graph: uniform rows (`device_replay.uniform_rows`), hindsight
 goals for the first her_ratio of them (`future`, `final` or `episode`), their rewards and terminations
 from a torch `reward_fn`, the dense reward added back, the agent's flat inputs composed for the new
-goals. It draws from torch's generator of the device (no numpy rng).
+goals. Rows and goals are drawn from the buffer's sampler, the seed's Philox stream
+(`device_replay.SAMPLE_STREAM`), in that order each call.
 """
 
 from __future__ import annotations
@@ -17,13 +18,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from copilot_ray.algorithms.gc_sac.device_replay import uniform_rows
+from copilot_ray.algorithms.gc_sac.device_replay import SAMPLE_STREAM, uniform_rows
 from copilot_ray.algorithms.gc_sac.hindsight_buffer import (
     STORED_COLUMNS,
     GoalLayout,
     HindsightReplayBuffer,
     overwritten_prefix,
 )
+from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
     NEXT_OBS,
@@ -63,9 +65,11 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         n_sampled_goal: int = 4,
         goal_selection: str = "future",
         device: torch.device | str = "cpu",
+        seed: int = 0,
     ):
         super().__init__(capacity, layout, reward_fn, n_sampled_goal, goal_selection)
         self.device = torch.device(device)
+        self.sampler = PhiloxStreams([int(seed)], SAMPLE_STREAM, self.device)
         self._size_t = torch.zeros((), dtype=torch.int64, device=self.device)
         self._ptr_t = torch.zeros((), dtype=torch.int64, device=self.device)  # the ring's, for "episode"
         self.storage_version = 0
@@ -97,11 +101,18 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         self._ptr_t.fill_(self._ptr)
         return added
 
+    def get_state(self) -> dict[str, Any]:
+        """`HindsightReplayBuffer.get_state`, plus the sampler's counter."""
+        return {**super().get_state(), "sampler": self.sampler.get_state()}
+
     def set_state(self, state: Mapping[str, object]) -> None:
-        """`HindsightReplayBuffer.set_state` (either buffer's state), then the device's copy of the size."""
+        """`HindsightReplayBuffer.set_state` (either buffer's state), then the device's copy of the size
+        (and the sampler's counter, where the snapshot has one)."""
         super().set_state(state)
         self._size_t.fill_(self._size)
         self._ptr_t.fill_(self._ptr)
+        if state.get("sampler") is not None:
+            self.sampler.set_state(state["sampler"])
 
     def write_pointers(self) -> torch.Tensor:
         """The ring's next row, on the device (a captured step reads it as the buffer fills)."""
@@ -117,23 +128,26 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         agent's flat columns (device tensors; no host sync)."""
         if self._size == 0:
             raise ValueError("cannot sample from an empty DeviceHindsightBuffer")
-        rows = uniform_rows(self._size_t, int(batch_size), self.device)
-        return relabelled_columns(self, rows, self._take, columns)
+        rows = uniform_rows(self._size_t, self.sampler, int(batch_size))[0]
+
+        def goal_uniforms(shape: torch.Size) -> torch.Tensor:
+            return self.sampler.uniform(shape[-1], dtype=torch.float64)[0]
+
+        return relabelled_columns(self, rows, self._take, columns, goal_uniforms)
 
 
 def relabelled_columns(
     buffer: Any,
     rows: torch.Tensor,
     take: Callable[[str, torch.Tensor], torch.Tensor],
-    columns: Iterable[str] = TRAIN_COLUMNS,
-    uniform: Callable[[torch.Size], torch.Tensor] | None = None,
+    columns: Iterable[str],
+    uniform: Callable[[torch.Size], torch.Tensor],
 ) -> dict[str, torch.Tensor]:
     """The agent's flat columns for storage rows `rows` ([..., B]: a batch, or a batch per seed), the
     first her_ratio of each batch with hindsight goals; `take(name, rows)` gathers a stored column at
     rows of that shape. `buffer` gives her_ratio, goal_selection, reward_fn, layout and capacity (a
     `DeviceHindsightBuffer`, or `seed_replay.StackedHindsightBuffer` for its seeds). `uniform(shape)`:
-    the float64 uniforms that pick hindsight goals (default: the device's generator; a stacked trial
-    draws each seed's from its own)."""
+    the float64 uniforms that pick hindsight goals, one per row of `shape` (the buffer's sampler)."""
     axis = rows.dim() - 1  # the batch axis of rows; a column's rows carry its width after it
     goals, rewards, terminateds = take("goal", rows), take(REWARDS, rows), take(TERMINATEDS, rows)
     n_her = int(round(buffer.her_ratio * rows.shape[axis]))
@@ -164,7 +178,7 @@ def relabelled_columns(
     return {k: out[k] for k in columns}
 
 
-def _hindsight_goals(buffer: Any, rows: torch.Tensor, take, uniform=None) -> torch.Tensor:
+def _hindsight_goals(buffer: Any, rows: torch.Tensor, take, uniform) -> torch.Tensor:
     """A next achieved goal of each row's own episode: its last (final), one from its step on (future)
     or one from anywhere in it (episode)."""
     start, length, step = (take(k, rows) for k in ("episode_start", "episode_length", "step"))
@@ -176,11 +190,7 @@ def _hindsight_goals(buffer: Any, rows: torch.Tensor, take, uniform=None) -> tor
             if buffer.goal_selection == "future"
             else overwritten_prefix(buffer.write_pointers(), start, length, buffer.capacity)
         )
-        u = (
-            torch.rand(rows.shape, device=rows.device, dtype=torch.float64)
-            if uniform is None
-            else uniform(rows.shape)
-        )
+        u = uniform(rows.shape)
         offset = torch.minimum(low + (u * (length - low)).long(), length - 1)  # uniform in [low, length)
     return take("next_achieved", (start + offset) % buffer.capacity)
 

@@ -1,14 +1,16 @@
 """`FlatTransitionBuffer`'s twin whose rows live in torch tensors on the learner's device.
 
 Sampling happens on that device with no host synchronisation, so it can sit inside the fused SAC step
-and its CUDA graph: row indices are `floor(u * size)` for uniform `u` from torch's generator of the
-device, where `size` is a 0-d device tensor updated in place when rows are added. The storage is
+and its CUDA graph: row indices are `floor(u * size)` for uniform `u` from the buffer's sampler, the
+seed's Philox stream (`philox.PhiloxStreams`, purpose `SAMPLE_STREAM`: the same rows on every device,
+and the same rows for a seed whether its buffer is alone or a row of a stack), where `size` is a 0-d
+device tensor updated in place when rows are added. The storage is
 allocated once at full capacity (on the first `add`), so its address never moves while a graph reads
 it; `storage_version` counts (re)allocations, and a captured step is rebuilt when it changes.
 
 Adding is one host-to-device copy per column per call. The state (`get_state`) has
-`FlatTransitionBuffer`'s format, numpy arrays included, so either buffer restores the other's
-checkpoint.
+`FlatTransitionBuffer`'s format, numpy arrays included, plus the sampler's counter, so either buffer
+restores the other's checkpoint.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
     NEXT_OBS,
@@ -30,13 +33,19 @@ from copilot_ray.algorithms.gc_sac.replay_buffer import (
     FlatTransitionBuffer,
 )
 
+# The purpose word of the replay's row-sampling streams (a seed's noise streams have another).
+SAMPLE_STREAM = 2
 
-def uniform_rows(size: torch.Tensor, batch_size: int | tuple[int, ...], device: torch.device) -> torch.Tensor:
-    """`batch_size` uniform row indices in [0, size) for an int64 device tensor `size` >= 1 (0-d, or
-    [N, 1] with batch_size (N, B): each row of indices under its own size), without reading `size` on
-    the host (float64 uniforms keep the rounding below one row)."""
-    u = torch.rand(batch_size, device=device, dtype=torch.float64)
-    return torch.minimum((u * size).long(), size - 1)
+
+def uniform_rows(
+    size: torch.Tensor, sampler: PhiloxStreams, batch_size: int, active: torch.Tensor | None = None
+) -> torch.Tensor:
+    """[N, batch_size] uniform row indices, row i in [0, size_i) from stream i of `sampler`, for an int64
+    device tensor `size` (0-d for one stream, or [N, 1]), without reading `size` on the host (float64
+    uniforms keep the rounding below one row). An empty buffer's rows are 0 (its batch is not trained
+    on); `active` ([N] bool): the streams that move (the others' rows are drawn but not consumed)."""
+    u = sampler.uniform(int(batch_size), active, dtype=torch.float64)
+    return torch.minimum((u * size).long(), (size - 1).clamp(min=0))
 
 
 class DeviceTransitionBuffer(FlatTransitionBuffer):
@@ -47,6 +56,7 @@ class DeviceTransitionBuffer(FlatTransitionBuffer):
         capacity: transitions kept; the oldest are overwritten first.
         device: where the rows live and are sampled (the learner's device).
         obs_dim, action_dim: flat sizes; inferred from the first `add` when None.
+        seed: keys the sampler's stream (the run's seed).
     """
 
     def __init__(
@@ -55,8 +65,10 @@ class DeviceTransitionBuffer(FlatTransitionBuffer):
         device: torch.device | str = "cpu",
         obs_dim: int | None = None,
         action_dim: int | None = None,
+        seed: int = 0,
     ):
         self.device = torch.device(device)
+        self.sampler = PhiloxStreams([int(seed)], SAMPLE_STREAM, self.device)
         self._size_t = torch.zeros((), dtype=torch.int64, device=self.device)
         self.storage_version = 0
         super().__init__(capacity, obs_dim, action_dim)
@@ -95,7 +107,7 @@ class DeviceTransitionBuffer(FlatTransitionBuffer):
     def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
         """`batch_size` uniform transitions (with replacement) as device tensors, no host sync. The
         caller makes sure the buffer is not empty (`len(buffer) > 0`, a host-side count)."""
-        rows = uniform_rows(self._size_t, int(batch_size), self.device)
+        rows = uniform_rows(self._size_t, self.sampler, int(batch_size))[0]
         return {k: self._data[k].index_select(0, rows) for k in columns}
 
     # ---------------------------------------------------------------- state
@@ -124,9 +136,13 @@ class DeviceTransitionBuffer(FlatTransitionBuffer):
             "ptr": self._ptr,
             "size": self._size,
             "data": filled,
+            "sampler": self.sampler.get_state(),
         }
 
     def set_state(self, state: Mapping[str, Any]) -> None:
-        """Restores a `get_state` snapshot of either buffer (capacity, dims, rows, write pointer)."""
+        """Restores a `get_state` snapshot of either buffer (capacity, dims, rows, write pointer, and
+        the sampler's counter where the snapshot has one: a numpy buffer's has none)."""
         super().set_state(state)
         self._size_t.fill_(self._size)
+        if state.get("sampler") is not None:
+            self.sampler.set_state(state["sampler"])

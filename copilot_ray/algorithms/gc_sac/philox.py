@@ -110,6 +110,16 @@ class PhiloxStreams:
     def num_streams(self) -> int:
         return len(self.seeds)
 
+    def stream(self, i: int) -> PhiloxStreams:
+        """Stream i alone, sharing its counter with these streams (a draw from either moves both)."""
+        one = object.__new__(PhiloxStreams)
+        one.device, one.seeds, one.purpose = self.device, [self.seeds[i]], self.purpose
+        one._seed_low, one._seed_high = self._seed_low[i : i + 1], self._seed_high[i : i + 1]
+        one._keys = tuple(key[i : i + 1] for key in self._keys)
+        one._multipliers = self._multipliers
+        one.counters = self.counters[i : i + 1]
+        return one
+
     def blocks(self, num_blocks: int, active: torch.Tensor | None = None) -> torch.Tensor:
         """The next `num_blocks` blocks of every stream as [N, num_blocks, 4] 32-bit words (int64), and
         the counters of the `active` streams (default all) moved past them."""

@@ -7,10 +7,12 @@ and HER's relabelling buffer (`StackedHindsightBuffer`, HER's and SoRB's).
 tensor and each seed's fill count in one [N] tensor. Seed i's buffer, `buffer.seeds[i]`, is a
 `device_replay.DeviceTransitionBuffer` whose rows are row i of that storage: adding, its ring
 arithmetic and checks, `transitions()` and its checkpoint format (`get_state`/`set_state`, the
-one-seed `FlatTransitionBuffer` format) are that class's own. `sample(B)` draws B uniform rows from each
-seed's own filled rows as one [N, B, ...] batch: one gather per column for all seeds and no host sync,
-so it can sit inside `sac_step.SACStep`'s captured step. Its uniforms come from the device's
-default generator as one [N, B] draw (a seed's rows are not the rows its one-seed run would draw).
+one-seed `FlatTransitionBuffer` format) are that class's own. `sample(B, active=...)` draws B uniform rows
+from each seed's own filled rows as one [N, B, ...] batch: one gather per column for all seeds and no
+host sync, so it can sit inside `sac_step.SACStep`'s captured step. The uniforms are the seeds' own
+sampling streams (`philox.PhiloxStreams`, the stream a one-seed buffer of that seed samples from; seed
+i's buffer holds stream i, sharing its counter), so a seed's rows are the rows its one-seed buffer
+draws, and a seed that is not `active` draws nothing.
 """
 
 from __future__ import annotations
@@ -25,8 +27,9 @@ from copilot_ray.algorithms.gc_sac.device_hindsight import (
     hindsight_storage,
     relabelled_columns,
 )
-from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer, uniform_rows
+from copilot_ray.algorithms.gc_sac.device_replay import SAMPLE_STREAM, DeviceTransitionBuffer, uniform_rows
 from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout
+from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
     ACTIONS,
     NEXT_OBS,
@@ -44,6 +47,7 @@ class _SeedRows(DeviceTransitionBuffer):
     def __init__(self, stack: StackedTransitionBuffer, seed: int):
         self._stack, self._seed = stack, seed
         super().__init__(stack.capacity, stack.device)
+        self.sampler = stack.sampler.stream(seed)  # its checkpoint carries the stack's counter for it
         self._size_t = stack.sizes[seed]  # a 0-d view: this seed's fills write the stack's counts
         self._allocate(stack.obs_dim, stack.action_dim)
 
@@ -87,7 +91,13 @@ class StackedTransitionBuffer:
     """N seeds' FIFO rings of flat transitions on `device` (module docstring)."""
 
     def __init__(
-        self, num_seeds: int, capacity: int, device: torch.device | str, obs_dim: int, action_dim: int
+        self,
+        num_seeds: int,
+        capacity: int,
+        device: torch.device | str,
+        obs_dim: int,
+        action_dim: int,
+        seeds: Iterable[int] | None = None,
     ):
         if int(num_seeds) < 1:
             raise ValueError(f"num_seeds must be >= 1, got {num_seeds}")
@@ -107,16 +117,20 @@ class StackedTransitionBuffer:
         }
         self.storage_version = 1  # allocated once: a captured step that reads it stays valid
         self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=dev)
+        self.sampler = _sampler(self.num_seeds, seeds, dev)
         self.seeds = [_SeedRows(self, i) for i in range(self.num_seeds)]
 
     def __len__(self) -> int:
         """The smallest seed's fill (sampling needs every seed non-empty)."""
         return min(len(seed) for seed in self.seeds)
 
-    def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
+    def sample(
+        self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS, active: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
         """`batch_size` uniform transitions of each seed's own, as [N, batch_size, ...] device tensors,
-        with no host sync. The caller makes sure every seed holds one (`len(buffer) > 0`)."""
-        rows = uniform_rows(self.sizes.unsqueeze(1), (self.num_seeds, int(batch_size)), self.device)
+        with no host sync; only the `active` seeds' ([N] bool, default all) streams move. An empty seed's
+        rows are its storage's first (zeros): it must not train on them."""
+        rows = uniform_rows(self.sizes.unsqueeze(1), self.sampler, batch_size, active)
         return {key: gather_rows(self.storage[key], rows) for key in columns}
 
 
@@ -133,6 +147,7 @@ class _SeedEpisodes(DeviceHindsightBuffer):
             stack.goal_selection,
             stack.device,
         )
+        self.sampler = stack.sampler.stream(seed)
         self._size_t = stack.sizes[seed]  # a 0-d view: this seed's adds write the stack's counts
         self._ptr_t = stack.pointers[seed]  # (and its ring's next row)
         self._allocate(stack.action_dim)
@@ -175,6 +190,7 @@ class StackedHindsightBuffer:
         n_sampled_goal: int = 4,
         goal_selection: str = "future",
         device: torch.device | str = "cpu",
+        seeds: Iterable[int] | None = None,
     ):
         if int(num_seeds) < 1:
             raise ValueError(f"num_seeds must be >= 1, got {num_seeds}")
@@ -190,6 +206,7 @@ class StackedHindsightBuffer:
         self.storage_version = 1
         self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=self.device)
         self.pointers = torch.zeros(self.num_seeds, dtype=torch.int64, device=self.device)
+        self.sampler = _sampler(self.num_seeds, seeds, self.device)
         # Each seed's buffer checks capacity, n_sampled_goal and goal_selection as the one-seed one does.
         self.seeds = [_SeedEpisodes(self, i) for i in range(self.num_seeds)]
         self.her_ratio = self.seeds[0].her_ratio
@@ -202,8 +219,26 @@ class StackedHindsightBuffer:
         """Each seed's ring's next row, [N, 1] (against [N, B] sampled rows)."""
         return self.pointers.unsqueeze(1)
 
-    def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
-        """`batch_size` transitions of each seed's own, relabelled as one seed's buffer relabels, as
-        [N, batch_size, ...] device tensors. The caller makes sure every seed holds one."""
-        rows = uniform_rows(self.sizes.unsqueeze(1), (self.num_seeds, int(batch_size)), self.device)
-        return relabelled_columns(self, rows, lambda name, at: gather_rows(self.storage[name], at), columns)
+    def sample(
+        self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS, active: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
+        """`batch_size` transitions of each seed's own, relabelled as one seed's buffer relabels (rows,
+        then hindsight goals, from each seed's own stream), as [N, batch_size, ...] device tensors; only
+        the `active` seeds' streams move. An empty seed's rows are its storage's first."""
+        rows = uniform_rows(self.sizes.unsqueeze(1), self.sampler, batch_size, active)
+
+        def goal_uniforms(shape: torch.Size) -> torch.Tensor:
+            return self.sampler.uniform(shape[-1], active, dtype=torch.float64)
+
+        def take(name: str, at: torch.Tensor) -> torch.Tensor:
+            return gather_rows(self.storage[name], at)
+
+        return relabelled_columns(self, rows, take, columns, goal_uniforms)
+
+
+def _sampler(num_seeds: int, seeds: Iterable[int] | None, device: torch.device) -> PhiloxStreams:
+    """The stack's sampling streams: one per seed (`seeds`, default 0 ... N - 1)."""
+    seeds = list(range(num_seeds)) if seeds is None else [int(s) for s in seeds]
+    if len(seeds) != num_seeds:
+        raise ValueError(f"need one seed per row ({num_seeds}), got {len(seeds)}")
+    return PhiloxStreams(seeds, SAMPLE_STREAM, device)

@@ -14,11 +14,12 @@ updates waiting. When every seed of the stack is parked at its update (or done w
 seed i active in its first n_i (its learner's module is its row: the env runners sync from there, as
 after any update), and logs each seed's figures on its own learner.
 
-Random streams: each seed's SAC noise is its Philox stream (`gc_sac.philox`, keyed by its seed: the
-stream its one-seed fused update draws from), and it samples its replay rows (and HER's goals) from a
-generator of its own, seeded from its seed; an inactive seed draws nothing. So seed i's updates in a
-stack of any size are its updates in a stack of one (tested). Its row sampling is not yet a one-seed
-trial's, which samples from the device's default generator.
+Random streams: each seed's SAC noise and its replay's rows (and HER's goals) come from its own Philox
+streams (`gc_sac.philox`, keyed by its seed: the streams its one-seed fused update and one-seed device
+buffer draw from), through the stacked buffer's one sampler; an inactive seed draws nothing. So seed i's
+updates in a stack of any size are its updates in a stack of one (tested), drawn from the streams its
+one-seed trial's fused update draws from (a whole stacked trial against its one-seed trial is not tested:
+the seeds' acting still draws from the global generator in their turns).
 
 What the stacked path refuses (named, before anything runs): the numpy or stock update paths
 (`fused_update=False`, `fast_learner=False`), learning-rate schedules,
@@ -34,27 +35,16 @@ import numpy as np
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
-from copilot_ray.algorithms.gc_sac.device_hindsight import relabelled_columns
 from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
 from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep
 from copilot_ray.algorithms.gc_sac.seed_replay import (
     StackedHindsightBuffer,
     StackedTransitionBuffer,
-    gather_rows,
 )
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
 ACT, UPDATE = "act", "update"  # what a seed asks the stack for at a rendezvous
-# The stream a seed's stacked updates sample their rows from: SeedSequence([seed, SAMPLE_STREAM])
-# (distinct from the algorithm's own numpy and torch streams, which it seeds with its seed alone).
-SAMPLE_STREAM = 1_001
-
-
-def stream_generator(seed: int, stream: int, device: torch.device) -> torch.Generator:
-    """A torch generator on `device` for seed `seed`'s stream `stream`."""
-    value = int(np.random.SeedSequence([int(seed), int(stream)]).generate_state(1, np.uint64)[0] >> 1)
-    return torch.Generator(device=device).manual_seed(value)
 
 
 def stacking_problems(algos: Sequence[Any]) -> list[str]:
@@ -107,9 +97,8 @@ class StackedAgentUpdates:
             critic_loss=self.learners[0]._gc_settings["critic_loss"],
             seeds=self.seeds,
         )
-        self.samplers = [stream_generator(s, SAMPLE_STREAM, self.device) for s in self.seeds]
         self.action_dim = int(np.prod(modules[0].action_space.shape))
-        self.replay = _stacked_replay(algos, modules[0], self.device)
+        self.replay = _stacked_replay(algos, modules[0], self.device, self.seeds)
         self.hindsight = isinstance(self.replay, StackedHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
 
@@ -154,8 +143,8 @@ class StackedAgentUpdates:
         owed_on_device = torch.as_tensor(owed, device=self.device)  # once a round: steps compare to it
         last: dict[int, dict[str, torch.Tensor]] = {}
         for t in range(max(owed)):
-            drawing = [n > t for n in owed]
-            stats = self.step.step(self._sample(drawing), active=owed_on_device > t)
+            active = owed_on_device > t
+            stats = self.step.step(self.replay.sample(self.batch_size, TRAIN_COLUMNS, active), active=active)
             for i, n in enumerate(owed):
                 if n == t + 1:  # seed i's last step of this round: its figures
                     last[i] = {k: v[i].detach().clone() for k, v in stats.items() if k != FINITE}
@@ -167,59 +156,30 @@ class StackedAgentUpdates:
             out[i] = [results] if figures else []
         return out
 
-    def _sample(self, drawing: Sequence[bool]) -> dict[str, torch.Tensor]:
-        """A [N, B] batch: seed i's rows (and HER's goal picks) drawn from its own generator where
-        `drawing[i]`, row 0 else (its stream untouched)."""
-        rows = []
-        for i, draw in enumerate(drawing):
-            size = len(self.replay.seeds[i])
-            if draw and size > 0:
-                rows.append(torch.clamp((self._uniform(i, self.batch_size) * size).long(), max=size - 1))
-            else:
-                rows.append(torch.zeros(self.batch_size, dtype=torch.int64, device=self.device))
-        index = torch.stack(rows)
-        storage = self.replay.storage
-        if not self.hindsight:
-            return {key: gather_rows(storage[key], index) for key in TRAIN_COLUMNS}
-
-        def goal_picks(shape: torch.Size) -> torch.Tensor:  # [N, n_her]: each drawing seed's own
-            zeros = torch.zeros(shape[1:], dtype=torch.float64, device=self.device)
-            return torch.stack([self._uniform(i, shape[1]) if d else zeros for i, d in enumerate(drawing)])
-
-        def take(name: str, at: torch.Tensor) -> torch.Tensor:
-            return gather_rows(storage[name], at)
-
-        return relabelled_columns(self.replay, index, take, TRAIN_COLUMNS, uniform=goal_picks)
-
-    def _uniform(self, seed_index: int, n: int) -> torch.Tensor:
-        return torch.rand(n, generator=self.samplers[seed_index], dtype=torch.float64, device=self.device)
-
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, Any]:
-        """Every seed's parameters, optimizer state and noise stream, and its sampling stream (each
-        seed's replay rows are in its algorithm's checkpoint, through its `SeedUpdater`)."""
-        return {"step": self.step.get_state(), "samplers": [g.get_state() for g in self.samplers]}
+        """Every seed's parameters, optimizer state and noise stream (each seed's replay rows and
+        sampling stream are in its algorithm's checkpoint, through its `SeedUpdater`)."""
+        return {"step": self.step.get_state()}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restores `get_state`'s snapshot (in place: the learners' modules, views of the step's rows,
         hold it too)."""
         self.step.set_state(state["step"])
-        for g, g_state in zip(self.samplers, state["samplers"], strict=True):
-            g.set_state(g_state)
         # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint,
         # so a learner counts only the steps skipped from here on (its own count restarts with it).
         for learner, skipped in zip(self.learners, self.step.skipped.cpu().tolist(), strict=True):
             learner.note_skipped_logged(int(skipped))
 
 
-def _stacked_replay(algos: Sequence[Any], module, device: torch.device):
+def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: Sequence[int]):
     """The seeds' replay as one stacked buffer: HER's relabelling buffer where the agent uses one (its
     reward on the device, as the one-seed fused path relabels), else flat transitions."""
     cfg = algos[0].config
     action_dim = int(np.prod(module.action_space.shape))
     if not cfg.uses_hindsight_buffer():
         obs_dim = int(np.prod(module.observation_space.shape))
-        return StackedTransitionBuffer(len(algos), replay_capacity(cfg), device, obs_dim, action_dim)
+        return StackedTransitionBuffer(len(algos), replay_capacity(cfg), device, obs_dim, action_dim, seeds)
     first = algos[0]
     return StackedHindsightBuffer(
         len(algos),
@@ -230,6 +190,7 @@ def _stacked_replay(algos: Sequence[Any], module, device: torch.device):
         n_sampled_goal=cfg.her["n_sampled_goal"],
         goal_selection=cfg.her["goal_selection"],
         device=device,
+        seeds=seeds,
     )
 
 
