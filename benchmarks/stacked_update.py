@@ -8,7 +8,7 @@ Rows, per device: "one seed, fused" (the learner's `SACStep`, N = 1, the path a 
 updates/s is its seed-updates/s), then for each N "N stacked" (one `SACStep` for N seeds); on a GPU each also
 "captured" (one CUDA graph per update, `graph_capture.CapturedCall`). Each row warms up for 3 calls,
 then runs for `--seconds`; it prints updates/s of the stack and seed-updates/s (N x that). Each seed
-samples its batch from its own replay inside the step (`seed_replay.StackedTransitionBuffer`, random
+samples its batch from its own ring of one replay inside the step (`DeviceTransitionBuffer` with a ring per seed, random
 transitions; one gather per column for all seeds, no host sync).
 
 On a CPU compare "N stacked" at `--threads` T against T one-seed trials side by side, each on one
@@ -29,8 +29,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from copilot_ray.algorithms.gc_sac import use_fast_learner
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
-from copilot_ray.algorithms.gc_sac.sac_step import SACStep, with_seed_axis
-from copilot_ray.algorithms.gc_sac.seed_replay import StackedTransitionBuffer
+from copilot_ray.algorithms.gc_sac.sac_step import SACStep
 
 OBS, ACT, BATCH, CAPACITY = 4, 2, 256, 100_000
 
@@ -61,10 +60,10 @@ def _transitions(seed: int) -> dict[str, np.ndarray]:
     }
 
 
-def _replay(num_seeds: int, device: torch.device) -> StackedTransitionBuffer:
-    replay = StackedTransitionBuffer(num_seeds, CAPACITY, device, OBS, ACT)
-    for seed, rows in enumerate(replay.seeds):
-        rows.add(_transitions(seed))
+def _replay(num_seeds: int, device: torch.device) -> DeviceTransitionBuffer:
+    replay = DeviceTransitionBuffer(CAPACITY, device, OBS, ACT, seeds=range(num_seeds))
+    for seed in range(num_seeds):
+        replay.add(_transitions(seed), seed=seed)
     return replay
 
 
@@ -115,7 +114,7 @@ def main() -> None:
     one = DeviceTransitionBuffer(CAPACITY, device)
     one.add(_transitions(0))
     fused = learner.fused_step()
-    _row("one seed, fused", 1, lambda: fused.step(with_seed_axis(one.sample(BATCH))), args.seconds, device)
+    _row("one seed, fused", 1, lambda: fused.step(one.sample(BATCH)), args.seconds, device)
     for n in args.seeds:
         replay = _replay(n, device)
         seeds = [_learner(args.device) for _ in range(n)]  # its own modules: the step views their weights

@@ -173,7 +173,7 @@ def test_update_from_replay_samples_its_batch_inside_the_step_and_logs_as_rllib_
         replay.add(_columns(n=40))
     fused = by_hand._learner.fused_step()
     for _ in range(4):
-        fused.step(with_seed_axis(replays[0].sample(16)))
+        fused.step(replays[0].sample(16))  # [1, 16, ...]: one seed's batch
     result = from_replay._learner.update_from_replay(
         replays[1], 4, 16, {"num_env_steps_sampled_lifetime": 40}
     )

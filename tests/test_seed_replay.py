@@ -1,4 +1,5 @@
-"""`seed_replay`'s stacked buffers: N seeds' rings in one storage. Each seed keeps exactly what its own
+"""N seeds' rings in one storage: `DeviceTransitionBuffer` with a ring per seed, and `seed_replay`'s HER
+buffer. Each seed keeps exactly what its own
 buffer (`DeviceTransitionBuffer`, `DeviceHindsightBuffer`) would keep, a sample gives every seed rows of
 its own (HER's relabelled within that seed's episodes), the rows and goals its own one-seed buffer
 draws (one sampler: each seed's Philox stream), and a seed's checkpoint is the one-seed format (either
@@ -16,7 +17,13 @@ from copilot_ray.algorithms.gc_sac import (
     HindsightReplayBuffer,
 )
 from copilot_ray.algorithms.gc_sac.replay_buffer import OBS, REWARDS, TERMINATEDS
-from copilot_ray.algorithms.gc_sac.seed_replay import StackedHindsightBuffer, StackedTransitionBuffer
+from copilot_ray.algorithms.gc_sac.seed_replay import StackedHindsightBuffer
+
+
+def StackedTransitionBuffer(num_seeds, capacity, device, obs_dim, action_dim, seeds=None):  # noqa: N802
+    """A flat buffer with a ring per seed (seeds 0 ... N - 1 unless given)."""
+    seeds = range(num_seeds) if seeds is None else seeds
+    return DeviceTransitionBuffer(capacity, device, obs_dim, action_dim, seeds=seeds)
 
 
 def _rows(seed, start, n):
@@ -39,22 +46,25 @@ def test_each_seed_keeps_what_its_own_buffer_keeps_through_wraps():
     for seed, sizes in adds.items():
         start = 0
         for n in sizes:
-            assert stack.seeds[seed].add(_rows(seed, start, n)) == alone[seed].add(_rows(seed, start, n)) == n
+            assert (
+                stack.add(seed=seed, transitions=_rows(seed, start, n))
+                == alone[seed].add(_rows(seed, start, n))
+                == n
+            )
             start += n
     for seed in range(3):
-        mine, want = stack.seeds[seed].transitions(), alone[seed].transitions()
+        mine, want = stack.transitions(seed=seed), alone[seed].transitions()
         assert mine.keys() == want.keys()
         for key in want:
             np.testing.assert_array_equal(mine[key], want[key], err_msg=f"seed {seed} {key}")
-        assert stack.seeds[seed].num_added == sum(adds[seed])
+        assert stack.get_state(seed=seed)["num_added"] == sum(adds[seed])
     assert stack.sizes.tolist() == [8, 10, 10] and len(stack) == 8
 
 
 def test_a_sample_gives_every_seed_filled_rows_of_its_own():
     stack = StackedTransitionBuffer(3, capacity=50, device="cpu", obs_dim=2, action_dim=2)
     for seed, n in enumerate((3, 40, 12)):
-        stack.seeds[seed].add(_rows(seed, 0, n))
-    torch.manual_seed(0)
+        stack.add(seed=seed, transitions=_rows(seed, 0, n))
     batch = stack.sample(500)
     assert batch["obs"].shape == (3, 500, 2) and batch["rewards"].shape == (3, 500)
     for seed, n in enumerate((3, 40, 12)):
@@ -71,30 +81,30 @@ def test_a_sample_gives_every_seed_filled_rows_of_its_own():
 
 def test_a_seeds_state_is_the_one_seed_format_both_ways():
     stack = StackedTransitionBuffer(2, capacity=8, device="cpu", obs_dim=2, action_dim=2)
-    stack.seeds[0].add(_rows(0, 0, 11))  # wrapped
+    stack.add(seed=0, transitions=_rows(0, 0, 11))  # wrapped
     flat = FlatTransitionBuffer(8)
-    flat.set_state(stack.seeds[0].get_state())
-    np.testing.assert_array_equal(flat.transitions()["obs"], stack.seeds[0].transitions()["obs"])
+    flat.set_state(stack.get_state(seed=0))
+    np.testing.assert_array_equal(flat.transitions()["obs"], stack.transitions(seed=0)["obs"])
     other = StackedTransitionBuffer(2, capacity=8, device="cpu", obs_dim=2, action_dim=2)
-    other.seeds[1].set_state(flat.get_state())  # seed 0's rows restored as seed 1 of another stack
-    np.testing.assert_array_equal(other.seeds[1].transitions()["obs"], stack.seeds[0].transitions()["obs"])
+    other.set_state(seed=1, state=flat.get_state())  # seed 0's rows restored as seed 1 of another stack
+    np.testing.assert_array_equal(other.transitions(seed=1)["obs"], stack.transitions(seed=0)["obs"])
     assert other.sizes.tolist() == [0, 8]
-    other.seeds[0].set_state(FlatTransitionBuffer(8).get_state())  # an empty snapshot keeps the rows' views
-    other.seeds[0].add(_rows(0, 0, 2))
-    assert other.sizes.tolist() == [2, 8] and float(other.storage["obs"][0, 1, 1]) == 1.0
+    other.set_state(seed=0, state=FlatTransitionBuffer(8).get_state())  # an empty snapshot keeps the storage
+    other.add(seed=0, transitions=_rows(0, 0, 2))
+    assert other.sizes.tolist() == [2, 8] and other.transitions(seed=0)["obs"][1, 1] == 1.0
 
 
 def test_a_stack_refuses_what_does_not_fit():
     stack = StackedTransitionBuffer(2, capacity=8, device="cpu", obs_dim=2, action_dim=2)
-    before = stack.seeds[1].get_state()
+    before = stack.get_state(seed=1)
     with pytest.raises(
-        ValueError, match="seed 1: a snapshot of capacity 16 does not fit the stack's capacity 8"
+        ValueError, match=r"seed 1: a snapshot of capacity 16, .* does not fit the stack's \(capacity 8"
     ):
-        stack.seeds[1].set_state(FlatTransitionBuffer(16).get_state())
-    assert stack.seeds[1].get_state() == before
+        stack.set_state(seed=1, state=FlatTransitionBuffer(16).get_state())
+    assert stack.get_state(seed=1) == before
     with pytest.raises(ValueError, match="action size 3 != buffer action_dim 2"):
-        stack.seeds[0].add({**_rows(0, 0, 2), "actions": np.zeros((2, 3), np.float32)})
-    with pytest.raises(ValueError, match="num_seeds must be >= 1, got 0"):
+        stack.add(seed=0, transitions={**_rows(0, 0, 2), "actions": np.zeros((2, 3), np.float32)})
+    with pytest.raises(ValueError, match="needs at least one seed"):
         StackedTransitionBuffer(0, capacity=8, device="cpu", obs_dim=2, action_dim=2)
 
 
@@ -211,7 +221,7 @@ def test_a_stacked_seed_samples_the_rows_and_goals_its_one_seed_buffer_samples()
     flat = StackedTransitionBuffer(3, capacity=30, device="cpu", obs_dim=2, action_dim=2, seeds=seeds)
     her = _her_stack(3, capacity=40, seeds=seeds)
     for i in range(len(seeds)):
-        flat.seeds[i].add(_rows(i, 0, 10 + 5 * i))
+        flat.add(seed=i, transitions=_rows(i, 0, 10 + 5 * i))
         _line(her.seeds[i], 100 * i, 8)
         _line(her.seeds[i], 100 * i + 50, 6)
     flat_alone = DeviceTransitionBuffer(30, device="cpu", seed=7)
@@ -224,11 +234,11 @@ def test_a_stacked_seed_samples_the_rows_and_goals_its_one_seed_buffer_samples()
         for stack, alone in ((flat, flat_alone), (her, her_alone)):
             batch, own = stack.sample(20, active=active), alone.sample(20)
             for key, column in own.items():
-                assert torch.equal(batch[key][1], column), key
+                assert torch.equal(batch[key][1], column[0]), key
     assert flat.sampler.counters.tolist()[0] == 0 and her.sampler.counters.tolist()[0] == 0
     # A seed's buffer checkpoints its stream's counter; its one-seed buffer takes it, and draws on alike.
     restored = DeviceTransitionBuffer(30, device="cpu", seed=7)
-    restored.set_state(flat.seeds[1].get_state())
-    assert torch.equal(restored.sample(20)["obs"], flat.sample(20)["obs"][1])
+    restored.set_state(flat.get_state(seed=1))
+    assert torch.equal(restored.sample(20)["obs"][0], flat.sample(20)["obs"][1])
     with pytest.raises(ValueError, match="does not fit these streams"):
-        DeviceTransitionBuffer(30, device="cpu", seed=8).set_state(flat.seeds[1].get_state())
+        DeviceTransitionBuffer(30, device="cpu", seed=8).set_state(flat.get_state(seed=1))

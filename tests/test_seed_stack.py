@@ -239,3 +239,13 @@ def test_the_stacked_update_benchmark_prints_a_row_per_stack_and_refuses_a_bad_s
         stacked_update.main()
     assert exit_info.value.code == 2
     assert "--seeds: every N must be >= 1, got [0]" in capsys.readouterr().err
+
+
+def test_a_batch_without_the_seed_axis_is_refused_naming_the_shape():
+    step = _stack_of([_learner(s) for s in SEEDS[:2]])
+    with pytest.raises(
+        ValueError, match=r"\[N, B, ...\] columns for its 2 seed\(s\); got actions of shape \(64, 2\)"
+    ):
+        step.step(_batch(0))
+    with pytest.raises(ValueError, match=r"got actions of shape \(1, 64, 2\)"):
+        step.step(with_seed_axis(_batch(0)))

@@ -125,7 +125,8 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
 
     def sample(self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS) -> dict[str, torch.Tensor]:
         """`batch_size` uniform transitions, the first her_ratio of them with hindsight goals, as the
-        agent's flat columns (device tensors; no host sync)."""
+        agent's flat columns: [1, batch_size, ...] device tensors (one seed, as every device buffer
+        samples a leading seed axis); no host sync."""
         if self._size == 0:
             raise ValueError("cannot sample from an empty DeviceHindsightBuffer")
         rows = uniform_rows(self._size_t, self.sampler, int(batch_size))[0]
@@ -133,7 +134,8 @@ class DeviceHindsightBuffer(HindsightReplayBuffer):
         def goal_uniforms(shape: torch.Size) -> torch.Tensor:
             return self.sampler.uniform(shape[-1], dtype=torch.float64)[0]
 
-        return relabelled_columns(self, rows, self._take, columns, goal_uniforms)
+        batch = relabelled_columns(self, rows, self._take, columns, goal_uniforms)
+        return {k: v.unsqueeze(0) for k, v in batch.items()}
 
 
 def relabelled_columns(

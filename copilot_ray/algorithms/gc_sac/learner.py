@@ -64,7 +64,7 @@ from ray.rllib.utils.metrics import (
 
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
 from copilot_ray.algorithms.gc_sac.losses import CRITIC_LOSSES, sac_losses
-from copilot_ray.algorithms.gc_sac.sac_step import FINITE, TOTAL_LOSS, SACStep, with_seed_axis
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, TOTAL_LOSS, SACStep
 from copilot_ray.torch_checks import all_finite
 
 GC_SAC_KEY = "gc_sac"
@@ -255,7 +255,7 @@ class GCSACTorchLearner(SACTorchLearner):
         step.set_learning_rates(dict(zip(SAC_OPTIMIZERS, lrs, strict=True)))
 
         def run() -> dict[str, torch.Tensor]:
-            return step.step(with_seed_axis(replay.sample(int(batch_size))))
+            return step.step(replay.sample(int(batch_size)))  # [1, B, ...]: this seed's batch
 
         if self._gc_settings["compile_update"]:
             run = torch.compile(run)

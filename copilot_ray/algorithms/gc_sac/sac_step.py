@@ -325,6 +325,11 @@ class SACStep:
         columns are [N, B, ...]. Returns each loss statistic, `total_loss` and `finite` as [N] device
         tensors."""
         actions = batch[Columns.ACTIONS]
+        if actions.dim() != 3 or actions.shape[0] != self.num_seeds:  # shapes are host metadata: no sync
+            raise ValueError(
+                f"the SAC step takes [N, B, ...] columns for its {self.num_seeds} seed(s); got actions of "
+                f"shape {tuple(actions.shape)}"
+            )
         # Seed i's two draws in one: the current actions' noise, then the next actions'.
         noise = self.noise.normal((2, *actions.shape[1:]), active)
         total, stats = self._per_seed(

@@ -1,18 +1,15 @@
-"""N seeds' replay buffers in one set of device tensors, sampled for all seeds at once.
+"""HER's relabelling buffer for N seeds in one set of device tensors, sampled for all seeds at once.
 
-Two kinds, as a one-seed trial has: flat transitions (`StackedTransitionBuffer`, CO-PILOT's and SAC's)
-and HER's relabelling buffer (`StackedHindsightBuffer`, HER's and SoRB's).
-
-`StackedTransitionBuffer(num_seeds, capacity, ...)` keeps each column as one [N, capacity, ...]
-tensor and each seed's fill count in one [N] tensor. Seed i's buffer, `buffer.seeds[i]`, is a
-`device_replay.DeviceTransitionBuffer` whose rows are row i of that storage: adding, its ring
-arithmetic and checks, `transitions()` and its checkpoint format (`get_state`/`set_state`, the
-one-seed `FlatTransitionBuffer` format) are that class's own. `sample(B, active=...)` draws B uniform rows
-from each seed's own filled rows as one [N, B, ...] batch: one gather per column for all seeds and no
-host sync, so it can sit inside `sac_step.SACStep`'s captured step. The uniforms are the seeds' own
-sampling streams (`philox.PhiloxStreams`, the stream a one-seed buffer of that seed samples from; seed
-i's buffer holds stream i, sharing its counter), so a seed's rows are the rows its one-seed buffer
-draws, and a seed that is not `active` draws nothing.
+(The flat kind is `device_replay.DeviceTransitionBuffer` itself, with its leading seed axis.)
+`StackedHindsightBuffer(num_seeds, capacity, ...)` keeps each stored column as one [N, capacity, ...]
+tensor and each seed's fill and write pointer in [N] tensors. Seed i's episodes are added, and its
+checkpoint read and written (the one-seed `HindsightReplayBuffer` format), by a
+`device_hindsight.DeviceHindsightBuffer` over row i of that storage (`add_episodes(..., seed=i)`,
+`get_state(seed=i)`). `sample(B, active=...)` draws B rows of each seed's own and relabels them as the
+one-seed buffer does, as one [N, B, ...] batch with no host sync, so it can sit inside
+`sac_step.SACStep`'s captured step. Rows and goals come from the seeds' own sampling streams
+(`philox.PhiloxStreams`, the streams a one-seed buffer of that seed samples from), so a seed's batch is
+the batch its one-seed buffer draws, and a seed that is not `active` draws nothing.
 """
 
 from __future__ import annotations
@@ -27,111 +24,12 @@ from copilot_ray.algorithms.gc_sac.device_hindsight import (
     hindsight_storage,
     relabelled_columns,
 )
-from copilot_ray.algorithms.gc_sac.device_replay import SAMPLE_STREAM, DeviceTransitionBuffer, uniform_rows
+from copilot_ray.algorithms.gc_sac.device_replay import SAMPLE_STREAM, gather_rows, uniform_rows
 from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout
 from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
 from copilot_ray.algorithms.gc_sac.replay_buffer import (
-    ACTIONS,
-    NEXT_OBS,
-    OBS,
-    REWARDS,
-    TERMINATEDS,
     TRAIN_COLUMNS,
-    TRUNCATEDS,
 )
-
-
-class _SeedRows(DeviceTransitionBuffer):
-    """One seed's `DeviceTransitionBuffer` over its row of the stacked storage (never reallocated)."""
-
-    def __init__(self, stack: StackedTransitionBuffer, seed: int):
-        self._stack, self._seed = stack, seed
-        super().__init__(stack.capacity, stack.device)
-        self.sampler = stack.sampler.stream(seed)  # its checkpoint carries the stack's counter for it
-        self._size_t = stack.sizes[seed]  # a 0-d view: this seed's fills write the stack's counts
-        self._allocate(stack.obs_dim, stack.action_dim)
-
-    def _allocate(self, obs_dim: int, action_dim: int) -> None:
-        stack = self._stack
-        if (self.capacity, int(obs_dim), int(action_dim)) != (
-            stack.capacity,
-            stack.obs_dim,
-            stack.action_dim,
-        ):
-            raise ValueError(
-                f"seed {self._seed}: a buffer of capacity {self.capacity}, obs_dim {obs_dim}, action_dim "
-                f"{action_dim} does not fit the stack's (capacity {stack.capacity}, obs_dim {stack.obs_dim}, "
-                f"action_dim {stack.action_dim})"
-            )
-        self._obs_dim, self._action_dim = int(obs_dim), int(action_dim)
-        self._data = {k: v[self._seed] for k, v in stack.storage.items()}
-        self.storage_version = stack.storage_version
-
-    def set_state(self, state) -> None:
-        """`DeviceTransitionBuffer.set_state`, refusing a snapshot of another capacity before touching
-        anything (the stack's storage cannot grow for one seed)."""
-        if int(state["capacity"]) != self._stack.capacity:
-            raise ValueError(
-                f"seed {self._seed}: a snapshot of capacity {state['capacity']} does not fit the stack's "
-                f"capacity {self._stack.capacity}"
-            )
-        super().set_state(state)
-        if self._data is None:  # an empty snapshot without dims: keep this seed's rows
-            self._allocate(self._stack.obs_dim, self._stack.action_dim)
-
-
-def gather_rows(column: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-    """column [N, capacity, ...] at rows [N, B] (each seed its own rows): [N, B, ...]."""
-    n, b = rows.shape
-    index = rows.view(n, b, *([1] * (column.dim() - 2))).expand(n, b, *column.shape[2:])
-    return torch.gather(column, 1, index)
-
-
-class StackedTransitionBuffer:
-    """N seeds' FIFO rings of flat transitions on `device` (module docstring)."""
-
-    def __init__(
-        self,
-        num_seeds: int,
-        capacity: int,
-        device: torch.device | str,
-        obs_dim: int,
-        action_dim: int,
-        seeds: Iterable[int] | None = None,
-    ):
-        if int(num_seeds) < 1:
-            raise ValueError(f"num_seeds must be >= 1, got {num_seeds}")
-        if int(capacity) <= 0:
-            raise ValueError(f"capacity must be > 0, got {capacity}")
-        self.num_seeds, self.capacity = int(num_seeds), int(capacity)
-        self.device = torch.device(device)
-        self.obs_dim, self.action_dim = int(obs_dim), int(action_dim)
-        shape, dev = (self.num_seeds, self.capacity), self.device
-        self.storage = {
-            OBS: torch.zeros(*shape, self.obs_dim, device=dev),
-            NEXT_OBS: torch.zeros(*shape, self.obs_dim, device=dev),
-            ACTIONS: torch.zeros(*shape, self.action_dim, device=dev),
-            REWARDS: torch.zeros(shape, device=dev),
-            TERMINATEDS: torch.zeros(shape, dtype=torch.bool, device=dev),
-            TRUNCATEDS: torch.zeros(shape, dtype=torch.bool, device=dev),
-        }
-        self.storage_version = 1  # allocated once: a captured step that reads it stays valid
-        self.sizes = torch.zeros(self.num_seeds, dtype=torch.int64, device=dev)
-        self.sampler = _sampler(self.num_seeds, seeds, dev)
-        self.seeds = [_SeedRows(self, i) for i in range(self.num_seeds)]
-
-    def __len__(self) -> int:
-        """The smallest seed's fill (sampling needs every seed non-empty)."""
-        return min(len(seed) for seed in self.seeds)
-
-    def sample(
-        self, batch_size: int, columns: Iterable[str] = TRAIN_COLUMNS, active: torch.Tensor | None = None
-    ) -> dict[str, torch.Tensor]:
-        """`batch_size` uniform transitions of each seed's own, as [N, batch_size, ...] device tensors,
-        with no host sync; only the `active` seeds' ([N] bool, default all) streams move. An empty seed's
-        rows are its storage's first (zeros): it must not train on them."""
-        rows = uniform_rows(self.sizes.unsqueeze(1), self.sampler, batch_size, active)
-        return {key: gather_rows(self.storage[key], rows) for key in columns}
 
 
 class _SeedEpisodes(DeviceHindsightBuffer):
@@ -214,6 +112,22 @@ class StackedHindsightBuffer:
     def __len__(self) -> int:
         """The smallest seed's fill (sampling needs every seed non-empty)."""
         return min(len(seed) for seed in self.seeds)
+
+    def add_episodes(self, episodes, seed: int = 0) -> int:
+        """Seed `seed`'s episodes into its rings (its row's `DeviceHindsightBuffer`)."""
+        return self.seeds[seed].add_episodes(episodes)
+
+    def size_of(self, seed: int) -> int:
+        """Seed `seed`'s fill."""
+        return len(self.seeds[seed])
+
+    def get_state(self, seed: int = 0):
+        """Seed `seed`'s buffer in the one-seed format (its sampler's counter included)."""
+        return self.seeds[seed].get_state()
+
+    def set_state(self, state, seed: int = 0) -> None:
+        """Restores a one-seed snapshot into seed `seed`'s rows."""
+        self.seeds[seed].set_state(state)
 
     def write_pointers(self) -> torch.Tensor:
         """Each seed's ring's next row, [N, 1] (against [N, B] sampled rows)."""

@@ -2,8 +2,9 @@
 
 `StackedAgentUpdates(algos)` stacks the seeds' learner modules into one `gc_sac.sac_step.SACStep` (their
 parameters and Adam state become views of its rows: a seed's learner always holds its current agent) and
-their replay (`gc_sac.seed_replay`: flat transitions, or HER's relabelling buffer for her, sorb and
-sorb_map, relabelled on the device as the one-seed fused path relabels), and gives each algorithm an
+their replay (flat transitions in one `gc_sac.device_replay.DeviceTransitionBuffer` with a ring per
+seed, or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.seed_replay`, relabelled on the
+device as the one-seed fused path relabels), and gives each algorithm an
 updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
 seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep`
 rendezvous, and so does `act(obs)`, its env runner's hook for every env step. A round with seeds asking
@@ -35,12 +36,10 @@ import numpy as np
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
+from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
 from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep
-from copilot_ray.algorithms.gc_sac.seed_replay import (
-    StackedHindsightBuffer,
-    StackedTransitionBuffer,
-)
+from copilot_ray.algorithms.gc_sac.seed_replay import StackedHindsightBuffer
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
@@ -179,7 +178,7 @@ def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: S
     action_dim = int(np.prod(module.action_space.shape))
     if not cfg.uses_hindsight_buffer():
         obs_dim = int(np.prod(module.observation_space.shape))
-        return StackedTransitionBuffer(len(algos), replay_capacity(cfg), device, obs_dim, action_dim, seeds)
+        return DeviceTransitionBuffer(replay_capacity(cfg), device, obs_dim, action_dim, seeds=seeds)
     first = algos[0]
     return StackedHindsightBuffer(
         len(algos),
@@ -195,18 +194,18 @@ def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: S
 
 
 class SeedUpdater:
-    """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface."""
+    """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface,
+    over the seed's rings of the stack's replay."""
 
     def __init__(self, stack: StackedAgentUpdates, index: int, lockstep):
         self.stack, self.index, self.lockstep = stack, int(index), lockstep
-        self.buffer = stack.replay.seeds[self.index]
 
     def add(self, episodes) -> None:
-        self.buffer.add_episodes(episodes)
+        self.stack.replay.add_episodes(episodes, seed=self.index)
 
     def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
         """Waits for the stack's next round and returns this seed's results ([] for no step)."""
-        if num_updates <= 0 or len(self.buffer) == 0:
+        if num_updates <= 0 or self.stack.replay.size_of(self.index) == 0:
             return []
         return self.lockstep.meet(self.index, (UPDATE, int(num_updates), dict(timesteps)))
 
@@ -217,7 +216,7 @@ class SeedUpdater:
         return self.lockstep.meet(self.index, (ACT, observation, noise))
 
     def get_state(self) -> dict[str, Any]:
-        return {"buffer": self.buffer.get_state()}
+        return {"buffer": self.stack.replay.get_state(seed=self.index)}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        self.buffer.set_state(state["buffer"])
+        self.stack.replay.set_state(state["buffer"], seed=self.index)
