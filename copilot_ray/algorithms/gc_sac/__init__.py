@@ -10,7 +10,8 @@ Pieces:
     `PhiloxStreams`: per-seed counter-based random streams on the device (its noise).
   * `sac_losses` / `bellman_target`: SAC's losses, shared by both update paths.
   * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
-  * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there.
+  * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there, with a
+    ring per seed ([N, capacity, ...]; N = 1 for one seed) and one sampler on the seeds' streams.
   * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled;
     `DeviceHindsightBuffer`: the same on the learner's device, relabelled inside the fused step.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
