@@ -13,7 +13,8 @@ Pieces:
   * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there, with a
     ring per seed ([N, capacity, ...]; N = 1 for one seed) and one sampler on the seeds' streams.
   * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled;
-    `DeviceHindsightBuffer`: the same on the learner's device, relabelled inside the fused step.
+    `DeviceHindsightBuffer`: the same on the learner's device (a ring per seed), relabelled inside
+    the fused step.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
   * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
   * `use_fast_learner(config)`: switch a SACConfig to all of the above.

@@ -2,9 +2,9 @@
 
 `StackedAgentUpdates(algos)` stacks the seeds' learner modules into one `gc_sac.sac_step.SACStep` (their
 parameters and Adam state become views of its rows: a seed's learner always holds its current agent) and
-their replay (flat transitions in one `gc_sac.device_replay.DeviceTransitionBuffer` with a ring per
-seed, or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.seed_replay`, relabelled on the
-device as the one-seed fused path relabels), and gives each algorithm an
+their replay (one device buffer with a ring per seed: flat transitions, `gc_sac.DeviceTransitionBuffer`,
+or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.DeviceHindsightBuffer`, relabelled on
+the device as the one-seed fused path relabels), and gives each algorithm an
 updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
 seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep`
 rendezvous, and so does `act(obs)`, its env runner's hook for every env step. A round with seeds asking
@@ -36,10 +36,10 @@ import numpy as np
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
+from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
 from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep
-from copilot_ray.algorithms.gc_sac.seed_replay import StackedHindsightBuffer
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
@@ -98,7 +98,7 @@ class StackedAgentUpdates:
         )
         self.action_dim = int(np.prod(modules[0].action_space.shape))
         self.replay = _stacked_replay(algos, modules[0], self.device, self.seeds)
-        self.hindsight = isinstance(self.replay, StackedHindsightBuffer)
+        self.hindsight = isinstance(self.replay, DeviceHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
 
     def view(self, index: int, lockstep) -> SeedUpdater:
@@ -180,12 +180,10 @@ def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: S
         obs_dim = int(np.prod(module.observation_space.shape))
         return DeviceTransitionBuffer(replay_capacity(cfg), device, obs_dim, action_dim, seeds=seeds)
     first = algos[0]
-    return StackedHindsightBuffer(
-        len(algos),
+    return DeviceHindsightBuffer(
         replay_capacity(cfg),
         first.goal_layout(),
         DeviceRelabelledReward(first.goal_env.unwrapped, first.rules, device),
-        action_dim,
         n_sampled_goal=cfg.her["n_sampled_goal"],
         goal_selection=cfg.her["goal_selection"],
         device=device,
