@@ -247,3 +247,13 @@ def test_a_stacked_seed_samples_the_rows_and_goals_its_one_seed_buffer_samples()
     assert torch.equal(restored.sample(20)["obs"][0], flat.sample(20)["obs"][1])
     with pytest.raises(ValueError, match="does not fit these streams"):
         DeviceTransitionBuffer(30, device="cpu", seed=8).set_state(flat.get_state(seed=1))
+
+
+def test_sorbs_replayed_states_come_from_the_asked_seeds_ring():
+    stack = _her_stack(2, capacity=40)
+    _line(stack, 0, 8, seed=0)
+    _line(stack, 500, 8, seed=1)
+    observations, achieved = stack.sample_states(6, np.random.default_rng(0), seed=1)
+    assert observations.shape == (6, 2) and (observations[:, 0] >= 500).all()
+    np.testing.assert_array_equal(observations, achieved)  # this episode's achieved goal is its position
+    assert (stack.sample_states(6, np.random.default_rng(0), seed=0)[0][:, 0] < 500).all()

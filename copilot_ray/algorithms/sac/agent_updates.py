@@ -111,6 +111,14 @@ class FastLearnerUpdater:
             timesteps,
         )
 
+    def replay_size(self) -> int:
+        """Transitions in this agent's replay."""
+        return len(self.buffer)
+
+    def replay_states(self, n: int, rng: np.random.Generator):
+        """n replayed (observations, achieved goals) of a hindsight buffer (SoRB's graph)."""
+        return self.buffer.sample_states(n, rng)
+
     def get_state(self) -> dict[str, Any]:
         return {"buffer": self.buffer.get_state(), "rng": self.rng.bit_generator.state}
 
@@ -151,6 +159,14 @@ class FusedLearnerUpdater:
                 self.buffer, num_updates, self.config.train_batch_size_per_learner, timesteps
             )
         ]
+
+    def replay_size(self) -> int:
+        """Transitions in this agent's replay."""
+        return len(self.buffer)
+
+    def replay_states(self, n: int, rng: np.random.Generator):
+        """n replayed (observations, achieved goals) of a hindsight buffer (SoRB's graph)."""
+        return self.buffer.sample_states(n, rng)
 
     def get_state(self) -> dict[str, Any]:
         """The buffer, its sampling stream's counter included (sampling reads no global generator)."""

@@ -213,6 +213,14 @@ class SeedUpdater:
         noise = torch.randn(1, self.stack.action_dim) if explore else None
         return self.lockstep.meet(self.index, (ACT, observation, noise))
 
+    def replay_size(self) -> int:
+        """Transitions in this seed's ring of the stack's replay."""
+        return self.stack.replay.size_of(self.index)
+
+    def replay_states(self, n: int, rng: np.random.Generator):
+        """n replayed (observations, achieved goals) of this seed's ring (SoRB's graph)."""
+        return self.stack.replay.sample_states(n, rng, seed=self.index)
+
     def get_state(self) -> dict[str, Any]:
         return {"buffer": self.stack.replay.get_state(seed=self.index)}
 
