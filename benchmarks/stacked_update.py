@@ -1,13 +1,14 @@
-"""SAC updates/s with N seeds stacked in one update (`seed_stack.StackedSACStep`) against one seed's
-fused step, at this project's sizes (actor and twin critics [256, 256], batch 256, obs 4, action 2).
+"""SAC updates/s with N seeds stacked in one update (`sac_step.SACStep` over N seeds) against one seed's
+fused step (the same step at N = 1), at this project's sizes (actor and twin critics [256, 256], batch
+256, obs 4, action 2).
 
     PYTHONPATH=. python benchmarks/stacked_update.py [--seeds 1 2 4] [--seconds 5] [--threads 2] [--device cpu]
 
-Rows, per device: "one seed, fused" (`FusedSACStep`, the path a trial takes today: its updates/s is its
-seed-updates/s), then for each N "N stacked" (one `StackedSACStep` for N seeds); on a GPU each also
+Rows, per device: "one seed, fused" (the learner's `SACStep`, N = 1, the path a trial takes today: its
+updates/s is its seed-updates/s), then for each N "N stacked" (one `SACStep` for N seeds); on a GPU each also
 "captured" (one CUDA graph per update, `graph_capture.CapturedCall`). Each row warms up for 3 calls,
 then runs for `--seconds`; it prints updates/s of the stack and seed-updates/s (N x that). Each seed
-samples its batch from its own replay inside the step (`seed_replay.StackedTransitionBuffer`, random
+samples its batch from its own ring of one replay inside the step (`DeviceTransitionBuffer` with a ring per seed, random
 transitions; one gather per column for all seeds, no host sync).
 
 On a CPU compare "N stacked" at `--threads` T against T one-seed trials side by side, each on one
@@ -28,8 +29,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from copilot_ray.algorithms.gc_sac import use_fast_learner
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
-from copilot_ray.algorithms.gc_sac.seed_replay import StackedTransitionBuffer
-from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
+from copilot_ray.algorithms.gc_sac.sac_step import SACStep
 
 OBS, ACT, BATCH, CAPACITY = 4, 2, 256, 100_000
 
@@ -60,10 +60,10 @@ def _transitions(seed: int) -> dict[str, np.ndarray]:
     }
 
 
-def _replay(num_seeds: int, device: torch.device) -> StackedTransitionBuffer:
-    replay = StackedTransitionBuffer(num_seeds, CAPACITY, device, OBS, ACT)
-    for seed, rows in enumerate(replay.seeds):
-        rows.add(_transitions(seed))
+def _replay(num_seeds: int, device: torch.device) -> DeviceTransitionBuffer:
+    replay = DeviceTransitionBuffer(CAPACITY, device, OBS, ACT, seeds=range(num_seeds))
+    for seed in range(num_seeds):
+        replay.add(_transitions(seed), seed=seed)
     return replay
 
 
@@ -103,8 +103,6 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
     learner = _learner(args.device)
-    module = learner.module[DEFAULT_MODULE_ID].unwrapped()
-    log_alpha = learner.curr_log_alpha[DEFAULT_MODULE_ID]
     config = learner.config.get_config_for_module(DEFAULT_MODULE_ID)
     lrs = {"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr}
     print(
@@ -119,14 +117,17 @@ def main() -> None:
     _row("one seed, fused", 1, lambda: fused.step(one.sample(BATCH)), args.seconds, device)
     for n in args.seeds:
         replay = _replay(n, device)
-        agents = StackedSAC.from_modules([module] * n, [log_alpha] * n)  # same start: speed is what counts
-        step = StackedSACStep(
-            agents,
-            lrs,
+        seeds = [_learner(args.device) for _ in range(n)]  # its own modules: the step views their weights
+        step = SACStep(
+            [s.module[DEFAULT_MODULE_ID].unwrapped() for s in seeds],
+            [s.curr_log_alpha[DEFAULT_MODULE_ID] for s in seeds],
+            None,
             learner.target_entropy[DEFAULT_MODULE_ID],
             gamma=config.gamma,
             tau=config.tau,
             critic_loss="huber",
+            seeds=range(n),
+            lrs=lrs,
         )
 
         def run(step=step, replay=replay):

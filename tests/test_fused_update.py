@@ -1,9 +1,10 @@
-"""The fused SAC update (`GCSACTorchLearner.update_from_replay`, `FusedSACStep`) against RLlib's path.
+"""The fused SAC update (`GCSACTorchLearner.update_from_replay`, `SACStep` at N = 1) against RLlib's path.
 
-The fused step must be today's step (RLlib's `update(batch=...)` through `_uncompiled_update`) for the
-same batch, parameters and noise: losses, gradients, new parameters, targets, log alpha and optimizer
-state. A non-finite step must change nothing and be counted; a checkpoint must carry the optimizer
-state, log alpha and the replay, and continue identically. All on the CPU (CI has no GPU).
+The fused step must be RLlib's step (`update(batch=...)` through `_uncompiled_update`) for the same
+batch, parameters and noise (the step draws its noise from its Philox stream; RLlib's path is handed
+the same numbers): losses, gradients, new parameters, targets, log alpha and optimizer state. A
+non-finite step must change nothing and be counted; a checkpoint must carry the optimizer state, log
+alpha, the noise stream and the replay, and continue identically. All on the CPU (CI has no GPU).
 """
 
 import gymnasium as gym
@@ -21,7 +22,8 @@ from copilot_ray.algorithms.gc_sac import (
     make_train_batch,
     use_fast_learner,
 )
-from copilot_ray.algorithms.gc_sac.fused_step import FINITE, TOTAL_LOSS
+from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, NOISE_STREAM, TOTAL_LOSS, with_seed_axis
 
 OBS_SPACE = gym.spaces.Box(0.0, 1.0, (4,), np.float32)
 ACT_SPACE = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -74,6 +76,48 @@ def _grads(learner_group):
     return {n: p.grad.clone() for n, p in module.named_parameters() if p.grad is not None}
 
 
+def _step_grads(learner_group):
+    """The fused step's gradients by module parameter name: each parameter is a view of the step's
+    row, its gradient the same columns of the step's gradient row."""
+    step = learner_group._learner.fused_step()
+    module = learner_group._learner.module[DEFAULT_MODULE_ID]
+    row = step.flat[0]
+    out = {}
+    for name, p in module.named_parameters():
+        if name.startswith("target_"):
+            continue
+        at = (p.data_ptr() - row.data_ptr()) // row.element_size()
+        assert 0 <= at < row.numel(), name  # the parameter lives in the step's row
+        out[name] = step.flat_grad[0, at : at + p.numel()].view(p.shape).clone()
+    return out
+
+
+class HandedNoise:
+    """torch's Normal sampling replaced by given standard-normal draws, in order (RLlib's module
+    draws the current actions' noise by `rsample`, the next actions' by `sample`)."""
+
+    def __init__(self, monkeypatch):
+        self.queue = []
+        handed = self
+
+        def rsample(dist, sample_shape=torch.Size()):
+            return dist.loc + handed.queue.pop(0) * dist.scale
+
+        def sample(dist, sample_shape=torch.Size()):
+            with torch.no_grad():
+                return rsample(dist, sample_shape)
+
+        monkeypatch.setattr(torch.distributions.Normal, "rsample", rsample)
+        monkeypatch.setattr(torch.distributions.Normal, "sample", sample)
+
+    def hand_next_draws_of(self, step, batch_size, action_dim=2):
+        """Queues what `step` will draw in its next call (a twin of its stream at its counter)."""
+        twin = PhiloxStreams([0], NOISE_STREAM)
+        twin.counters.copy_(step.noise.counters)
+        draws = twin.normal((2, batch_size, action_dim))[0]
+        self.queue[:] = [draws[0], draws[1]]
+
+
 def _assert_same(want, got, **tolerance):
     assert want.keys() == got.keys()
     for key in want:
@@ -81,21 +125,22 @@ def _assert_same(want, got, **tolerance):
 
 
 @pytest.mark.parametrize("critic_loss", ["huber", "mse"])
-def test_the_fused_step_is_rllibs_step_for_the_same_batch(critic_loss):
+def test_the_fused_step_is_rllibs_step_for_the_same_batch(critic_loss, monkeypatch):
     rllib_path, fused_path = _twins(critic_loss)
     fused = fused_path._learner.fused_step()
     cols = _columns()
-    batch = {k: torch.as_tensor(v) for k, v in cols.items()}
+    batch = with_seed_axis({k: torch.as_tensor(v) for k, v in cols.items()})
     before = _snapshot(rllib_path)
-    for seed in range(3):  # three steps: Adam's moments and the targets carry over
-        torch.manual_seed(seed)  # the same reparameterisation noise on both paths
+    noise = HandedNoise(monkeypatch)
+    for _ in range(3):  # three steps: Adam's moments and the targets carry over
+        noise.hand_next_draws_of(fused, len(cols["obs"]))  # the same reparameterisation noise on both paths
         result = rllib_path.update(
             batch=make_train_batch(cols),
             minibatch_size=len(cols["obs"]),
             num_epochs=1,
             shuffle_batch_per_epoch=False,
         )[0][DEFAULT_MODULE_ID]
-        torch.manual_seed(seed)
+        assert not noise.queue  # RLlib's path took both draws
         stats = fused.step(batch)
         assert bool(stats[FINITE])
         for key in (
@@ -111,7 +156,7 @@ def test_the_fused_step_is_rllibs_step_for_the_same_batch(critic_loss):
         assert stats[TOTAL_LOSS].item() == pytest.approx(
             float(result["total_loss"].peek()), rel=1e-6, abs=1e-7
         )
-        _assert_same(_grads(rllib_path), _grads(fused_path), rtol=1e-6, atol=1e-7)
+        _assert_same(_grads(rllib_path), _step_grads(fused_path), rtol=1e-6, atol=1e-7)
     after = _snapshot(rllib_path)
     _assert_same(after, _snapshot(fused_path), rtol=1e-6, atol=1e-7)
     # It trained: the online critic, the targets and log alpha moved; each Adam took three steps.
@@ -123,14 +168,15 @@ def test_the_fused_step_is_rllibs_step_for_the_same_batch(critic_loss):
 
 def test_update_from_replay_samples_its_batch_inside_the_step_and_logs_as_rllib_does():
     by_hand, from_replay = _twins()
-    replay = DeviceTransitionBuffer(100, device=from_replay._learner.device)
-    replay.add(_columns(n=40))
+    replays = [DeviceTransitionBuffer(100, device=from_replay._learner.device) for _ in range(2)]
+    for replay in replays:  # twins: each samples its own rows from the same stream
+        replay.add(_columns(n=40))
     fused = by_hand._learner.fused_step()
-    torch.manual_seed(7)
     for _ in range(4):
-        fused.step(replay.sample(16))
-    torch.manual_seed(7)
-    result = from_replay._learner.update_from_replay(replay, 4, 16, {"num_env_steps_sampled_lifetime": 40})
+        fused.step(replays[0].sample(16))  # [1, 16, ...]: one seed's batch
+    result = from_replay._learner.update_from_replay(
+        replays[1], 4, 16, {"num_env_steps_sampled_lifetime": 40}
+    )
     _assert_same(_snapshot(by_hand), _snapshot(from_replay), rtol=0, atol=0)
     module = result[DEFAULT_MODULE_ID]
     assert module["num_target_updates"].peek() == 4
@@ -158,8 +204,8 @@ def test_a_nonfinite_step_changes_nothing_and_is_counted_on_the_device():
     assert learner.fused_step().skipped.item() == 3
 
     # One poisoned row in an otherwise clean batch is enough to skip, and the guard lets clean steps pass.
-    batch = {k: torch.as_tensor(v) for k, v in _columns(n=16).items()}
-    batch["rewards"][5] = float("nan")
+    batch = with_seed_axis({k: torch.as_tensor(v) for k, v in _columns(n=16).items()})
+    batch["rewards"][0, 5] = float("nan")
     assert not bool(learner.fused_step().step(batch)[FINITE])
     _assert_same(before, _snapshot(learner_group), rtol=0, atol=0)
     result = learner.update_from_replay(replay, 1, 16)
@@ -171,7 +217,9 @@ def test_a_nonfinite_step_changes_nothing_and_is_counted_on_the_device():
     )
 
 
-def test_a_checkpoint_restores_optimizer_state_log_alpha_and_the_replay_then_continues_identically(tmp_path):
+def test_a_checkpoint_restores_optimizer_state_log_alpha_noise_and_the_replay_then_continues_identically(
+    tmp_path,
+):
     original = _learner_group()
     replay = DeviceTransitionBuffer(64, device=original._learner.device)
     replay.add(_columns(n=50, seed=1))
@@ -192,7 +240,6 @@ def test_a_checkpoint_restores_optimizer_state_log_alpha_and_the_replay_then_con
 
     results = []
     for learner_group, buffer in ((original, replay), (restored, restored_replay)):
-        torch.manual_seed(11)
         results.append(learner_group._learner.update_from_replay(buffer, 3, 16)[DEFAULT_MODULE_ID])
         buffer.add(_columns(n=5, seed=3))
     _assert_same(_snapshot(original), _snapshot(restored), rtol=0, atol=0)

@@ -142,8 +142,9 @@ def test_the_device_buffer_keeps_the_same_rows_as_the_flat_one():
 def test_device_sampling_draws_aligned_rows_of_the_filled_part_only():
     buf = DeviceTransitionBuffer(capacity=1000)
     buf.add(_rows(0, 3))  # 3 of 1000 rows filled: a draw past them would read zeros
-    torch.manual_seed(0)
-    s = buf.sample(4000)
+    batch = buf.sample(4000)
+    assert batch["obs"].shape == (1, 4000, 3)  # one seed's batch
+    s = {k: v[0] for k, v in batch.items()}
     assert s["obs"].shape == (4000, 3) and s["obs"].dtype == torch.float32
     assert s["terminateds"].dtype == torch.bool and set(s) == {
         "obs",

@@ -71,3 +71,49 @@ def test_warm_up_then_one_capture_then_replays_only(monkeypatch):
 def test_a_warm_up_below_one_is_refused():
     with pytest.raises(ValueError, match="warmup must be >= 1"):
         CapturedCall(lambda: None, warmup=0)
+
+
+def test_the_learners_fused_update_reaches_the_capture_site_with_its_noise_stream_in_place(monkeypatch):
+    """On a (faked) CUDA learner the fused update is a `CapturedCall` of the `SACStep`: warmed up, then
+    captured once with the step's noise counters and storage as they are, which every replay reads."""
+    import gymnasium as gym
+    import numpy as np
+    from ray.rllib.algorithms.sac import SACConfig
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
+    from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, GCSACTorchLearner, use_fast_learner
+
+    cfg = SACConfig().environment(
+        observation_space=gym.spaces.Box(0.0, 1.0, (4,), np.float32),
+        action_space=gym.spaces.Box(-1.0, 1.0, (2,), np.float32),
+    )
+    learner = (
+        use_fast_learner(cfg.debugging(seed=0), hidden=(16, 16), torch_threads=1)
+        .build_learner_group()
+        ._learner
+    )
+    replay = DeviceTransitionBuffer(50, device="cpu")
+    rng = np.random.default_rng(0)
+    replay.add(
+        {
+            "obs": rng.uniform(0, 1, (30, 4)).astype(np.float32),
+            "new_obs": rng.uniform(0, 1, (30, 4)).astype(np.float32),
+            "actions": rng.uniform(-1, 1, (30, 2)).astype(np.float32),
+            "rewards": np.full(30, -1.0, np.float32),
+            "terminateds": np.zeros(30, bool),
+        }
+    )
+    step = learner.fused_step()
+    counters, flat = step.noise.counters, step.flat
+    recorder = Recorder()
+    recorder.install(monkeypatch)
+    monkeypatch.setattr(GCSACTorchLearner, "device", property(lambda self: torch.device("cuda")))
+    run = learner._replay_run(DEFAULT_MODULE_ID, replay, 8)
+    assert isinstance(run, CapturedCall)
+    outs = [run() for _ in range(5)]
+    # Three warm-up steps and the capturing one ran the step (the faked recorder computes nothing after).
+    assert counters.tolist() == [4 * 8]  # 2 x 8 x 2 normals a step: 8 Philox blocks
+    assert run.captured and recorder.events.count("replay") == 2  # after capturing, and the fifth call
+    assert outs[3] is outs[4] and set(outs[3]) >= {"qf_loss", "finite", "total_loss"}
+    # What the graph holds is the step's own storage: the noise counters and parameters, in place.
+    assert learner.fused_step() is step and step.noise.counters is counters and step.flat is flat

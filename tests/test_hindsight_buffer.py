@@ -28,10 +28,10 @@ def kind(request):
 
 
 def draw(buffer, n, seed):
-    """n transitions as numpy columns: the numpy buffer's own rng, or torch's seeded generator."""
+    """n transitions as numpy columns: the numpy buffer's own rng seeded `seed`, or the device buffer's
+    own stream drawing on (its one seed's batch)."""
     if isinstance(buffer, DeviceHindsightBuffer):
-        torch.manual_seed(seed)
-        return {k: v.cpu().numpy() for k, v in buffer.sample(n).items()}
+        return {k: v[0].cpu().numpy() for k, v in buffer.sample(n).items()}
     return buffer.sample(n, np.random.default_rng(seed))
 
 

@@ -1,9 +1,10 @@
-"""Seeds stacked in one update (`seed_stack.StackedSACStep`) against each seed's own fused step.
+"""Seeds stacked in one update (`sac_step.SACStep` over N seeds) against each seed's own step (N = 1).
 
-A stack of seeds {0, 1, 2} must give every seed the update its one-seed `FusedSACStep` gives it for the
-same batch and the same noise stream: losses, new parameters, target critics and log alpha, over
-several steps (Adam's moments and the targets carry over). A seed whose gradient is not finite must
-stay where it was while the others step. All on the CPU.
+A stack of seeds {0, 1, 2} must give every seed the update its one-seed step gives it for the same
+batch: losses, new parameters, target critics, log alpha and Adam state, over several steps (Adam's
+moments and the targets carry over). Both draw seed i's noise from seed i's Philox stream, so nothing
+is handed over: a seed's stream does not depend on the stack. A seed whose gradient is not finite, or
+that sits a step out, must stay where it was while the others step. All on the CPU.
 """
 
 import gymnasium as gym
@@ -14,18 +15,12 @@ from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac import use_fast_learner
-from copilot_ray.algorithms.gc_sac.fused_step import FINITE
-from copilot_ray.algorithms.gc_sac.seed_stack import (
-    NETWORKS,
-    StackedSAC,
-    StackedSACStep,
-    _linear_layers,
-    stack_batches,
-)
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep, stack_batches, with_seed_axis
 
 OBS_SPACE = gym.spaces.Box(0.0, 1.0, (4,), np.float32)
 ACT_SPACE = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
 SEEDS = (0, 1, 2)
+STATS = ("qf_loss", "qf_twin_loss", "policy_loss", "alpha_loss", "logps", "td_error_mean")
 
 
 def _learner(seed, critic_loss="huber"):
@@ -52,142 +47,111 @@ def _batch(seed, n=64, reward=-1.0):
 
 
 def _stack_of(learners, critic_loss="huber"):
-    modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in learners]
-    agents = StackedSAC.from_modules(
-        modules, [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in learners]
-    )
+    """One `SACStep` over the learners' modules: their parameters and Adam state become its rows."""
     config = learners[0].config.get_config_for_module(DEFAULT_MODULE_ID)
-    lrs = {"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr}
-    generators = [torch.Generator() for _ in learners]
-    step = StackedSACStep(
-        agents,
-        lrs,
+    return SACStep(
+        [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in learners],
+        [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in learners],
+        [learner._sac_optimizers(DEFAULT_MODULE_ID) for learner in learners],
         learners[0].target_entropy[DEFAULT_MODULE_ID],
         gamma=config.gamma,
         tau=config.tau,
         critic_loss=critic_loss,
-        generators=generators,
-    )
-    return step, generators
-
-
-def _assert_seed_matches(stacked, learner, i):
-    module = learner.module[DEFAULT_MODULE_ID].unwrapped()
-    for name, encoder, head in NETWORKS:
-        layers = _linear_layers(getattr(module, encoder), getattr(module, head))
-        for k, (layer, (weight, bias)) in enumerate(zip(layers, stacked.agents.nets[name], strict=True)):
-            torch.testing.assert_close(
-                weight[i], layer.weight, rtol=1e-5, atol=1e-6, msg=f"{name}[{k}] seed {i}"
-            )
-            torch.testing.assert_close(
-                bias[i], layer.bias, rtol=1e-5, atol=1e-6, msg=f"{name}[{k}] bias seed {i}"
-            )
-    torch.testing.assert_close(
-        stacked.agents.log_alpha[i], learner.curr_log_alpha[DEFAULT_MODULE_ID], rtol=1e-6, atol=1e-7
+        seeds=[int(learner.config.seed) for learner in learners],
     )
 
 
-def _run(learners, batches, steps=3, critic_loss="huber"):
-    """`steps` one-seed fused steps per learner and the same steps stacked; the stacked step."""
-    stacked, generators = _stack_of(learners, critic_loss)
+def _state(learner):
+    """A learner's module (online and target nets), log alpha and Adam moments and counts."""
+    out = {k: v.detach().clone() for k, v in learner.module[DEFAULT_MODULE_ID].state_dict().items()}
+    out["log_alpha"] = learner.curr_log_alpha[DEFAULT_MODULE_ID].detach().clone()
+    for name, optimizer in learner.get_optimizers_for_module(DEFAULT_MODULE_ID):
+        for k, state in enumerate(optimizer.state.values()):
+            out.update({f"{name}/{k}/{key}": v.detach().clone() for key, v in state.items()})
+    return out
+
+
+def _assert_seed_matches(stacked_learner, alone_learner, i):
+    want, got = _state(alone_learner), _state(stacked_learner)
+    assert want.keys() == got.keys()
+    for key in want:
+        torch.testing.assert_close(
+            got[key], want[key], rtol=1e-5, atol=1e-6, msg=lambda m, k=key: f"seed {i} {k}: {m}"
+        )
+
+
+def _run(batches, steps=3, critic_loss="huber", active=None):
+    """`steps` stacked steps for seeds SEEDS and each seed's own one-seed steps (where active);
+    (stacked learners, the step, alone learners)."""
+    stacked_learners = [_learner(s, critic_loss) for s in SEEDS]
+    alone = [_learner(s, critic_loss) for s in SEEDS]
+    step = _stack_of(stacked_learners, critic_loss)
+    mask = None if active is None else torch.tensor(active)
     for t in range(steps):
-        stats = []
-        for i, learner in enumerate(learners):
-            torch.manual_seed(1000 * t + i)  # seed i's noise stream at step t ...
-            stats.append(learner.fused_step().step(batches[i]))
-        for i, g in enumerate(generators):
-            g.manual_seed(1000 * t + i)  # ... and the same stream for seed i in the stack
-        stacked_stats = stacked.step(stack_batches(batches))
-        for i, one in enumerate(stats):
-            assert bool(stacked_stats[FINITE][i]) == bool(one[FINITE])
-            for key in ("qf_loss", "qf_twin_loss", "policy_loss", "alpha_loss", "logps", "td_error_mean"):
+        stacked_stats = step.step(stack_batches(batches), active=mask)
+        for i, learner in enumerate(alone):
+            if active is not None and not active[i]:
+                continue
+            one = learner.fused_step().step(with_seed_axis(batches[i]))
+            assert bool(stacked_stats[FINITE][i]) == bool(one[FINITE][0])
+            for key in STATS:
                 assert stacked_stats[key][i].item() == pytest.approx(
-                    one[key].item(), rel=1e-5, abs=1e-6, nan_ok=True
-                ), (
-                    key,
-                    i,
-                    t,
-                )
-    return stacked
+                    one[key][0].item(), rel=1e-5, abs=1e-6, nan_ok=True
+                ), (key, i, t)
+    return stacked_learners, step, alone
 
 
 @pytest.mark.parametrize("critic_loss", ["huber", "mse"])
 def test_a_stack_of_three_seeds_gives_each_seed_its_own_update(critic_loss):
-    learners = [_learner(s, critic_loss) for s in SEEDS]
-    first = [learner.module[DEFAULT_MODULE_ID].unwrapped().pi_encoder for learner in learners]
-    # The seeds start apart (each module built with its own seed), so a mixed-up slice shows.
-    weights = [next(enc.parameters()).detach().clone() for enc in first]
+    fresh = [_learner(s) for s in SEEDS]
+    weights = [next(f.module[DEFAULT_MODULE_ID].pi_encoder.parameters()).detach() for f in fresh]
+    # The seeds start apart (each module built with its own seed), so a mixed-up row shows.
     assert not torch.equal(weights[0], weights[1]) and not torch.equal(weights[1], weights[2])
-    before_target = [
-        learner.module[DEFAULT_MODULE_ID].unwrapped().target_qf_encoder.net.mlp[0].weight.detach().clone()
-        for learner in learners
-    ]
-    stacked = _run(learners, [_batch(s) for s in SEEDS], critic_loss=critic_loss)
-    for i, learner in enumerate(learners):
-        _assert_seed_matches(stacked, learner, i)
-        after = learner.module[DEFAULT_MODULE_ID].unwrapped().target_qf_encoder.net.mlp[0].weight
-        assert not torch.equal(before_target[i], after)  # the targets moved, and the stack followed
-    assert stacked.skipped.tolist() == [0, 0, 0]
-    assert stacked.optimizer.step_count.tolist() == [3.0, 3.0, 3.0]
+    stacked, step, alone = _run([_batch(s) for s in SEEDS], critic_loss=critic_loss)
+    for i in range(len(SEEDS)):
+        _assert_seed_matches(stacked[i], alone[i], i)
+        before = _state(fresh[i])["target_qf_encoder.net.mlp.0.weight"]
+        assert not torch.equal(before, _state(stacked[i])["target_qf_encoder.net.mlp.0.weight"])
+    assert step.skipped.tolist() == [0, 0, 0]
+    assert step.step_counts[:, 0].tolist() == [3.0, 3.0, 3.0]
+    # Seed i's noise stream is where seed i's own one-seed stream is.
+    assert step.noise.counters.tolist() == [int(a.fused_step().noise.counters[0]) for a in alone]
 
 
 def test_a_seed_with_a_non_finite_gradient_stays_put_and_the_others_step():
-    learners = [_learner(s) for s in SEEDS]
-    bad = _batch(1, reward=float("nan"))
-    stacked, _ = _stack_of(learners)
-    start = {
-        name: [(w[1].clone(), b[1].clone()) for w, b in stacked.agents.nets[name]] for name, _, _ in NETWORKS
-    }
-    start_alpha = stacked.agents.log_alpha[1].clone()
-    stacked = _run(learners, [_batch(0), bad, _batch(2)], steps=2)
-    assert stacked.skipped.tolist() == [0, 2, 0]
-    assert stacked.optimizer.step_count.tolist() == [2.0, 0.0, 2.0]
-    for name, _, _ in NETWORKS:  # seed 1: parameters and targets untouched, and finite
-        for (weight, bias), (w0, b0) in zip(stacked.agents.nets[name], start[name], strict=True):
-            assert torch.equal(weight[1], w0) and torch.equal(bias[1], b0), name
-    assert torch.equal(stacked.agents.log_alpha[1], start_alpha)
+    start = _state(_learner(1))
+    stacked, step, alone = _run([_batch(0), _batch(1, reward=float("nan")), _batch(2)], steps=2)
+    assert step.skipped.tolist() == [0, 2, 0]
+    assert step.step_counts[:, 0].tolist() == [2.0, 0.0, 2.0]
+    after = _state(stacked[1])
+    for key, value in start.items():  # seed 1: parameters, targets, log alpha, Adam state untouched
+        if key in after:
+            assert torch.equal(after[key], value), key
+    assert all(torch.isfinite(v).all() for v in after.values())
     for i in (0, 2):  # the others took their own one-seed steps
-        _assert_seed_matches(stacked, learners[i], i)
+        _assert_seed_matches(stacked[i], alone[i], i)
 
 
-def test_an_inactive_seed_keeps_everything_and_is_not_counted_as_skipped():
-    learners = [_learner(s) for s in SEEDS]
-    stacked, generators = _stack_of(learners)
-    start = stacked.get_state()
-    active = torch.tensor([True, False, True])
-    for t in range(2):
-        for i in (0, 2):
-            torch.manual_seed(1000 * t + i)
-            learners[i].fused_step().step(_batch(i))
-        for i, g in enumerate(generators):
-            g.manual_seed(1000 * t + i)
-        stacked.step(stack_batches([_batch(s) for s in SEEDS]), active=active)
-    now = stacked.get_state()
-    for key in ("flat", "target_flat", "exp_avg", "exp_avg_sq"):
-        np.testing.assert_array_equal(now[key][1], start[key][1], err_msg=key)
-    assert now["step_count"].tolist() == [2.0, 0.0, 2.0] and now["skipped"].tolist() == [0, 0, 0]
-    for i in (0, 2):
-        _assert_seed_matches(stacked, learners[i], i)
-
-
-def test_write_to_puts_each_seed_back_into_its_module():
-    learners = [_learner(s) for s in SEEDS]
-    stacked = _run(learners, [_batch(s) for s in SEEDS], steps=1)
-    fresh = [_learner(s) for s in SEEDS]  # the untrained modules, then seed i's trained slice
-    modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in fresh]
-    log_alphas = [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in fresh]
-    stacked.agents.write_to(modules, log_alphas)
-    for i, learner in enumerate(fresh):
-        _assert_seed_matches(stacked, learner, i)
+def test_a_seed_that_sits_steps_out_keeps_everything_then_steps_as_it_would_alone():
+    batches = [_batch(s) for s in SEEDS]
+    stacked, step, alone = _run(batches, steps=2, active=[True, False, True])
+    assert step.skipped.tolist() == [0, 0, 0] and step.step_counts[:, 0].tolist() == [2.0, 0.0, 2.0]
+    assert step.noise.counters[1].item() == 0  # its stream did not move
+    untrained = _learner(1)
+    untrained.fused_step()  # its Adam state made (zeros, no steps), as the stack's is
+    _assert_seed_matches(stacked[1], untrained, 1)  # still where it started
+    # Its first step, two stacked steps late, is its first step alone: its stream waited for it.
+    stats = step.step(stack_batches(batches), active=torch.tensor([False, True, False]))
+    one = alone[1].fused_step().step(with_seed_axis(batches[1]))
+    assert stats["qf_loss"][1].item() == pytest.approx(one["qf_loss"][0].item(), rel=1e-5, abs=1e-6)
+    for i in SEEDS:
+        _assert_seed_matches(stacked[i], alone[i], i)
 
 
 def test_a_restored_stack_continues_exactly_and_a_foreign_snapshot_is_refused():
-    learners = [_learner(s) for s in SEEDS]
     batch = stack_batches([_batch(s) for s in SEEDS])
-    first, _ = _stack_of(learners)
-    fresh, _ = _stack_of(learners)  # built before any step: the snapshot must carry everything
-    for g in first.generators:
-        g.manual_seed(7)
+    first = _stack_of([_learner(s) for s in SEEDS])
+    fresh = _stack_of([_learner(s) for s in SEEDS])  # built before any step: the snapshot carries it all
     first.step(batch)
     first.step(batch)
     snapshot = first.get_state()
@@ -196,58 +160,60 @@ def test_a_restored_stack_continues_exactly_and_a_foreign_snapshot_is_refused():
     again = [fresh.step(batch)["qf_loss"].clone() for _ in range(2)]
     for want, got in zip(ahead, again, strict=True):
         assert torch.equal(want, got)
-    assert torch.equal(first.agents.flat, fresh.agents.flat)
-    assert torch.equal(first.agents.target_flat, fresh.agents.target_flat)
-    assert torch.equal(first.optimizer.exp_avg_sq, fresh.optimizer.exp_avg_sq)
-    assert fresh.optimizer.step_count.tolist() == [4.0, 4.0, 4.0]
-    two, _ = _stack_of(learners[:2])
-    before = two.agents.flat.detach().clone()
-    with pytest.raises(
-        ValueError, match=r"flat has shape \(3, \d+\), this stack's is \(2, \d+\) \(2 seeds\)"
-    ):
+    for key in ("flat", "target_flat", "exp_avg_sq", "step_counts"):
+        assert torch.equal(getattr(first, key), getattr(fresh, key)), key
+    assert fresh.step_counts[:, 0].tolist() == [4.0, 4.0, 4.0]
+    two = _stack_of([_learner(s) for s in SEEDS[:2]])
+    before = two.flat.clone()
+    with pytest.raises(ValueError, match=r"flat has shape \(3, \d+\), this step's is \(2, \d+\) \(2 seeds\)"):
         two.set_state(snapshot)
-    assert torch.equal(two.agents.flat, before)
+    assert torch.equal(two.flat, before)
 
 
 def test_one_batched_forward_acts_as_each_seeds_module_acts():
     """The traversal's runner samples a seed's action from its module's distribution (exploring) or takes
     its deterministic twin; the stack's `act` gives every seed the same in one pass."""
     learners = [_learner(s) for s in SEEDS]
-    stacked, _ = _stack_of(learners)
+    step = _stack_of(learners)
     obs = torch.as_tensor(np.random.default_rng(0).uniform(0, 1, (3, 5, 4)), dtype=torch.float32)
-    generators = [torch.Generator().manual_seed(10 + i) for i in range(3)]
-    noise = torch.stack([torch.empty(5, 2).normal_(generator=g) for g in generators])
-    explored, greedy = stacked.agents.act(obs, noise), stacked.agents.act(obs)
+    noise = torch.as_tensor(np.random.default_rng(1).normal(0, 1, (3, 5, 2)), dtype=torch.float32)
+    explored, greedy = step.act(obs, noise), step.act(obs)
     for i, learner in enumerate(learners):
         module = learner.module[DEFAULT_MODULE_ID].unwrapped()
         with torch.no_grad():
             logits = module._forward_exploration({"obs": obs[i]})["action_dist_inputs"]
             dist = module.get_exploration_action_dist_cls().from_logits(logits)
-            torch.manual_seed(10 + i)  # the module's sample draws its noise as seed i's generator did
-            torch.testing.assert_close(explored[i], dist.sample(), rtol=1e-5, atol=1e-6)
+            loc, scale = dist._dist.loc, dist._dist.scale
+            torch.testing.assert_close(
+                explored[i], dist._squash(loc + noise[i] * scale), rtol=1e-5, atol=1e-6
+            )
             torch.testing.assert_close(greedy[i], dist.to_deterministic().sample(), rtol=1e-5, atol=1e-6)
     assert not torch.allclose(explored, greedy)
+    one = _stack_of([_learner(2)])  # N = 1 (no vmap) acts as seed 2 of the stack
+    torch.testing.assert_close(one.act(obs[2:], noise[2:]), explored[2:], rtol=1e-5, atol=1e-6)
 
 
-def test_stacking_refuses_what_it_cannot_stack():
+def test_the_step_refuses_what_it_cannot_stack():
     learner = _learner(0)
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()
-    with pytest.raises(ValueError, match="one log alpha per module"):
-        StackedSAC.from_modules([module, module], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
-    agents = StackedSAC.from_modules([module], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
-    other = _learner(1).module[DEFAULT_MODULE_ID].unwrapped()
-    other.pi_encoder.net.mlp[1] = torch.nn.Tanh()  # a network the batched layers do not compute
-    with pytest.raises(ValueError, match=r"Linear/ReLU networks .* got layers \['linear', 'Tanh', 'linear'"):
-        StackedSAC.from_modules([other], [learner.curr_log_alpha[DEFAULT_MODULE_ID]])
-    with pytest.raises(ValueError, match=r"one generator per seed \(1\), got 2"):
-        StackedSACStep(
-            agents,
-            {"qf": 1e-3, "policy": 1e-3, "alpha": 1e-3},
+    log_alpha = learner.curr_log_alpha[DEFAULT_MODULE_ID]
+    common = {"gamma": 0.99, "tau": 0.005, "critic_loss": "huber"}
+    with pytest.raises(ValueError, match="one log alpha and one seed per module"):
+        SACStep(
+            [module, module],
+            [log_alpha],
+            None,
             -2.0,
-            gamma=0.99,
-            tau=0.005,
-            critic_loss="huber",
-            generators=[torch.Generator(), torch.Generator()],
+            seeds=[0, 1],
+            lrs={"qf": 1, "policy": 1, "alpha": 1},
+            **common,
+        )
+    with pytest.raises(ValueError, match="need the optimizers or the learning rates"):
+        SACStep([module], [log_alpha], None, -2.0, seeds=[0], **common)
+    module.twin_q = False
+    with pytest.raises(ValueError, match=r"twin critics \(twin_q=True\)"):
+        SACStep(
+            [module], [log_alpha], None, -2.0, seeds=[0], lrs={"qf": 1, "policy": 1, "alpha": 1}, **common
         )
 
 
@@ -273,3 +239,13 @@ def test_the_stacked_update_benchmark_prints_a_row_per_stack_and_refuses_a_bad_s
         stacked_update.main()
     assert exit_info.value.code == 2
     assert "--seeds: every N must be >= 1, got [0]" in capsys.readouterr().err
+
+
+def test_a_batch_without_the_seed_axis_is_refused_naming_the_shape():
+    step = _stack_of([_learner(s) for s in SEEDS[:2]])
+    with pytest.raises(
+        ValueError, match=r"\[N, B, ...\] columns for its 2 seed\(s\); got actions of shape \(64, 2\)"
+    ):
+        step.step(_batch(0))
+    with pytest.raises(ValueError, match=r"got actions of shape \(1, 64, 2\)"):
+        step.step(with_seed_axis(_batch(0)))

@@ -4,13 +4,17 @@ Pieces:
   * `GCSACCatalog` / `GCSACTorchRLModule`: SB3-shaped actor and twin critics (critic = MLP on
     concat(obs, action)).
   * `GCSACTorchLearner`: one backward pass, per-gradient-step target updates, NaN guard; its fused
-    update (`FusedSACStep`: the whole step on the device, no host sync, a CUDA graph on a GPU) samples
-    a replay buffer that lives on the learner's device.
+    update (`SACStep` at N = 1: the whole step on the device, no host sync, a CUDA graph on a GPU)
+    samples a replay buffer that lives on the learner's device.
+  * `SACStep`: the SAC step of N seeds at once over the RLModule's own networks (N = 1: one seed);
+    `PhiloxStreams`: per-seed counter-based random streams on the device (its noise).
   * `sac_losses` / `bellman_target`: SAC's losses, shared by both update paths.
   * `FlatTransitionBuffer`: numpy ring buffer of flat transitions, fed from RLlib episodes.
-  * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there.
+  * `DeviceTransitionBuffer`: its twin in torch tensors on the learner's device, sampled there, with a
+    ring per seed ([N, capacity, ...]; N = 1 for one seed) and one sampler on the seeds' streams.
   * `HindsightReplayBuffer`: HER as a replay buffer (SB3's way): goals relabelled when sampled;
-    `DeviceHindsightBuffer`: the same on the learner's device, relabelled inside the fused step.
+    `DeviceHindsightBuffer`: the same on the learner's device (a ring per seed), relabelled inside
+    the fused step.
   * `update_from_buffer`: N gradient steps in one `learner_group.update(batch=...)` call.
   * `GradientStepSchedule`: update-to-data ratio -> integer gradient steps per iteration.
   * `use_fast_learner(config)`: switch a SACConfig to all of the above.
@@ -27,7 +31,6 @@ from copilot_ray.algorithms.gc_sac.catalog import (
 from copilot_ray.algorithms.gc_sac.config import use_fast_learner, uses_fast_learner
 from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer, TorchRewardFn
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
-from copilot_ray.algorithms.gc_sac.fused_step import FusedSACStep
 from copilot_ray.algorithms.gc_sac.hindsight_buffer import GoalLayout, HindsightReplayBuffer
 from copilot_ray.algorithms.gc_sac.learner import (
     GC_SAC_KEY,
@@ -36,7 +39,9 @@ from copilot_ray.algorithms.gc_sac.learner import (
     gc_sac_settings,
 )
 from copilot_ray.algorithms.gc_sac.losses import bellman_target, sac_losses
+from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
 from copilot_ray.algorithms.gc_sac.replay_buffer import COLUMNS, TRAIN_COLUMNS, FlatTransitionBuffer
+from copilot_ray.algorithms.gc_sac.sac_step import SACStep
 from copilot_ray.algorithms.gc_sac.updater import GradientStepSchedule, make_train_batch, update_from_buffer
 
 __all__ = [
@@ -51,12 +56,13 @@ __all__ = [
     "DeviceHindsightBuffer",
     "DeviceTransitionBuffer",
     "FlatTransitionBuffer",
-    "FusedSACStep",
     "GCSACCatalog",
     "GCSACTorchLearner",
     "GCSACTorchRLModule",
     "GoalLayout",
     "HindsightReplayBuffer",
+    "PhiloxStreams",
+    "SACStep",
     "GradientStepSchedule",
     "bellman_target",
     "count_parameters",

@@ -25,7 +25,8 @@ Two update paths, the same step:
 * `update(batch=...)` (RLlib's): per minibatch `_uncompiled_update`, the finite check read on the host
   (the path before the fused update; `fused_update=False` trains through it).
 * `update_from_replay(replay, num_steps, batch_size, timesteps)` (the fused one, `fused_update=True`):
-  `num_steps` calls of `fused_step.FusedSACStep`, each sampling its batch from `replay` (a buffer on
+  `num_steps` calls of `sac_step.SACStep` (N = 1; its noise from the seed's Philox stream, whose
+  counters the learner checkpoints), each sampling its batch from `replay` (a buffer on
   this learner's device) inside the step and guarding non-finite gradients on the device. On CUDA the
   step is captured once into a CUDA graph and replayed (`cuda_graph`), optionally compiled first
   (`compile_update`); on a CPU it runs eagerly (or compiled). The loss statistics of the last step and
@@ -61,15 +62,17 @@ from ray.rllib.utils.metrics import (
     WEIGHTS_SEQ_NO,
 )
 
-from copilot_ray.algorithms.gc_sac.fused_step import FINITE, TOTAL_LOSS, FusedSACStep
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
 from copilot_ray.algorithms.gc_sac.losses import CRITIC_LOSSES, sac_losses
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, TOTAL_LOSS, SACStep
 from copilot_ray.torch_checks import all_finite
 
 GC_SAC_KEY = "gc_sac"
 NONFINITE_SKIPPED_KEY = "num_nonfinite_steps_skipped"
 LOG_ALPHA_STATE_KEY = "gc_sac_log_alpha"
+NOISE_STATE_KEY = "gc_sac_noise_stream"  # the fused step's noise counters: a resumed run draws on
 BOOLEAN_KNOBS = ("fused_update", "cuda_graph", "compile_update")
+SAC_OPTIMIZERS = ("qf", "policy", "alpha")  # the order of `SACStep`'s learning rates
 
 
 def gc_sac_settings(config) -> dict[str, Any]:
@@ -101,9 +104,10 @@ class GCSACTorchLearner(SACTorchLearner):
             torch.set_num_threads(int(settings["torch_threads"]))
         self._gc_settings = settings
         self._gc_target_pairs: dict[str, tuple[list[torch.Tensor], list[torch.Tensor]]] = {}
-        self._fused_steps: dict[str, FusedSACStep] = {}
+        self._fused_steps: dict[str, SACStep] = {}
         self._replay_runs: dict[str, tuple[tuple, Any]] = {}
         self._skipped_read: dict[str, int] = {}
+        self._noise_states: dict[str, dict[str, Any]] = {}  # restored before a module's step is built
         super().build()
 
     @property
@@ -205,9 +209,10 @@ class GCSACTorchLearner(SACTorchLearner):
             self.metrics.log_value((module_id, NUM_TARGET_UPDATES), 1, reduce="lifetime_sum")
 
     # ------------------------------------------------------------------ the fused update path
-    def fused_step(self, module_id: str = DEFAULT_MODULE_ID) -> FusedSACStep:
-        """The module's `FusedSACStep` over this learner's parameters and optimizers (built once; built
-        again after anything that replaces optimizer state or modules)."""
+    def fused_step(self, module_id: str = DEFAULT_MODULE_ID) -> SACStep:
+        """The module's `SACStep` for one seed (N = 1) over this learner's parameters and optimizers,
+        which become views of the step's storage (built once; built again after anything that replaces
+        optimizer state or modules). Its noise stream is keyed by the config's seed."""
         step = self._fused_steps.get(module_id)
         if step is None:
             config = self.config.get_config_for_module(module_id)
@@ -217,29 +222,41 @@ class GCSACTorchLearner(SACTorchLearner):
                     "['fused_update']=True (the fused step does not clip); use grad_clip=None or "
                     "fused_update=False"
                 )
-            step = FusedSACStep(
-                self.module[module_id].unwrapped(),
-                self.curr_log_alpha[module_id],
-                [optimizer for _, optimizer in self.get_optimizers_for_module(module_id)],
+            step = SACStep(
+                [self.module[module_id].unwrapped()],
+                [self.curr_log_alpha[module_id]],
+                [self._sac_optimizers(module_id)],
                 self.target_entropy[module_id],
                 gamma=config.gamma,
                 tau=config.tau,
                 critic_loss=self._gc_settings["critic_loss"],
-                twin_q=config.twin_q,
+                seeds=[int(self.config.seed or 0)],
             )
+            if module_id in self._noise_states:
+                step.noise.set_state(self._noise_states.pop(module_id))
             self._fused_steps[module_id] = step
             self._skipped_read[module_id] = 0
         return step
 
+    def _sac_optimizers(self, module_id: str) -> list[torch.optim.Optimizer]:
+        """The module's critics', actor's and temperature's optimizers, in that order."""
+        named = dict(self.get_optimizers_for_module(module_id))
+        return [named[name] for name in SAC_OPTIMIZERS]
+
     def _replay_run(self, module_id: str, replay: Any, batch_size: int):
         """The zero-argument step for `replay`, compiled and/or captured per the knobs; rebuilt when the
         replay's storage, the batch size or a learning rate changed (a graph holds all three fixed)."""
-        lrs = tuple(float(self._get_optimizer_lr(o)) for _, o in self.get_optimizers_for_module(module_id))
+        lrs = tuple(float(self._get_optimizer_lr(o)) for o in self._sac_optimizers(module_id))
         key = (id(replay), replay.storage_version, int(batch_size), lrs)
         cached = self._replay_runs.get(module_id)
         if cached is not None and cached[0] == key:
             return cached[1]
-        run = self.fused_step(module_id).sampled_step(replay, int(batch_size))
+        step = self.fused_step(module_id)
+        step.set_learning_rates(dict(zip(SAC_OPTIMIZERS, lrs, strict=True)))
+
+        def run() -> dict[str, torch.Tensor]:
+            return step.step(replay.sample(int(batch_size)))  # [1, B, ...]: this seed's batch
+
         if self._gc_settings["compile_update"]:
             run = torch.compile(run)
         if self.device.type == "cuda" and self._gc_settings["cuda_graph"]:
@@ -287,7 +304,7 @@ class GCSACTorchLearner(SACTorchLearner):
             return
         names = [k for k in stats if k != FINITE]
         step = self._fused_steps[module_id]
-        values = torch.stack([stats[k].float() for k in names] + [step.skipped.float()]).cpu().tolist()
+        values = torch.stack([stats[k][0].float() for k in names] + [step.skipped[0].float()]).cpu().tolist()
         skipped_total = int(values.pop())
         self._log_step_figures(module_id, dict(zip(names, values, strict=True)), skipped_total, steps, batch)
 
@@ -340,7 +357,11 @@ class GCSACTorchLearner(SACTorchLearner):
         self.metrics.log_value((ALL_MODULES, NUM_ENV_STEPS_TRAINED_LIFETIME), trained, reduce="lifetime_sum")
 
     def _forget_fused(self, module_id: str | None = None) -> None:
-        """Drops fused steps and their graphs (all, or one module's): their tensors may be stale."""
+        """Drops fused steps and their graphs (all, or one module's): their tensors may be stale. A
+        dropped step's noise stream is kept for the next one (it draws on, not from the start)."""
+        for mid in list(self._fused_steps) if module_id is None else [module_id]:
+            if mid in self._fused_steps:
+                self._noise_states[mid] = self._fused_steps[mid].noise.get_state()
         for cache in (self._fused_steps, self._replay_runs):
             if module_id is None:
                 cache.clear()
@@ -379,6 +400,9 @@ class GCSACTorchLearner(SACTorchLearner):
             state[LOG_ALPHA_STATE_KEY] = {
                 mid: v.detach().cpu().numpy().copy() for mid, v in self.curr_log_alpha.items()
             }
+            noise = dict(self._noise_states)
+            noise.update({mid: step.noise.get_state() for mid, step in self._fused_steps.items()})
+            state[NOISE_STATE_KEY] = noise
         return state
 
     @override(Learner)
@@ -391,6 +415,8 @@ class GCSACTorchLearner(SACTorchLearner):
                     self.curr_log_alpha[mid].copy_(torch.as_tensor(value))
         self._gc_target_pairs.clear()
         self._forget_fused()
+        if NOISE_STATE_KEY in state:
+            self._noise_states = dict(state[NOISE_STATE_KEY])
 
     @override(TorchLearner)
     def _set_optimizer_state(self, state) -> None:

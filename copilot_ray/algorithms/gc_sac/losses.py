@@ -1,7 +1,7 @@
 """SAC's three losses for one batch, as one pure function over tensors.
 
 Shared by the learner's RLlib path (`GCSACTorchLearner.compute_losses`) and the fused step
-(`fused_step.FusedSACStep`), so both optimise exactly the same objective:
+(`sac_step.SACStep`), so both optimise exactly the same objective:
 
     critic:      mean(huber(Q_i(s, a), y)) per critic (or 0.5 * MSE), y = `bellman_target`
     actor:       mean(alpha * log pi(a~|s) - min_i Q_i(s, a~)),   a~ ~ pi(.|s) reparameterised

@@ -31,6 +31,22 @@ COLUMNS = (OBS, NEXT_OBS, ACTIONS, REWARDS, TERMINATEDS, TRUNCATEDS)
 TRAIN_COLUMNS = (OBS, NEXT_OBS, ACTIONS, REWARDS, TERMINATEDS)
 
 
+def ring_segments(ptr: int, n: int, capacity: int) -> list[tuple[int, slice]]:
+    """Where n new rows go in a ring of `capacity` whose next row is `ptr`: [(storage start, slice of
+    the new rows)], at most two; of more than `capacity` rows only the newest survive, from row 0."""
+    if n >= capacity:
+        return [(0, slice(n - capacity, n))]
+    first = min(n, capacity - ptr)
+    return [(ptr, slice(0, first))] + ([(0, slice(first, n))] if first < n else [])
+
+
+def ring_advance(ptr: int, size: int, n: int, capacity: int) -> tuple[int, int]:
+    """The ring's (next row, fill) after n more rows."""
+    if n >= capacity:
+        return 0, capacity
+    return (ptr + n) % capacity, min(size + n, capacity)
+
+
 class FlatTransitionBuffer:
     """Fixed-capacity FIFO ring buffer of flat transitions, stored column-wise in numpy arrays.
 
@@ -99,10 +115,23 @@ class FlatTransitionBuffer:
         Required keys: obs, new_obs, actions, rewards; optional: terminateds, truncateds (False when
         absent). Observations/actions are reshaped to (n, -1). Returns the number of rows added.
         """
+        cols = self._checked_columns(transitions)
+        if cols is None:
+            return 0
+        n = len(cols[OBS])
+        for start, rows in ring_segments(self._ptr, n, self.capacity):
+            self._write(start, {k: v[rows] for k, v in cols.items()})
+        self._ptr, self._size = ring_advance(self._ptr, self._size, n, self.capacity)
+        self._num_added += n
+        return n
+
+    def _checked_columns(self, transitions: Mapping[str, Any]) -> dict[str, np.ndarray] | None:
+        """`transitions` as the six stored columns, shapes checked against the buffer's (allocated on
+        the first add); None for an empty batch."""
         obs = np.asarray(transitions[OBS])
         n = int(obs.shape[0])
         if n == 0:
-            return 0
+            return None
         obs = obs.reshape(n, -1)
         next_obs = np.asarray(transitions[NEXT_OBS]).reshape(n, -1)
         actions = np.asarray(transitions[ACTIONS]).reshape(n, -1)
@@ -117,8 +146,7 @@ class FlatTransitionBuffer:
             raise ValueError(f"observation size {obs.shape[1]} != buffer obs_dim {self._obs_dim}")
         if actions.shape[1] != self._action_dim:
             raise ValueError(f"action size {actions.shape[1]} != buffer action_dim {self._action_dim}")
-
-        cols = {
+        return {
             OBS: obs,
             NEXT_OBS: next_obs,
             ACTIONS: actions,
@@ -126,19 +154,6 @@ class FlatTransitionBuffer:
             TERMINATEDS: term,
             TRUNCATEDS: trunc,
         }
-        if n >= self.capacity:  # only the newest `capacity` rows survive
-            self._write(0, {k: v[n - self.capacity :] for k, v in cols.items()})
-            self._ptr = 0
-            self._size = self.capacity
-        else:
-            first = min(n, self.capacity - self._ptr)
-            self._write(self._ptr, {k: v[:first] for k, v in cols.items()})
-            if first < n:
-                self._write(0, {k: v[first:] for k, v in cols.items()})
-            self._ptr = (self._ptr + n) % self.capacity
-            self._size = min(self._size + n, self.capacity)
-        self._num_added += n
-        return n
 
     def _write(self, start: int, cols: Mapping[str, np.ndarray]) -> None:
         """Stores equally long `cols` at storage rows start, start + 1, ... (the storage's only writer)."""

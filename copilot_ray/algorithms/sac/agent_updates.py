@@ -17,7 +17,6 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-import torch
 from ray.rllib.utils.from_config import from_config
 from ray.rllib.utils.metrics import ALL_MODULES, TD_ERROR_KEY
 from ray.rllib.utils.numpy import convert_to_numpy
@@ -112,6 +111,14 @@ class FastLearnerUpdater:
             timesteps,
         )
 
+    def replay_size(self) -> int:
+        """Transitions in this agent's replay."""
+        return len(self.buffer)
+
+    def replay_states(self, n: int, rng: np.random.Generator):
+        """n replayed (observations, achieved goals) of a hindsight buffer (SoRB's graph)."""
+        return self.buffer.sample_states(n, rng)
+
     def get_state(self) -> dict[str, Any]:
         return {"buffer": self.buffer.get_state(), "rng": self.rng.bit_generator.state}
 
@@ -135,7 +142,9 @@ class FusedLearnerUpdater:
         self.learner_group = learner_group
         self.learner = local_learner(config, learner_group)
         if buffer is None:
-            buffer = DeviceTransitionBuffer(replay_capacity(config), device=self.learner.device)
+            buffer = DeviceTransitionBuffer(
+                replay_capacity(config), device=self.learner.device, seed=int(config.seed or 0)
+            )
         self.buffer = buffer
 
     def add(self, episodes) -> None:
@@ -151,17 +160,21 @@ class FusedLearnerUpdater:
             )
         ]
 
+    def replay_size(self) -> int:
+        """Transitions in this agent's replay."""
+        return len(self.buffer)
+
+    def replay_states(self, n: int, rng: np.random.Generator):
+        """n replayed (observations, achieved goals) of a hindsight buffer (SoRB's graph)."""
+        return self.buffer.sample_states(n, rng)
+
     def get_state(self) -> dict[str, Any]:
-        state: dict[str, Any] = {"buffer": self.buffer.get_state()}
-        if self.learner.device.type == "cuda":  # sampling draws from the device's generator
-            state["cuda_rng"] = torch.cuda.get_rng_state(self.learner.device)
-        return state
+        """The buffer, its sampling stream's counter included (sampling reads no global generator)."""
+        return {"buffer": self.buffer.get_state()}
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restores the buffer (a numpy path's checkpoint too: its sampling rng has no use here)."""
         self.buffer.set_state(state["buffer"])
-        if "cuda_rng" in state and self.learner.device.type == "cuda":
-            torch.cuda.set_rng_state(state["cuda_rng"], self.learner.device)
 
 
 def local_learner(config, learner_group):

@@ -426,7 +426,12 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
             device = local_learner(cfg, self.learner_group).device
             reward = DeviceRelabelledReward(self.goal_env.unwrapped, self.rules, device)
             buffer = DeviceHindsightBuffer(
-                replay_capacity(cfg), self.goal_layout(), reward, **her, device=device
+                replay_capacity(cfg),
+                self.goal_layout(),
+                reward,
+                **her,
+                device=device,
+                seed=int(cfg.seed or 0),
             )
             return FusedLearnerUpdater(cfg, self.learner_group, buffer)
         buffer = HindsightReplayBuffer(

@@ -1,8 +1,10 @@
 """The SAC updates of N seeds' agents (one `GoalSAC` each, in one process) as one stacked update.
 
-`StackedAgentUpdates(algos)` stacks the seeds' learner modules (`gc_sac.seed_stack.StackedSAC`) and
-their replay (`gc_sac.seed_replay`: flat transitions, or HER's relabelling buffer for her, sorb and
-sorb_map, relabelled on the device as the one-seed fused path relabels), and gives each algorithm an
+`StackedAgentUpdates(algos)` stacks the seeds' learner modules into one `gc_sac.sac_step.SACStep` (their
+parameters and Adam state become views of its rows: a seed's learner always holds its current agent) and
+their replay (one device buffer with a ring per seed: flat transitions, `gc_sac.DeviceTransitionBuffer`,
+or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.DeviceHindsightBuffer`, relabelled on
+the device as the one-seed fused path relabels), and gives each algorithm an
 updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
 seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep`
 rendezvous, and so does `act(obs)`, its env runner's hook for every env step. A round with seeds asking
@@ -10,13 +12,15 @@ for actions answers them with one batched forward pass of the stacked actors (`S
 seed's exploration noise drawn in its own turn from its own stream) and leaves the seeds parked at their
 updates waiting. When every seed of the stack is parked at its update (or done with its iteration),
 `run(requests)` runs max(n) stacked steps,
-seed i active in its first n_i, then writes every seed's weights back into its learner's module (the
-env runners sync from there, as after any update) and logs each seed's figures on its own learner.
+seed i active in its first n_i (its learner's module is its row: the env runners sync from there, as
+after any update), and logs each seed's figures on its own learner.
 
-Random streams: each seed samples its replay rows (and HER's goals) and its SAC noise from two
-generators of its own, seeded from its seed, and an inactive seed draws nothing; so seed i's updates in a stack of any size are
-its updates in a stack of one (tested). They are not the draws of a one-seed trial's fused update,
-which samples from the device's default generator.
+Random streams: each seed's SAC noise and its replay's rows (and HER's goals) come from its own Philox
+streams (`gc_sac.philox`, keyed by its seed: the streams its one-seed fused update and one-seed device
+buffer draw from), through the stacked buffer's one sampler; an inactive seed draws nothing. So seed i's
+updates in a stack of any size are its updates in a stack of one (tested), drawn from the streams its
+one-seed trial's fused update draws from (a whole stacked trial against its one-seed trial is not tested:
+the seeds' acting still draws from the global generator in their turns).
 
 What the stacked path refuses (named, before anything runs): the numpy or stock update paths
 (`fused_update=False`, `fast_learner=False`), learning-rate schedules,
@@ -32,28 +36,14 @@ import numpy as np
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
-from copilot_ray.algorithms.gc_sac.device_hindsight import relabelled_columns
-from copilot_ray.algorithms.gc_sac.fused_step import FINITE
+from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer
+from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
-from copilot_ray.algorithms.gc_sac.seed_replay import (
-    StackedHindsightBuffer,
-    StackedTransitionBuffer,
-    gather_rows,
-)
-from copilot_ray.algorithms.gc_sac.seed_stack import StackedSAC, StackedSACStep
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 
 ACT, UPDATE = "act", "update"  # what a seed asks the stack for at a rendezvous
-# The streams a seed's stacked updates draw from: SeedSequence([seed, STREAM]) (distinct from the
-# algorithm's own numpy and torch streams, which it seeds with its seed alone).
-SAMPLE_STREAM, NOISE_STREAM = 1_001, 1_002
-
-
-def stream_generator(seed: int, stream: int, device: torch.device) -> torch.Generator:
-    """A torch generator on `device` for seed `seed`'s stream `stream`."""
-    value = int(np.random.SeedSequence([int(seed), int(stream)]).generate_state(1, np.uint64)[0] >> 1)
-    return torch.Generator(device=device).manual_seed(value)
 
 
 def stacking_problems(algos: Sequence[Any]) -> list[str]:
@@ -94,22 +84,21 @@ class StackedAgentUpdates:
         modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in self.learners]
         self.modules = modules
         self.log_alphas = [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in self.learners]
-        self.agents = StackedSAC.from_modules(modules, self.log_alphas)
         cfg = algos[0].config
         module_cfg = self.learners[0].config.get_config_for_module(DEFAULT_MODULE_ID)
-        self.step = StackedSACStep(
-            self.agents,
-            {"qf": module_cfg.critic_lr, "policy": module_cfg.actor_lr, "alpha": module_cfg.alpha_lr},
+        self.step = SACStep(
+            modules,
+            self.log_alphas,
+            [learner._sac_optimizers(DEFAULT_MODULE_ID) for learner in self.learners],
             self.learners[0].target_entropy[DEFAULT_MODULE_ID],
             gamma=module_cfg.gamma,
             tau=module_cfg.tau,
             critic_loss=self.learners[0]._gc_settings["critic_loss"],
-            generators=[stream_generator(s, NOISE_STREAM, self.device) for s in self.seeds],
+            seeds=self.seeds,
         )
-        self.samplers = [stream_generator(s, SAMPLE_STREAM, self.device) for s in self.seeds]
         self.action_dim = int(np.prod(modules[0].action_space.shape))
-        self.replay = _stacked_replay(algos, modules[0], self.device)
-        self.hindsight = isinstance(self.replay, StackedHindsightBuffer)
+        self.replay = _stacked_replay(algos, modules[0], self.device, self.seeds)
+        self.hindsight = isinstance(self.replay, DeviceHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
 
     def view(self, index: int, lockstep) -> SeedUpdater:
@@ -130,7 +119,7 @@ class StackedAgentUpdates:
         """{seed index: (observation, its standard-normal noise [1, A] or None for the deterministic
         action)} -> {seed index: its action (numpy)}, as its module would act on that noise."""
         n = len(self.algos)
-        dims = self.agents.shapes["pi"][0][0][1]  # the actor's input width
+        dims = int(np.prod(self.modules[0].observation_space.shape))  # the actor's input width
         obs = torch.zeros(n, 1, dims, device=self.device)
         for i, (observation, _) in requests.items():
             obs[i, 0] = torch.as_tensor(np.asarray(observation, np.float32), device=self.device)
@@ -140,25 +129,24 @@ class StackedAgentUpdates:
             noise = torch.zeros(n, 1, self.action_dim, device=self.device)
             for i, draw in noisy.items():
                 noise[i] = draw.to(self.device)
-            actions = self.agents.act(obs, noise).cpu().numpy()
+            actions = self.step.act(obs, noise).cpu().numpy()
             out.update({i: actions[i, 0] for i in noisy})
         if len(noisy) < len(requests):
-            actions = self.agents.act(obs).cpu().numpy()
+            actions = self.step.act(obs).cpu().numpy()
             out.update({i: actions[i, 0] for i in requests if i not in noisy})
         return out
 
     def update(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
         """{seed index: (gradient steps, timesteps)} -> {seed index: [its learner's results]}."""
         owed = [int(requests[i][0]) if i in requests else 0 for i in range(len(self.algos))]
+        owed_on_device = torch.as_tensor(owed, device=self.device)  # once a round: steps compare to it
         last: dict[int, dict[str, torch.Tensor]] = {}
         for t in range(max(owed)):
-            drawing = [n > t for n in owed]
-            active = torch.tensor(drawing, device=self.device)
-            stats = self.step.step(self._sample(drawing), active=active, drawing=drawing)
+            active = owed_on_device > t
+            stats = self.step.step(self.replay.sample(self.batch_size, TRAIN_COLUMNS, active), active=active)
             for i, n in enumerate(owed):
                 if n == t + 1:  # seed i's last step of this round: its figures
                     last[i] = {k: v[i].detach().clone() for k, v in stats.items() if k != FINITE}
-        self.agents.write_to(self.modules, self.log_alphas)
         skipped = self.step.skipped.cpu().tolist()
         out = {}
         for i, (n, timesteps) in requests.items():
@@ -167,85 +155,55 @@ class StackedAgentUpdates:
             out[i] = [results] if figures else []
         return out
 
-    def _sample(self, drawing: Sequence[bool]) -> dict[str, torch.Tensor]:
-        """A [N, B] batch: seed i's rows (and HER's goal picks) drawn from its own generator where
-        `drawing[i]`, row 0 else (its stream untouched)."""
-        rows = []
-        for i, draw in enumerate(drawing):
-            size = len(self.replay.seeds[i])
-            if draw and size > 0:
-                rows.append(torch.clamp((self._uniform(i, self.batch_size) * size).long(), max=size - 1))
-            else:
-                rows.append(torch.zeros(self.batch_size, dtype=torch.int64, device=self.device))
-        index = torch.stack(rows)
-        storage = self.replay.storage
-        if not self.hindsight:
-            return {key: gather_rows(storage[key], index) for key in TRAIN_COLUMNS}
-
-        def goal_picks(shape: torch.Size) -> torch.Tensor:  # [N, n_her]: each drawing seed's own
-            zeros = torch.zeros(shape[1:], dtype=torch.float64, device=self.device)
-            return torch.stack([self._uniform(i, shape[1]) if d else zeros for i, d in enumerate(drawing)])
-
-        def take(name: str, at: torch.Tensor) -> torch.Tensor:
-            return gather_rows(storage[name], at)
-
-        return relabelled_columns(self.replay, index, take, TRAIN_COLUMNS, uniform=goal_picks)
-
-    def _uniform(self, seed_index: int, n: int) -> torch.Tensor:
-        return torch.rand(n, generator=self.samplers[seed_index], dtype=torch.float64, device=self.device)
-
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, Any]:
-        """Every seed's parameters, optimizer state and noise stream, and its sampling stream (each
-        seed's replay rows are in its algorithm's checkpoint, through its `SeedUpdater`)."""
-        return {"step": self.step.get_state(), "samplers": [g.get_state() for g in self.samplers]}
+        """Every seed's parameters, optimizer state and noise stream (each seed's replay rows and
+        sampling stream are in its algorithm's checkpoint, through its `SeedUpdater`)."""
+        return {"step": self.step.get_state()}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
-        """Restores `get_state`'s snapshot and writes the weights into the learners' modules."""
+        """Restores `get_state`'s snapshot (in place: the learners' modules, views of the step's rows,
+        hold it too)."""
         self.step.set_state(state["step"])
-        for g, g_state in zip(self.samplers, state["samplers"], strict=True):
-            g.set_state(g_state)
-        self.agents.write_to(self.modules, self.log_alphas)
         # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint,
         # so a learner counts only the steps skipped from here on (its own count restarts with it).
         for learner, skipped in zip(self.learners, self.step.skipped.cpu().tolist(), strict=True):
             learner.note_skipped_logged(int(skipped))
 
 
-def _stacked_replay(algos: Sequence[Any], module, device: torch.device):
+def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: Sequence[int]):
     """The seeds' replay as one stacked buffer: HER's relabelling buffer where the agent uses one (its
     reward on the device, as the one-seed fused path relabels), else flat transitions."""
     cfg = algos[0].config
     action_dim = int(np.prod(module.action_space.shape))
     if not cfg.uses_hindsight_buffer():
         obs_dim = int(np.prod(module.observation_space.shape))
-        return StackedTransitionBuffer(len(algos), replay_capacity(cfg), device, obs_dim, action_dim)
+        return DeviceTransitionBuffer(replay_capacity(cfg), device, obs_dim, action_dim, seeds=seeds)
     first = algos[0]
-    return StackedHindsightBuffer(
-        len(algos),
+    return DeviceHindsightBuffer(
         replay_capacity(cfg),
         first.goal_layout(),
         DeviceRelabelledReward(first.goal_env.unwrapped, first.rules, device),
-        action_dim,
         n_sampled_goal=cfg.her["n_sampled_goal"],
         goal_selection=cfg.her["goal_selection"],
         device=device,
+        seeds=seeds,
     )
 
 
 class SeedUpdater:
-    """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface."""
+    """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface,
+    over the seed's rings of the stack's replay."""
 
     def __init__(self, stack: StackedAgentUpdates, index: int, lockstep):
         self.stack, self.index, self.lockstep = stack, int(index), lockstep
-        self.buffer = stack.replay.seeds[self.index]
 
     def add(self, episodes) -> None:
-        self.buffer.add_episodes(episodes)
+        self.stack.replay.add_episodes(episodes, seed=self.index)
 
     def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
         """Waits for the stack's next round and returns this seed's results ([] for no step)."""
-        if num_updates <= 0 or len(self.buffer) == 0:
+        if num_updates <= 0 or self.stack.replay.size_of(self.index) == 0:
             return []
         return self.lockstep.meet(self.index, (UPDATE, int(num_updates), dict(timesteps)))
 
@@ -255,8 +213,16 @@ class SeedUpdater:
         noise = torch.randn(1, self.stack.action_dim) if explore else None
         return self.lockstep.meet(self.index, (ACT, observation, noise))
 
+    def replay_size(self) -> int:
+        """Transitions in this seed's ring of the stack's replay."""
+        return self.stack.replay.size_of(self.index)
+
+    def replay_states(self, n: int, rng: np.random.Generator):
+        """n replayed (observations, achieved goals) of this seed's ring (SoRB's graph)."""
+        return self.stack.replay.sample_states(n, rng, seed=self.index)
+
     def get_state(self) -> dict[str, Any]:
-        return {"buffer": self.buffer.get_state()}
+        return {"buffer": self.stack.replay.get_state(seed=self.index)}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        self.buffer.set_state(state["buffer"])
+        self.stack.replay.set_state(state["buffer"], seed=self.index)

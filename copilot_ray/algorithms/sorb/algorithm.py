@@ -129,7 +129,7 @@ class SoRB(GoalSAC):
         docstring. Batched, in chunks."""
         module = self.learner_group._learner.module[DEFAULT_MODULE_ID]
         device = next(module.parameters()).device  # the learner's: a GPU with resources.gpus_per_trial
-        layout = self.agent_updater.buffer.layout
+        layout = self.goal_layout()
         reward = float(self.goal_env.unwrapped.goal_reward) * self.rules.reward_factor(0)
         log_gamma = np.log(self.config.gamma)
         out = np.empty(len(goals))
@@ -148,12 +148,12 @@ class SoRB(GoalSAC):
     def _evaluation_plan(self, n: int) -> dict[str, Any] | None:
         cfg = self.config
         steps = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
-        if steps < cfg.sorb["pretrain_env_steps"] or len(self.agent_updater.buffer) == 0:
+        if steps < cfg.sorb["pretrain_env_steps"] or self.agent_updater.replay_size() == 0:
             # Before its search starts, SoRB is its agent alone: evaluated as such, on the cadence
             # every method shares (no gap at the start of its curve).
             return super()._evaluation_plan(n)
         t0 = time.perf_counter()
-        observations, achieved = self.agent_updater.buffer.sample_states(cfg.sorb["graph_size"], self._rng)
+        observations, achieved = self.agent_updater.replay_states(cfg.sorb["graph_size"], self._rng)
         graph = ReplayGraph.build(
             observations,
             achieved,
