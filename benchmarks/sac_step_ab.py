@@ -48,9 +48,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _module_at(rev: str, path: str, name: str) -> types.ModuleType:
     """The module at `path` as of git revision `rev`, imported under `name`."""
-    source = subprocess.run(
-        ["git", "show", f"{rev}:{path}"], cwd=ROOT, check=True, capture_output=True, text=True
-    )
+    source = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True)
+    if source.returncode != 0:
+        # a shallow clone lacks the revision: say so instead of git's traceback
+        sys.exit(
+            f"error: --base {rev}: {path} is not readable there ({source.stderr.strip()}); fetch it (git fetch --unshallow)"
+        )
     spec = importlib.util.spec_from_loader(name, loader=None)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
