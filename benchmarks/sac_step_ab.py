@@ -51,9 +51,12 @@ def _module_at(rev: str, path: str, name: str) -> types.ModuleType:
     source = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True)
     if source.returncode != 0:
         # a shallow clone lacks the revision: say so instead of git's traceback
-        sys.exit(
-            f"error: --base {rev}: {path} is not readable there ({source.stderr.strip()}); fetch it (git fetch --unshallow)"
+        why = source.stderr.strip()
+        print(
+            f"error: --base {rev}: {path} is not readable there ({why}); fetch it (git fetch --unshallow)",
+            file=sys.stderr,
         )
+        sys.exit(2)
     spec = importlib.util.spec_from_loader(name, loader=None)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
