@@ -70,7 +70,7 @@ from copilot_ray.torch_checks import all_finite
 GC_SAC_KEY = "gc_sac"
 NONFINITE_SKIPPED_KEY = "num_nonfinite_steps_skipped"
 LOG_ALPHA_STATE_KEY = "gc_sac_log_alpha"
-NOISE_STATE_KEY = "gc_sac_noise_stream"  # the fused step's noise counters: a resumed run draws on
+NOISE_STATE_KEY = "gc_sac_noise_stream"  # the fused step's noise counters: a resumed run draws on from them
 BOOLEAN_KNOBS = ("fused_update", "cuda_graph", "compile_update")
 SAC_OPTIMIZERS = ("qf", "policy", "alpha")  # the order of `SACStep`'s learning rates
 
