@@ -84,27 +84,29 @@ def _assert_same(a, b, what):
 
 
 def _weights(trial, index):
-    module = trial.stack.learners[index].module[DEFAULT_MODULE_ID]
+    module = trial.stack.updates.learners[index].module[DEFAULT_MODULE_ID]
     return {k: v.detach().clone() for k, v in module.state_dict().items()}
 
 
 def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alone(
     ray_session, tmp_path, monkeypatch, stacked_updates
 ):
-    from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
+    from copilot_ray.algorithms.sac.seed_stack import SeedStack
 
     monkeypatch.setenv("COPILOT_RAY_FAULT", "planner_nan@3:seed=1")  # seed 1's planner breaks at iteration 3
     acting = []  # the seeds of every batched forward pass
-    act = StackedAgentUpdates.act
-    monkeypatch.setattr(StackedAgentUpdates, "act", lambda self, r: acting.append(sorted(r)) or act(self, r))
+    act = SeedStack._act
+    monkeypatch.setattr(
+        SeedStack, "_act", lambda self, ids, obs: acting.append(list(ids)) or act(self, ids, obs)
+    )
     spec = _spec(tmp_path)
     pair = _trial(spec, [0, 1])
     first = pair.train()
     assert [0, 1] in acting  # both seeds' env steps went through one forward pass
     # seed 0 as if 3 of its steps had gone non-finite, counted by the stack and logged by its learner:
     # a restored stack must not log them again (its learner's count starts anew)
-    pair.stack.step.skipped[0] += 3
-    pair.stack.learners[0].note_skipped_logged(int(pair.stack.step.skipped[0]))
+    pair.stack.updates.step.skipped[0] += 3
+    pair.stack.updates.learners[0].note_skipped_logged(int(pair.stack.updates.step.skipped[0]))
     checkpoint = pair.save(str(tmp_path / "checkpoint"))
     second = pair.train()
     pair_weights = _weights(pair, 1)
@@ -146,48 +148,91 @@ def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alon
     assert math.isclose(top, third[keys.SEED_RESULTS]["0"][success])
 
 
-def test_a_stacked_her_seed_relabels_as_it_would_alone(ray_session, tmp_path, stacked_updates):
-    """HER's relabelling buffer stacked: seed 1's hindsight goals, rewards and updates in a pair are its
-    own (drawn from its generators), as in a stack of seed 1 alone."""
-    her = {
-        "name": "stack_her",
-        "algorithm": "her",
-        "config": {
-            "tau_max": 12,
-            "task_batch_size": 2,
-            "eval_interval": 1,
-            "eval_num_tasks": 3,
-            "num_steps_sampled_before_learning_starts": 30,
-            "train_batch_size_per_learner": 16,
-            "updates_per_env_step": 0.25,
-        },
-    }
+HER = {
+    "name": "stack_her",
+    "algorithm": "her",
+    "config": {
+        "tau_max": 12,
+        "task_batch_size": 2,
+        "eval_interval": 1,
+        "eval_num_tasks": 3,
+        "num_steps_sampled_before_learning_starts": 30,
+        "train_batch_size_per_learner": 16,
+        "updates_per_env_step": 0.25,
+    },
+}
+
+
+def _learner_weights(algo):
+    module = algo.learner_group._learner.module[DEFAULT_MODULE_ID]
+    return {k: v.detach().clone() for k, v in module.state_dict().items()}
+
+
+@pytest.mark.parametrize(("algorithm", "stacked"), [("copilot", False), ("copilot", True), ("her", True)])
+def test_a_stack_of_three_seeds_trains_each_as_its_one_seed_trial(
+    ray_session, tmp_path, monkeypatch, algorithm, stacked
+):
+    """Seeds {0, 1, 2} in one stack (their env steps in one loop; stacked: one batched act and one
+    stacked update, HER relabelling in its stacked buffer) against each seed's own one-seed trial, over
+    two iterations: every clock-free figure of every seed, and its learner's weights."""
+    from copilot_ray.registry import get_algorithm
+
+    monkeypatch.setattr(SeedStackTrial, "stack_updates", stacked)
+    data = {**SPEC, **(HER if algorithm == "her" else {}), "seeds": [0, 1, 2], "seeds_per_trial": 3}
+    path = tmp_path / "three.yaml"
+    path.write_text(yaml.safe_dump({**data, "tracking": {"storage": str(tmp_path / "results")}}))
+    stack = _trial(str(path), [0, 1, 2])
+    assert (stack.stack.updates is not None) == stacked
+    assert stack.stack._move is not None  # the maze: every env step moves all seeds' agents at once
+    trial_class = get_algorithm(algorithm).trial_class()
+    alone = [trial_class(config={keys.SPEC_PATH_KEY: str(path), keys.SEED_PARAM: s}) for s in (0, 1, 2)]
+    for _ in range(2):
+        together = stack.train()
+        for seed, own in enumerate(alone):
+            mine = {k: v for k, v in result_metrics(own.train(), rllib_timers=True).items() if not _timing(k)}
+            _assert_same(_figures(together, seed), mine, f"seed {seed} of three vs its one-seed trial")
+    for seed, own in enumerate(alone):
+        want = _learner_weights(own)
+        for key, value in _learner_weights(stack.algos[seed]).items():
+            torch.testing.assert_close(value, want[key], rtol=1e-5, atol=1e-6, msg=f"seed {seed}: {key}")
+        assert together[keys.SEED_RESULTS][str(seed)][keys.AGENT_SAC_UPDATES] > 0
+        own.stop()
+    assert _figures(together, 0) != _figures(together, 1)  # the seeds differ: the comparison could fail
+    stack.stop()
+
+
+def test_on_a_faked_cuda_device_a_stacks_update_reaches_the_capture_site(ray_session, tmp_path, monkeypatch):
+    """A stacked trial's update goes through the capture site every SAC update goes through
+    (`sac_step.replay_step_call`), without a host sync; on a (faked) CUDA device it is a `CapturedCall` of the stacked step,
+    warmed up and captured with the seeds' noise and sampling counters and the `active` mask in place,
+    which every replay reads."""
+    from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
+    from tests.test_graph_capture import Recorder
+    from tests.test_no_host_sync import NoHostSync
+
+    monkeypatch.setattr(SeedStackTrial, "stack_updates", True)
     path = tmp_path / "her.yaml"
-    path.write_text(yaml.safe_dump({**SPEC, **her, "tracking": {"storage": str(tmp_path / "results")}}))
-    pair, alone = _trial(str(path), [0, 1]), _trial(str(path), [1])
-    assert pair.stack.hindsight
-    for _ in range(2):
-        together, own = pair.train(), alone.train()
-        _assert_same(_figures(together, 1), _figures(own, 1), "HER seed 1 in a pair vs alone")
-    assert own[keys.SEED_RESULTS]["1"][keys.AGENT_SAC_UPDATES] > 0
-    assert _figures(together, 0) != _figures(together, 1)
+    path.write_text(yaml.safe_dump({**SPEC, **HER, "tracking": {"storage": str(tmp_path / "results")}}))
+    pair = _trial(str(path), [0, 1])
+    pair.train()  # the replay holds both seeds' transitions
+    updates = pair.stack.updates
+    noise, sampler, active = updates.step.noise.counters, updates.replay.sampler.counters, updates._active
+    active.fill_(True)
+    with NoHostSync():  # the call a trial's round makes, eager here: no host read, no host data in it
+        updates._run()()
+    recorder = Recorder()
+    recorder.install(monkeypatch)
+    monkeypatch.setattr(updates, "device", torch.device("cuda"))  # (the decision only: tensors stay put)
+    updates._cached = None
+    run = updates._run()
+    monkeypatch.setattr(updates, "device", torch.device("cpu"))
+    assert isinstance(run, CapturedCall)
+    active.fill_(True)
+    before = noise.clone()
+    outs = [run() for _ in range(5)]
+    assert run.captured and recorder.events.count("replay") == 2
+    assert (noise > before).all()  # both seeds' streams advanced by the eager and capturing calls
+    assert outs[3] is outs[4] and set(outs[3]) >= {"qf_loss", "finite", "total_loss"}
+    assert updates.step.noise.counters is noise and updates.replay.sampler.counters is sampler
+    assert updates._active is active and updates._run() is run  # the same call while storage stays
     pair.stop()
-    alone.stop()
-
-
-def test_on_a_cpu_a_stacked_seed_trains_exactly_as_its_one_seed_trial(ray_session, tmp_path):
-    """The CPU's default: no stacked update, each seed its own (in its turn, its own random state), so
-    seed 1 of a pair is its one-seed trial, figure for figure."""
-    from copilot_ray.algorithms.copilot.trial import CoPilotTrial
-
-    spec = _spec(tmp_path)
-    pair = _trial(spec, [0, 1])
-    assert pair.stack is None
-    own = CoPilotTrial(config={keys.SPEC_PATH_KEY: spec, keys.SEED_PARAM: 1})
-    for _ in range(2):
-        together, alone = pair.train(), own.train()
-        figures = {k: v for k, v in result_metrics(alone, rllib_timers=True).items() if not _timing(k)}
-        _assert_same(_figures(together, 1), figures, "seed 1 of a pair vs its one-seed trial")
-    assert together[keys.SEED_RESULTS]["1"][keys.AGENT_SAC_UPDATES] > 0
-    pair.stop()
-    own.stop()

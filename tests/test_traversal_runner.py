@@ -65,7 +65,8 @@ def test_the_lean_loop_samples_rllibs_episodes(plan, explore):
     for call in range(5):  # one sub-task per call: RLlib resets (and seeds) the env at each
         got = {}
         for name, runner in (("rllib", rllib), ("lean", lean)):
-            torch.manual_seed(call)  # the same action noise
+            torch.manual_seed(call)  # the same action noise: RLlib's from torch's generator, the lean
+            lean.action_noise.set_state(torch.get_rng_state())  # loop's from its own, in that state
             (got[name],) = runner.sample(num_episodes=1, explore=explore)
         want, have = got["rllib"], got["lean"]
         assert len(have) == len(want) > 0
@@ -113,3 +114,26 @@ def test_a_call_ends_when_the_plan_runs_out_instead_of_stepping_placeholder_epis
     assert missed and len(episodes) < planned  # (a failure dropped sub-tasks: what the test is about)
     steps = runner.get_metrics()[NUM_ENV_STEPS_SAMPLED_LIFETIME].peek()
     assert steps == sum(len(e) for e in episodes)
+
+
+def test_the_lean_loop_draws_its_noise_from_its_own_generator_not_torchs(plan):
+    """Two runners of one seed sample the same episodes whatever torch's global generator is doing
+    in between (a seed stack steps several runners in one process), and a state set back repeats them."""
+    config = _config()
+    first, second = _runner(config, TraversalEnvRunner, plan), _runner(config, TraversalEnvRunner, plan)
+    second.set_state(first.get_state())
+    saved = first.action_noise.get_state()
+    torch.manual_seed(1)
+    (a,) = first.sample(num_episodes=1, explore=True)
+    torch.manual_seed(2)
+    torch.randn(7)
+    (b,) = second.sample(num_episodes=1, explore=True)
+    np.testing.assert_array_equal(a.get_actions(), b.get_actions())
+    first.env.unwrapped.call("load_plan", *plan[:1], DEPTH, plan[1])
+    first.action_noise.set_state(saved)
+    (again,) = first.sample(num_episodes=1, explore=True)
+    np.testing.assert_array_equal(again.get_actions(), a.get_actions())
+    other = _runner(_config().debugging(seed=6), TraversalEnvRunner, plan)
+    other.set_state(first.get_state())
+    (c,) = other.sample(num_episodes=1, explore=True)
+    assert not np.array_equal(c.get_actions()[:3], a.get_actions()[:3])  # another seed, other noise

@@ -4,11 +4,11 @@
 The trial's Tune config is a one-seed trial's with `_seeds: [s0, s1, ...]` in place of `seed`. It builds
 the algorithm's own trial class once per seed (its config with `seed: s`, its files under `seed_<s>/`),
 so each seed plans, traverses, evaluates and checkpoints exactly as a one-seed trial does; each
-iteration runs every seed's `train()` in turns (`trials.lockstep.Lockstep`), each with its own global
-random state. Where the learner is on a GPU the seeds meet there at every env step (one batched forward
-pass for their actions) and at every update (one stacked update); on a CPU, where the stacked update
-measured slower than one seed's own, each seed updates and acts as its own trial would, so a stacked
-seed there trains exactly as its one-seed trial (tested).
+iteration runs every seed's iteration in one loop (`algorithms.sac.seed_stack.SeedStack`: the seeds'
+env steps together, each drawing from its own generators), then each seed's `train()` for its result.
+Where the learner is on a GPU the seeds act in one batched forward pass and update in one stacked
+update; on a CPU, where the stacked update measured slower than one seed's own, each seed acts and
+updates as its own trial would. Either way a stacked seed trains as its one-seed trial (tested).
 
 What it reports (`step`):
 * `keys.SEED_RESULTS`: {seed: that seed's metrics, as a one-seed trial logs them} (the MLflow callback
@@ -39,7 +39,6 @@ from copilot_ray.registry import get_algorithm
 from copilot_ray.sweep_spec import tune_stop
 from copilot_ray.tracking import result_metrics
 from copilot_ray.trials.description import load_spec_cached, seed_config
-from copilot_ray.trials.lockstep import Lockstep, RandomState
 from copilot_ray.trials.planning_trial import nested
 
 logger = logging.getLogger(__name__)
@@ -71,10 +70,6 @@ def stacks_updates(algo, wanted: bool | None) -> bool:
 _COUNTERS = ("_iteration", "_time_total", "_timesteps_total", "_episodes_total")
 
 
-def _no_rendezvous(requests):
-    raise RuntimeError(f"seeds {sorted(requests)} met though their updates are not stacked")
-
-
 def _reached(metrics: Mapping[str, float], stop: Mapping[str, int]) -> bool:
     """Whether a seed's metrics meet any of the stop criteria (Tune's rule: either one ends a trial)."""
     return any(metrics.get(key, -math.inf) >= value for key, value in stop.items())
@@ -98,29 +93,23 @@ class SeedStackTrial(tune.Trainable):
         return trial_class.default_resource_request(seed_config(config, config[keys.SEEDS_KEY][0]))
 
     def setup(self, config: dict[str, Any]) -> None:
-        from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
+        from copilot_ray.algorithms.sac.seed_stack import SeedStack
 
         spec = load_spec_cached(str(config[keys.SPEC_PATH_KEY]))
         trial_class = get_algorithm(spec.algorithm).trial_class()
         self.seeds = [int(s) for s in config[keys.SEEDS_KEY]]
         self.stop_at = tune_stop(spec)
-        self.algos, states = [], []
+        self.algos = []
         for seed in self.seeds:
             logdir = _seed_dir(self.logdir, seed)
             logdir.mkdir(parents=True, exist_ok=True)
             algo = trial_class(config=seed_config(config, seed))
             _move_logdir(algo, logdir)
             self.algos.append(algo)
-            # Seed i's global random state as its own setup left it: it continues from there.
-            states.append(RandomState.capture())
-        self.stack = None
-        if stacks_updates(self.algos[0], self.stack_updates):
-            self.stack = StackedAgentUpdates(self.algos)
-        self.lockstep = Lockstep(states, self.stack.run if self.stack else _no_rendezvous)
-        for i, algo in enumerate(self.algos if self.stack else ()):
-            algo.agent_updater = self.stack.view(i, self.lockstep)
-            # every env step of every seed: one batched forward pass of the stacked actors
-            algo.env_runner_group.local_env_runner.act_hook = algo.agent_updater.act
+        # (an algorithm without iteration steps, a stand-in in tests, trains seed after seed)
+        together = hasattr(self.algos[0], "iteration_steps")
+        stacked = together and stacks_updates(self.algos[0], self.stack_updates)
+        self.stack = SeedStack(self.algos, stacked) if together else None
         self.metrics: dict[int, dict[str, float]] = {}  # seed index -> its last metrics (no NaN)
         # Every metric a seed has reported, NaN ones included: a one-seed trial reports its evaluation
         # figures as NaN before its first evaluation so that Tune's strict metric check (a scheduler's
@@ -131,13 +120,19 @@ class SeedStackTrial(tune.Trainable):
 
     def step(self) -> dict[str, Any]:
         running = [i for i in range(len(self.seeds)) if i not in self.errors and i not in self.finished]
-        outcomes = self.lockstep.run({i: self.algos[i].train for i in running})
-        for i, outcome in sorted(outcomes.items()):
-            if outcome.error is not None:
-                self.errors[i] = f"{type(outcome.error).__name__}: {outcome.error}"
-                logger.error("seed %d stopped: %s", self.seeds[i], self.errors[i], exc_info=outcome.error)
+        failed = self.stack.run_iteration(running) if self.stack is not None else {}
+        for i in running:
+            error = failed.get(i)
+            if error is None:
+                try:
+                    result = self.algos[i].train()
+                except Exception as err:  # noqa: BLE001 - a seed's failure is its own
+                    error = err
+            if error is not None:
+                self.errors[i] = f"{type(error).__name__}: {error}"
+                logger.error("seed %d stopped: %s", self.seeds[i], self.errors[i], exc_info=error)
                 continue
-            reported = result_metrics(outcome.value, rllib_timers=True, keep_nan=True)
+            reported = result_metrics(result, rllib_timers=True, keep_nan=True)
             self.reported.update(reported)
             self.metrics[i] = {k: v for k, v in reported.items() if not math.isnan(v)}
             if _reached(self.metrics[i], self.stop_at):
@@ -170,18 +165,16 @@ class SeedStackTrial(tune.Trainable):
     # ------------------------------------------------------------------ checkpoints
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         """Every seed's algorithm in `seed_<s>/`, and the stack's state (its weights and optimizer
-        state when its updates are stacked, the seeds' random states, their last metrics and errors).
+        state when its updates are stacked, the seeds' last metrics and errors).
 
-        A seed's folder alone is not that seed's whole state: its global random state is in the stack's
-        file, and with stacked updates so are its optimizer's moments (its learner's are never
-        stepped). A stack restores from the whole checkpoint; its seeds' folders are what MLflow keeps
-        of each run for reading its weights."""
+        With stacked updates a seed's folder alone is not that seed's whole state: its optimizer's moments
+        are in the stack's file (its learner's are never stepped). A stack restores from the whole
+        checkpoint; its seeds' folders are what MLflow keeps of each run for reading its weights."""
         for seed, algo in zip(self.seeds, self.algos, strict=True):
             algo.save_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
         state = {
             "seeds": self.seeds,
             "stack": None if self.stack is None else self.stack.get_state(),
-            "random": self.lockstep.states,
             "metrics": self.metrics,
             "reported": sorted(self.reported),
             "errors": self.errors,
@@ -200,13 +193,6 @@ class SeedStackTrial(tune.Trainable):
             raise ValueError(
                 f"a checkpoint of seeds {state['seeds']} cannot restore a stack of seeds {self.seeds}"
             )
-        if (state["stack"] is None) != (self.stack is None):
-            raise ValueError(
-                "a checkpoint written with the seeds' updates "
-                + ("stacked" if state["stack"] is not None else "each its own")
-                + " cannot restore a stack that runs them "
-                + ("stacked" if self.stack is not None else "each its own")
-            )
         for seed, algo in zip(self.seeds, self.algos, strict=True):
             algo.load_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
         for algo, counters in zip(self.algos, state.get("counters") or (), strict=False):
@@ -214,7 +200,6 @@ class SeedStackTrial(tune.Trainable):
                 setattr(algo, name, value)
         if self.stack is not None:  # after the algorithms: the stack's weights are the live ones
             self.stack.set_state(state["stack"])
-        self.lockstep.states = list(state["random"])
         self.metrics = dict(state["metrics"])
         self.reported = set(state.get("reported", ()))
         self.errors = dict(state["errors"])

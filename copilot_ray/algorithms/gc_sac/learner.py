@@ -62,9 +62,8 @@ from ray.rllib.utils.metrics import (
     WEIGHTS_SEQ_NO,
 )
 
-from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
 from copilot_ray.algorithms.gc_sac.losses import CRITIC_LOSSES, sac_losses
-from copilot_ray.algorithms.gc_sac.sac_step import FINITE, TOTAL_LOSS, SACStep
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, TOTAL_LOSS, SACStep, replay_step_call
 from copilot_ray.torch_checks import all_finite
 
 GC_SAC_KEY = "gc_sac"
@@ -253,14 +252,13 @@ class GCSACTorchLearner(SACTorchLearner):
             return cached[1]
         step = self.fused_step(module_id)
         step.set_learning_rates(dict(zip(SAC_OPTIMIZERS, lrs, strict=True)))
-
-        def run() -> dict[str, torch.Tensor]:
-            return step.step(replay.sample(int(batch_size)))  # [1, B, ...]: this seed's batch
-
-        if self._gc_settings["compile_update"]:
-            run = torch.compile(run)
-        if self.device.type == "cuda" and self._gc_settings["cuda_graph"]:
-            run = CapturedCall(run)
+        run = replay_step_call(
+            step,
+            replay,
+            batch_size,
+            capture=self.device.type == "cuda" and self._gc_settings["cuda_graph"],
+            compile_update=self._gc_settings["compile_update"],
+        )
         self._replay_runs[module_id] = (key, run)
         return run
 

@@ -25,7 +25,8 @@ per minibatch, for every seed:
   ([N] bool) leaves the other seeds untouched the same way without counting them as skipped.
 
 No `.item()`, no host-built tensor, no data-dependent shape: the step can be captured in one CUDA graph
-(`graph_capture.py`) and replayed.
+(`graph_capture.py`) and replayed. `replay_step_call` is where every SAC update is captured, one
+seed's (the learner's fused update) and a seed stack's alike.
 """
 
 from __future__ import annotations
@@ -41,8 +42,10 @@ from ray.rllib.algorithms.sac.sac_learner import QF_PREDS, QF_TWIN_PREDS
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.models.base import ENCODER_OUT
 
+from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
 from copilot_ray.algorithms.gc_sac.losses import sac_losses
 from copilot_ray.algorithms.gc_sac.philox import PhiloxStreams
+from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
 
 TOTAL_LOSS = "total_loss"
 FINITE = "finite"
@@ -432,6 +435,31 @@ class SACStep:
 
 def _adam_params(optimizer: torch.optim.Optimizer) -> list[torch.Tensor]:
     return [p for group in optimizer.param_groups for p in group["params"]]
+
+
+def replay_step_call(
+    step: SACStep,
+    replay: Any,
+    batch_size: int,
+    *,
+    capture: bool,
+    compile_update: bool = False,
+    active: torch.Tensor | None = None,
+):
+    """The zero-argument call of one `step` on a batch sampled from `replay` (a device buffer with a
+    ring per seed) inside it: the seeds `active` ([N] bool, written in place between calls; None: all)
+    sample and step. Compiled first with `compile_update`; with `capture` (a CUDA device's, unless its
+    `cuda_graph` knob is off) captured into one graph and replayed (`CapturedCall`): the capture site
+    of every SAC update."""
+
+    def run() -> dict[str, torch.Tensor]:
+        return step.step(replay.sample(int(batch_size), TRAIN_COLUMNS, active), active=active)
+
+    if compile_update:
+        run = torch.compile(run)
+    if capture:
+        run = CapturedCall(run)
+    return run
 
 
 def stack_batches(batches: Sequence[Mapping[str, torch.Tensor]]) -> dict[str, torch.Tensor]:

@@ -398,6 +398,7 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
         self._batch_done = 0
         self._update_seconds, self._updates_done = 0.0, 0
         self.heartbeat = Heartbeat()  # a line every few seconds inside an iteration (`train` prints it)
+        self.iteration_done = False  # a seed stack ran this iteration's steps (training_step)
         self.agent_updater = self._make_agent_updater()
         # Carries the fraction of a gradient step from one call to the next, so a ratio like 0.3 is
         # exact over the run instead of rounded per sampling round.
@@ -458,12 +459,28 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
     # --------------------------------------------------------------------------- training step
     @override(DQN)
     def training_step(self) -> None:
-        """One iteration (module docstring): draw the tasks (or take up the unfinished batch), run their
-        remaining of `repetitions` traversals with SAC updates in between, ending early, with the batch
+        """One iteration: `iteration_steps`, its traversals run on this algorithm's env runners. A seed
+        stack (`seed_stack.SeedStack`) runs its seeds' iterations together, their traversals in one
+        loop, before it calls each seed's `train()`: then the iteration is done already."""
+        if self.iteration_done:
+            self.iteration_done = False
+            return
+        steps = self.iteration_steps()
+        try:
+            request = next(steps)
+            while True:
+                request = steps.send(self._traverse(*request))
+        except StopIteration:
+            return
+
+    def iteration_steps(self):
+        """One iteration (module docstring) as a generator: it yields each repetition's traversal,
+        (trees, task ids), and is sent its `Subtasks`. It draws the tasks (or takes up the unfinished
+        batch), runs their remaining of `repetitions` traversals with SAC updates in between, ending early, with the batch
         kept for the next iteration, past an env-step evaluation point or the run's env-step budget, or
         where a stop was asked for through `self.heartbeat` (an iteration a stop cuts short is evaluated
-        only at an env-step point: on the iterations cadence the one that finishes its batch is); log,
-        evaluate when due. A curriculum plans the trees of each repetition and learns from its finished
+        only at an env-step point: on the iterations cadence the one that finishes its batch is); logs,
+        evaluates when due. A curriculum plans the trees of each repetition and learns from its finished
         sub-tasks; its warm start pauses between phases on a stop (StopRequested)."""
         cfg = self.config
         curriculum = self.curriculum
@@ -500,7 +517,7 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
                 for key, value in figures.items():
                     stats[key].append(value)
             t0 = time.perf_counter()
-            subtasks = self._traverse(trees[:n_tasks], idx[:n_tasks])
+            subtasks = yield trees[:n_tasks], idx[:n_tasks]
             timing["agent_s"] += time.perf_counter() - t0
             self._privileged["resets"] += int(subtasks["reset_to_state"].sum())
             self._privileged["map_queries"] += int(subtasks["map_queries"].sum())
@@ -610,7 +627,8 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
         state = super().get_state(components, not_components=not_components, **kwargs)
         state[_STATE_KEY] = {
             "rng": self._rng.bit_generator.state,
-            "torch_rng": torch.get_rng_state(),
+            "torch_rng": torch.get_rng_state(),  # RLlib's own sampling loop draws from it
+            "action_noise": self._action_noise_state(),
             "agent_updater": self.agent_updater.get_state(),
             "gradient_steps": self.gradient_steps.get_state(),
             **self.evaluation.get_state(),  # its schedule and success curves
@@ -623,6 +641,11 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
             state[self.curriculum.state_key] = self.curriculum.state_dict()
         return state
 
+    def _action_noise_state(self) -> torch.Tensor | None:
+        """The local env runner's exploration-noise generator (the lean loop's), None without one."""
+        runner = self.env_runner_group.local_env_runner
+        return runner.action_noise.get_state() if isinstance(runner, TraversalEnvRunner) else None
+
     @override(Algorithm)
     def set_state(self, state: dict[str, Any]) -> None:
         """Algorithm's `set_state`, then the driver-side state when the state has it."""
@@ -632,6 +655,8 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
             return
         self._rng.bit_generator.state = own["rng"]
         torch.set_rng_state(own["torch_rng"])
+        if own.get("action_noise") is not None:
+            self.env_runner_group.local_env_runner.action_noise.set_state(own["action_noise"])
         self.agent_updater.set_state(own["agent_updater"])
         self.gradient_steps.set_state(own["gradient_steps"])
         self.evaluation.set_state(own)

@@ -117,10 +117,8 @@ class RunnerTraversal:
                 runner_metrics.append(metrics)
             for rid in set(active) - answered:  # died during this round
                 self._lose_subtasks(rid, queued.pop(rid))
-            self.metrics.aggregate(runner_metrics, key=ENV_RUNNER_RESULTS)
-            episodes = [e for e in episodes if not is_idle(e.get_infos(-1))]
+            episodes = self._took(episodes, runner_metrics, records)
             if episodes:
-                records.append(subtask_records(episodes))
                 self._learn(episodes)
             self.heartbeat.beat(self._traversal_progress)
         if not records:
@@ -145,20 +143,41 @@ class RunnerTraversal:
             keys.AGENT_SUBTASKS_LOST,
         )
 
+    def _took(self, episodes, runner_metrics, records: list[Subtasks]) -> list:
+        """A round's sampled episodes: the runners' metrics aggregated, the placeholder episodes of an
+        idle env dropped, the sub-tasks' records kept in `records`; the episodes left."""
+        self.metrics.aggregate(runner_metrics, key=ENV_RUNNER_RESULTS)
+        episodes = [e for e in episodes if not is_idle(e.get_infos(-1))]
+        if episodes:
+            records.append(subtask_records(episodes))
+        return episodes
+
     def _learn(self, episodes) -> None:
+        owed = self._owed_updates(episodes)
+        if owed is None:
+            return
+        t0 = time.perf_counter()
+        learner_results = self.agent_updater.update(*owed)
+        self._updated(owed[0], learner_results, time.perf_counter() - t0)
+
+    def _owed_updates(self, episodes) -> tuple[int, dict[str, int]] | None:
+        """Adds `episodes` to the replay; the gradient steps they make due and the timesteps the learner
+        logs with them (None: no step due)."""
         new_steps = sum(len(e) for e in episodes)
         self.agent_updater.add(episodes)
         num_updates = self.gradient_steps.on_env_steps(new_steps)
         if num_updates == 0:
-            return
+            return None
         lifetime = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
-        timesteps = {
+        return num_updates, {
             NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime,
             NUM_AGENT_STEPS_SAMPLED_LIFETIME: lifetime,
         }
-        t0 = time.perf_counter()
-        learner_results = self.agent_updater.update(num_updates, timesteps)
-        self._update_seconds += time.perf_counter() - t0
+
+    def _updated(self, num_updates: int, learner_results, seconds: float) -> None:
+        """After `num_updates` gradient steps (taking `seconds`): counted, their results logged, the
+        runners given the new weights."""
+        self._update_seconds += seconds
         self._updates_done += num_updates
         if learner_results:
             self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)

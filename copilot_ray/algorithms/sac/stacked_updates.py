@@ -6,21 +6,16 @@ their replay (one device buffer with a ring per seed: flat transitions, `gc_sac.
 or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.DeviceHindsightBuffer`, relabelled on
 the device as the one-seed fused path relabels), and gives each algorithm an
 updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
-seed's rows of the stacked replay; `update(n)` parks the seed at a `trials.lockstep.Lockstep`
-rendezvous, and so does `act(obs)`, its env runner's hook for every env step. A round with seeds asking
-for actions answers them with one batched forward pass of the stacked actors (`StackedSAC.act`; each
-seed's exploration noise drawn in its own turn from its own stream) and leaves the seeds parked at their
-updates waiting. When every seed of the stack is parked at its update (or done with its iteration),
-`run(requests)` runs max(n) stacked steps,
-seed i active in its first n_i (its learner's module is its row: the env runners sync from there, as
-after any update), and logs each seed's figures on its own learner.
+seed's rows of the stacked replay. `update({seed: (n, timesteps)})` (a `seed_stack.SeedStack` round, for
+every seed that owes steps) runs max(n) stacked steps, seed i active in its first n_i (its learner's
+module is its row: the env runners sync from there, as after any update), and logs each seed's figures
+on its own learner. The seeds' actions come from `self.step.act`, one batched forward pass.
 
 Random streams: each seed's SAC noise and its replay's rows (and HER's goals) come from its own Philox
 streams (`gc_sac.philox`, keyed by its seed: the streams its one-seed fused update and one-seed device
 buffer draw from), through the stacked buffer's one sampler; an inactive seed draws nothing. So seed i's
 updates in a stack of any size are its updates in a stack of one (tested), drawn from the streams its
-one-seed trial's fused update draws from (a whole stacked trial against its one-seed trial is not tested:
-the seeds' acting still draws from the global generator in their turns).
+one-seed trial's fused update draws from.
 
 What the stacked path refuses (named, before anything runs): the numpy or stock update paths
 (`fused_update=False`, `fast_learner=False`), learning-rate schedules,
@@ -38,12 +33,9 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer
 from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
-from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
-from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep
+from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep, replay_step_call
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
 from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
-
-ACT, UPDATE = "act", "update"  # what a seed asks the stack for at a rendezvous
 
 
 def stacking_problems(algos: Sequence[Any]) -> list[str]:
@@ -100,50 +92,23 @@ class StackedAgentUpdates:
         self.replay = _stacked_replay(algos, modules[0], self.device, self.seeds)
         self.hindsight = isinstance(self.replay, DeviceHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
+        self._active = torch.zeros(len(self.algos), dtype=torch.bool, device=self.device)
+        self._cached: tuple[int, Any] | None = None  # (replay storage version, its step call)
 
-    def view(self, index: int, lockstep) -> SeedUpdater:
+    def view(self, index: int) -> SeedUpdater:
         """Seed `index`'s updater (what its algorithm's `agent_updater` becomes)."""
-        return SeedUpdater(self, index, lockstep)
+        return SeedUpdater(self, index)
 
     # ------------------------------------------------------------------ one round
-    def run(self, requests: Mapping[int, tuple]) -> dict[int, Any]:
-        """One lockstep round: the actions of every seed that asks for one, in one batched forward pass;
-        else (every seed parked at its update, or done) the stacked update."""
-        acting = {i: r[1:] for i, r in requests.items() if r[0] == ACT}
-        if acting:
-            return self.act(acting)
-        return self.update({i: r[1:] for i, r in requests.items()})
-
-    @torch.no_grad()
-    def act(self, requests: Mapping[int, tuple[Any, torch.Tensor | None]]) -> dict[int, Any]:
-        """{seed index: (observation, its standard-normal noise [1, A] or None for the deterministic
-        action)} -> {seed index: its action (numpy)}, as its module would act on that noise."""
-        n = len(self.algos)
-        dims = int(np.prod(self.modules[0].observation_space.shape))  # the actor's input width
-        obs = torch.zeros(n, 1, dims, device=self.device)
-        for i, (observation, _) in requests.items():
-            obs[i, 0] = torch.as_tensor(np.asarray(observation, np.float32), device=self.device)
-        out = {}
-        noisy = {i: noise for i, (_, noise) in requests.items() if noise is not None}
-        if noisy:
-            noise = torch.zeros(n, 1, self.action_dim, device=self.device)
-            for i, draw in noisy.items():
-                noise[i] = draw.to(self.device)
-            actions = self.step.act(obs, noise).cpu().numpy()
-            out.update({i: actions[i, 0] for i in noisy})
-        if len(noisy) < len(requests):
-            actions = self.step.act(obs).cpu().numpy()
-            out.update({i: actions[i, 0] for i in requests if i not in noisy})
-        return out
-
     def update(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
         """{seed index: (gradient steps, timesteps)} -> {seed index: [its learner's results]}."""
         owed = [int(requests[i][0]) if i in requests else 0 for i in range(len(self.algos))]
         owed_on_device = torch.as_tensor(owed, device=self.device)  # once a round: steps compare to it
+        run = self._run()
         last: dict[int, dict[str, torch.Tensor]] = {}
         for t in range(max(owed)):
-            active = owed_on_device > t
-            stats = self.step.step(self.replay.sample(self.batch_size, TRAIN_COLUMNS, active), active=active)
+            torch.gt(owed_on_device, t, out=self._active)  # in place: what the captured step reads
+            stats = run()
             for i, n in enumerate(owed):
                 if n == t + 1:  # seed i's last step of this round: its figures
                     last[i] = {k: v[i].detach().clone() for k, v in stats.items() if k != FINITE}
@@ -154,6 +119,23 @@ class StackedAgentUpdates:
             results = self.learners[i].log_outside_update(figures, skipped[i], n, self.batch_size, timesteps)
             out[i] = [results] if figures else []
         return out
+
+    def _run(self):
+        """The stacked step on the stacked replay through the one capture site (`replay_step_call`),
+        built again when the replay's storage moved (a graph holds it fixed)."""
+        key = self.replay.storage_version
+        if self._cached is None or self._cached[0] != key:
+            settings = self.learners[0]._gc_settings
+            run = replay_step_call(
+                self.step,
+                self.replay,
+                self.batch_size,
+                capture=self.device.type == "cuda" and settings["cuda_graph"],
+                compile_update=settings["compile_update"],
+                active=self._active,
+            )
+            self._cached = (key, run)
+        return self._cached[1]
 
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, Any]:
@@ -193,25 +175,16 @@ def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: S
 
 class SeedUpdater:
     """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface,
-    over the seed's rings of the stack's replay."""
+    over the seed's rings of the stack's replay (its updates are the stack's)."""
 
-    def __init__(self, stack: StackedAgentUpdates, index: int, lockstep):
-        self.stack, self.index, self.lockstep = stack, int(index), lockstep
+    def __init__(self, stack: StackedAgentUpdates, index: int):
+        self.stack, self.index = stack, int(index)
 
     def add(self, episodes) -> None:
         self.stack.replay.add_episodes(episodes, seed=self.index)
 
     def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
-        """Waits for the stack's next round and returns this seed's results ([] for no step)."""
-        if num_updates <= 0 or self.stack.replay.size_of(self.index) == 0:
-            return []
-        return self.lockstep.meet(self.index, (UPDATE, int(num_updates), dict(timesteps)))
-
-    def act(self, observation, explore: bool):
-        """The seed's action for `observation` from the stack's batched forward pass (its env runner's
-        `act_hook`): the exploration noise is drawn here, in the seed's turn, from its own stream."""
-        noise = torch.randn(1, self.stack.action_dim) if explore else None
-        return self.lockstep.meet(self.index, (ACT, observation, noise))
+        raise RuntimeError("a stacked seed's updates are its stack's (SeedStack), not its own")
 
     def replay_size(self) -> int:
         """Transitions in this seed's ring of the stack's replay."""

@@ -240,7 +240,14 @@ class TraversalEnv(gym.Env):
             self._queue.popleft()
 
     def step(self, action):
-        obs, reward, reached, _, info = self.goal_env.step(action)
+        return self._after_goal_step(*self.goal_env.step(action))
+
+    def step_to(self, config: np.ndarray, collision: bool):
+        """`step` with the goal env's motion given (`GoalMazeEnv.step_to`: a seed stack moves every
+        seed's agent in one `batch_step`)."""
+        return self._after_goal_step(*self.inner.step_to(config, collision))
+
+    def _after_goal_step(self, obs, reward, reached, _truncated, info):
         self._steps += 1
         self._position = obs["achieved_goal"].copy()
         layer = self._current.layer if self._current is not None else 0

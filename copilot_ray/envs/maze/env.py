@@ -242,10 +242,15 @@ class GoalMazeEnv(SparseGoalReward, gym.Env):
         # Round to float32 before the collision check, so the stored position is exactly the checked one.
         proposed = self.agent_geometry.step(self._config_now, action).astype(np.float32).astype(np.float64)
         collision = bool(self.segments_collide(self._config_now[None], proposed[None])[0])
+        return self.step_to(self._config_now if collision else proposed, collision)
+
+    def step_to(self, config: np.ndarray, collision: bool):
+        """What `step` does after its motion, with the motion given: the agent now at `config` (where
+        `batch_step` moved it; its old configuration when `collision` blocked it). A seed stack moves
+        every seed's agent in one `batch_step` and finishes each seed's step here."""
         if collision:
             self._collisions += 1
-        else:
-            self._config_now = proposed
+        self._config_now = np.array(config, np.float64)
         self._steps += 1
         obs = self._obs()
         info = self._info(collision=collision)
@@ -253,6 +258,11 @@ class GoalMazeEnv(SparseGoalReward, gym.Env):
         terminated = self.compute_terminated(obs["achieved_goal"], obs["desired_goal"], info)
         truncated = not terminated and self._steps >= self.max_episode_steps
         return obs, reward, terminated, truncated, info
+
+    @property
+    def configuration(self) -> np.ndarray:
+        """The agent's configuration now (what `batch_step` takes)."""
+        return self._config_now
 
     def batch_step(self, configs: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """`step`'s motion for N agents at once, without touching this env's own state:

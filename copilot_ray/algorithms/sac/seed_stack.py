@@ -1,0 +1,221 @@
+"""Several seeds of one goal-conditioned SAC configuration trained in one loop (a spec's
+`seeds_per_trial`): `SeedStack(algos, stacked)`, one `GoalSAC` per seed, all in this process.
+
+Each seed keeps its own algorithm (its planner, curriculum, replay, evaluation, metrics and checkpoint,
+exactly as a one-seed run's); what the stack shares is the loop. `run_iteration` advances every seed's
+`iteration_steps` generator to its next traversal, then traverses all of them together: one loop over
+the seeds' sub-tasks (`traversal_runner.run_together`: at every env step one act for every seed whose
+sub-task is under way, and on the maze one `batch_step` moving all their agents), each seed's SAC updates due after its round of `subtasks_per_sample` sub-tasks,
+then every seed's next round. No thread and no global random state: every seed draws from its own
+generators only (its env runner's action noise, its Philox update and replay streams, its numpy rng for
+tasks and planner), so seed i of a stack trains as seed i alone, whatever the other seeds draw
+(`tests/test_seed_stack_trial.py`). Each seed's `train()` afterwards finds its iteration done and only
+does RLlib's bookkeeping (its result, its counters).
+
+`stacked=True` (a GPU's way): the seeds' actors act in one batched forward pass (`SACStep.act` over
+their stacked parameters) and every round's updates are one stacked step for the seeds that owe some
+(`stacked_updates.StackedAgentUpdates`, the `active` mask for the others); `stacked=False` (a CPU's,
+where the stacked update measured slower than each seed's own): each seed acts with its own module and
+updates through its own learner.
+
+A seed whose iteration raises (a non-finite planner, a crashed env) stops alone: `run_iteration` returns
+its error and the others go on (a stacked update that raises fails every seed in it).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+
+from copilot_ray.algorithms.sac.agent_updates import fused_update
+from copilot_ray.algorithms.sac.traversal_channel import (
+    Subtasks,
+    TraversalPlan,
+    concatenated,
+    load_plan,
+    remaining,
+)
+from copilot_ray.algorithms.sac.traversal_runner import TraversalEnvRunner, run_together
+
+
+def stack_problems(algos: Sequence[Any]) -> list[str]:
+    """Why these algorithms cannot share one loop ([] when they can): each seed must sample in this
+    process with the lean loop (its own noise) and update through the fused step (its own streams)."""
+    first = algos[0].config
+    problems = []
+    if first.num_env_runners:
+        problems.append(
+            f"num_env_runners={first.num_env_runners}: a stack steps every seed in its process (0)"
+        )
+    runner = algos[0].env_runner_group.local_env_runner
+    if not (isinstance(runner, TraversalEnvRunner) and runner.samples_lean(1)):
+        problems.append(
+            "lean_traversal=False or episode callbacks: a stack steps the seeds with the lean loop"
+        )
+    if not fused_update(first):
+        problems.append("fused_update=False: a stack's seeds update through the fused step")
+    return problems
+
+
+class SeedStack:
+    """N seeds' algorithms trained in one loop (module docstring)."""
+
+    def __init__(self, algos: Sequence[Any], stacked: bool):
+        from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
+
+        problems = stack_problems(algos)
+        if problems:
+            raise ValueError("these seeds cannot be trained as one stack: " + "; ".join(problems))
+        self.algos = list(algos)
+        self.runners = [algo.env_runner_group.local_env_runner for algo in self.algos]
+        # Each seed's traversal env; where its goal env moves many agents as arrays (the maze), every
+        # env step moves all seeds' agents in one `batch_step`.
+        self.envs = [runner.env.unwrapped.envs[0].unwrapped for runner in self.runners]
+        batched = all(hasattr(e.inner, "batch_step") and hasattr(e.inner, "step_to") for e in self.envs)
+        self._move = self._batch_move if batched else None
+        self._for_env = self.runners[0]._action_for_env_fn()
+        self.updates = StackedAgentUpdates(self.algos) if stacked else None
+        for i, algo in enumerate(self.algos if stacked else ()):
+            algo.agent_updater = self.updates.view(i)  # its replay: its rings of the stacked buffer
+
+    # ------------------------------------------------------------------ one iteration of every seed
+    def run_iteration(self, indices: Sequence[int]) -> dict[int, Exception]:
+        """One iteration of each seed in `indices`, their traversals together; {seed index: the error
+        it stopped with} for those that failed. Each seed that did not is left to its `train()`."""
+        steps = {i: self.algos[i].iteration_steps() for i in indices}
+        errors: dict[int, Exception] = {}
+        requests: dict[int, tuple] = {}
+
+        def advance(i: int, subtasks: Subtasks | None) -> None:
+            try:
+                requests[i] = next(steps[i]) if subtasks is None else steps[i].send(subtasks)
+            except StopIteration:
+                pass
+            except Exception as err:  # noqa: BLE001 - a seed's failure is its own
+                errors[i] = err
+
+        for i in indices:
+            advance(i, None)
+        while requests:
+            pending, requests = requests, {}
+            for i, result in self._traverse(pending).items():
+                if isinstance(result, Exception):
+                    errors[i] = result
+                    steps[i].close()
+                else:
+                    advance(i, result)
+        for i in indices:
+            if i not in errors:
+                self.algos[i].iteration_done = True
+        return errors
+
+    def _traverse(self, requests: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> dict[int, Any]:
+        """Every requesting seed's traversal of its trees, in rounds (`RunnerTraversal._traverse` for
+        one local runner, the seeds' env steps in one loop): {seed index: its Subtasks, or its error}."""
+        out: dict[int, Any] = {}
+        left, records = {}, {i: [] for i in requests}
+        for i, (trees, task_ids) in requests.items():
+            algo = self.algos[i]
+            left[i] = load_plan(self.runners[i], TraversalPlan(trees, algo.config.tree_depth, task_ids))
+        while any(n > 0 for i, n in left.items() if i not in out):
+            active = [i for i, n in left.items() if n > 0 and i not in out]
+            chunk = {i: min(self.algos[i].config.subtasks_per_sample, left[i]) for i in active}
+            sampled = run_together(
+                {i: self.runners[i].subtask_steps(chunk[i], explore=True) for i in active},
+                self._act,
+                self._move,
+            )
+            owed = {}
+            for i in active:
+                algo, result = self.algos[i], sampled[i]
+                if isinstance(result, Exception):
+                    out[i] = result
+                    continue
+                left[i] = remaining(self.runners[i])
+                episodes = algo._took(result, [self.runners[i].get_metrics()], records[i])
+                due = algo._owed_updates(episodes) if episodes else None
+                if due is not None:
+                    owed[i] = due
+            for i, results in self._update(owed).items():
+                if isinstance(results, Exception):
+                    out[i] = results
+                else:
+                    self.algos[i]._updated(owed[i][0], results[0], results[1])
+            for i in active:
+                self.algos[i].heartbeat.beat(self.algos[i]._traversal_progress)
+        for i in requests:
+            if i not in out:
+                if not records[i]:
+                    out[i] = RuntimeError("no sub-task of this repetition was traversed")
+                else:
+                    out[i] = concatenated(records[i])
+        return out
+
+    def _act(self, ids: Sequence[int], observations: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """The exploring actions of seeds `ids` for their observations: each seed's noise from its own
+        runner; one batched forward pass of the stacked actors, or each seed's own module."""
+        if self.updates is None:
+            return [self.runners[i].policy(True)(obs) for i, obs in zip(ids, observations, strict=True)]
+        step, device = self.updates.step, self.updates.device
+        n, dims = len(self.algos), int(np.prod(observations[0].shape))
+        obs = np.zeros((n, 1, dims), np.float32)
+        noise = torch.zeros(n, 1, self.updates.action_dim)
+        for i, o in zip(ids, observations, strict=True):
+            obs[i, 0] = o
+            noise[i] = self.runners[i].draw_noise()
+        with torch.no_grad():
+            actions = step.act(torch.from_numpy(obs).to(device), noise.to(device)).cpu().numpy()
+        return [actions[i, 0] for i in ids]
+
+    def _batch_move(self, ids: Sequence[int], actions: Sequence[np.ndarray]) -> list[tuple[np.ndarray, bool]]:
+        """Every seed's agent moved by its action in one `batch_step` of the goal env (stateless; the
+        seeds' envs are one configuration): [(its next configuration, whether it was blocked)]."""
+        space = self.runners[0].env.single_action_space
+        configs = np.stack([self.envs[i].inner.configuration for i in ids])
+        moved, blocked = self.envs[ids[0]].inner.batch_step(
+            configs, np.stack([self._for_env(a, space) for a in actions])
+        )
+        return [(moved[k], bool(blocked[k])) for k in range(len(ids))]
+
+    def _update(self, owed: Mapping[int, tuple[int, dict]]) -> dict[int, Any]:
+        """{seed index: (gradient steps, timesteps)} -> {seed index: (its learner results, seconds), or
+        the error its update raised}."""
+        if not owed:
+            return {}
+        if self.updates is not None:
+            t0 = time.perf_counter()
+            try:
+                results = self.updates.update(owed)
+            except Exception as err:  # noqa: BLE001 - it fails every seed it held
+                return dict.fromkeys(owed, err)
+            seconds = time.perf_counter() - t0  # every seed waited for the whole stacked step
+            return {i: (results[i], seconds) for i in owed}
+        out = {}
+        for i, (n, timesteps) in owed.items():
+            t0 = time.perf_counter()
+            try:
+                out[i] = (self.algos[i].agent_updater.update(n, timesteps), time.perf_counter() - t0)
+            except Exception as err:  # noqa: BLE001 - a seed's failure is its own
+                out[i] = err
+        return out
+
+    # ------------------------------------------------------------------ checkpoints
+    def get_state(self) -> dict[str, Any] | None:
+        """The stacked update's state (every seed's parameters, optimizer state and noise stream), None
+        when each seed updates through its own learner (all of it in its checkpoint)."""
+        return None if self.updates is None else self.updates.get_state()
+
+    def set_state(self, state: Mapping[str, Any] | None) -> None:
+        if (state is None) != (self.updates is None):
+            raise ValueError(
+                "a checkpoint written with the seeds' updates "
+                + ("each its own" if state is None else "stacked")
+                + " cannot restore a stack that runs them "
+                + ("stacked" if self.updates is not None else "each its own")
+            )
+        if self.updates is not None:
+            self.updates.set_state(state)
