@@ -8,7 +8,9 @@ Rows: one seed's own trial; then per stack size N, N seeds in one trial with eac
 CPU's default) and with one stacked update and batched acting (a GPU's default). Each row builds its
 trial (not timed), runs one iteration to warm up (the planner's warm start, SAC's
 learning start), then times `--iterations` iterations; rows alternate over `--rounds` so that a machine
-whose load drifts affects both alike. Printed per row: aggregate env steps/s (all its seeds) and per seed.
+whose load drifts affects both alike. Printed per row: aggregate env steps/s (all its seeds), per seed,
+and the host cost per seed env step: the traversals' wall time less their SAC updates', over the env
+steps they took (acting, env stepping, episodes; the target is <= 0.1 ms at 16 seeds).
 
 What it answers on a CPU: a two-core machine runs either seeds as trials two at a time (two one-seed
 processes side by side) or stacks side by side; a stack of N is not slower in aggregate when its row is
@@ -83,19 +85,64 @@ def _env_steps(result: dict) -> float:
     return float(result["env_runners"]["num_env_steps_sampled_lifetime"])
 
 
-def measure(trial, iterations: int) -> float:
-    """Env steps/s of all the trial's seeds over `iterations` iterations after one to warm up; each
-    iteration prints its running rate, so a run cut off (a lent machine's minutes) keeps a figure."""
+class Clock:
+    """Seconds spent inside the traversals and inside their SAC updates, for one-seed trials
+    (`RunnerTraversal._traverse`, `FusedLearnerUpdater.update`) and stacks (`SeedStack._traverse`,
+    `SeedStack._update`): patched in once, read per row."""
+
+    traverse_s = update_s = 0.0
+    _inside: set[str] = set()  # the fields being timed now (a stack's own updates call the learner's)
+
+    @classmethod
+    def install(cls) -> None:
+        from copilot_ray.algorithms.sac.agent_updates import FusedLearnerUpdater
+        from copilot_ray.algorithms.sac.runner_traversal import RunnerTraversal
+        from copilot_ray.algorithms.sac.seed_stack import SeedStack
+
+        for owner, name, field in (
+            (RunnerTraversal, "_traverse", "traverse_s"),
+            (SeedStack, "_traverse", "traverse_s"),
+            (FusedLearnerUpdater, "update", "update_s"),
+            (SeedStack, "_update", "update_s"),
+        ):
+            setattr(owner, name, cls._timed(getattr(owner, name), field))
+
+    @classmethod
+    def _timed(cls, fn, field: str):
+        def timed(*args, **kwargs):
+            if field in cls._inside:
+                return fn(*args, **kwargs)
+            cls._inside.add(field)
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                cls._inside.discard(field)
+                setattr(cls, field, getattr(cls, field) + time.perf_counter() - t0)
+
+        return timed
+
+
+def measure(trial, iterations: int) -> tuple[float, float]:
+    """(env steps/s of all the trial's seeds, host ms per seed env step) over `iterations` iterations
+    after one to warm up; each iteration prints its running rate, so a run cut off (a lent machine's
+    minutes) keeps a figure."""
     start = time.perf_counter()
     before = _env_steps(trial.train())
     print(f"   warm-up iteration: {before:.0f} env steps in {time.perf_counter() - start:.0f} s", flush=True)
+    Clock.traverse_s = Clock.update_s = 0.0
     start = time.perf_counter()
     for i in range(iterations):
         after = _env_steps(trial.train())
         seconds = time.perf_counter() - start
-        print(f"   iteration {i + 1}: {(after - before) / seconds:.1f} env steps/s so far", flush=True)
+        host_ms = 1000 * (Clock.traverse_s - Clock.update_s) / max(after - before, 1)
+        print(
+            f"   iteration {i + 1}: {(after - before) / seconds:.1f} env steps/s so far, host "
+            f"{host_ms:.3f} ms per seed env step",
+            flush=True,
+        )
     trial.stop()
-    return (after - before) / seconds
+    return (after - before) / seconds, host_ms
 
 
 def main() -> None:
@@ -121,14 +168,15 @@ def main() -> None:
     if args.gpu and not torch.cuda.is_available():
         raise SystemExit("--gpu: torch sees no CUDA device on this machine")
     torch.set_num_threads(args.threads)
+    Clock.install()
     directory = Path(tempfile.mkdtemp(prefix="stacked_trial_"))
-    rows: dict[str, list[float]] = {}
+    rows: dict[str, list[tuple[float, float]]] = {}
     for round_ in range(args.rounds):
         name = "one seed, its own trial"
         rows.setdefault(name, []).append(
             measure(_one_seed_trial(_spec_file(directory, [0], args.gpu, args.layout)), args.iterations)
         )
-        print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
+        print(f"round {round_ + 1}: {name}: {rows[name][-1][0]:.1f} env steps/s", flush=True)
         for n in args.stacks:
             seeds = list(range(n))
             for stacked_update, how in ((False, "each its own update"), (True, "one stacked update")):
@@ -139,15 +187,19 @@ def main() -> None:
                 rows.setdefault(name, []).append(
                     measure(_stacked_trial(spec, seeds, stacked_update), args.iterations)
                 )
-                print(f"round {round_ + 1}: {name}: {rows[name][-1]:.1f} env steps/s", flush=True)
-    print("\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial |")
-    print("|---|---|---|---|")
-    base = sum(rows["one seed, its own trial"]) / args.rounds
+                print(f"round {round_ + 1}: {name}: {rows[name][-1][0]:.1f} env steps/s", flush=True)
+    print(
+        "\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial "
+        "| host ms per seed env step |"
+    )
+    print("|---|---|---|---|---|")
+    base = sum(rate for rate, _ in rows["one seed, its own trial"]) / args.rounds
     for name, values in rows.items():
         n = 1 if name.startswith("one") else int(name.split()[0])
-        mean = sum(values) / len(values)
-        runs = ", ".join(f"{v:.1f}" for v in values)
-        print(f"| {name} | {mean:.1f} ({runs}) | {mean / n:.1f} | {mean / base:.2f}x |")
+        mean = sum(rate for rate, _ in values) / len(values)
+        host = sum(ms for _, ms in values) / len(values)
+        runs = ", ".join(f"{rate:.1f}" for rate, _ in values)
+        print(f"| {name} | {mean:.1f} ({runs}) | {mean / n:.1f} | {mean / base:.2f}x | {host:.3f} |")
 
 
 if __name__ == "__main__":

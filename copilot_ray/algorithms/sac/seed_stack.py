@@ -160,15 +160,15 @@ class SeedStack:
         runner; one batched forward pass of the stacked actors, or each seed's own module."""
         if self.updates is None:
             return [self.runners[i].policy(True)(obs) for i, obs in zip(ids, observations, strict=True)]
-        step, device = self.updates.step, self.updates.device
-        n, dims = len(self.algos), int(np.prod(observations[0].shape))
-        obs = np.zeros((n, 1, dims), np.float32)
-        noise = torch.zeros(n, 1, self.updates.action_dim)
-        for i, o in zip(ids, observations, strict=True):
-            obs[i, 0] = o
-            noise[i] = self.runners[i].draw_noise()
+        step, device, n = self.updates.step, self.updates.device, len(self.algos)
+        obs = torch.from_numpy(np.stack(observations).astype(np.float32, copy=False)).unsqueeze(1)
+        noise = torch.cat([self.runners[i].draw_noise() for i in ids]).unsqueeze(1)
+        if len(ids) < n:  # the seeds whose sub-task is under way, in their rows; the others' rows idle
+            rows = torch.as_tensor(ids)
+            obs = torch.zeros(n, *obs.shape[1:]).index_copy_(0, rows, obs)
+            noise = torch.zeros(n, *noise.shape[1:]).index_copy_(0, rows, noise)
         with torch.no_grad():
-            actions = step.act(torch.from_numpy(obs).to(device), noise.to(device)).cpu().numpy()
+            actions = step.act(obs.to(device), noise.to(device)).cpu().numpy()
         return [actions[i, 0] for i in ids]
 
     def _batch_move(self, ids: Sequence[int], actions: Sequence[np.ndarray]) -> list[tuple[np.ndarray, bool]]:
