@@ -106,7 +106,7 @@ def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alon
     # seed 0 as if 3 of its steps had gone non-finite, counted by the stack and logged by its learner:
     # a restored stack must not log them again (its learner's count starts anew)
     pair.stack.updates.step.skipped[0] += 3
-    pair.stack.updates.learners[0].note_skipped_logged(int(pair.stack.updates.step.skipped[0]))
+    pair.stack.updates._skipped_logged[0] += 3
     checkpoint = pair.save(str(tmp_path / "checkpoint"))
     second = pair.train()
     pair_weights = _weights(pair, 1)

@@ -304,42 +304,35 @@ class GCSACTorchLearner(SACTorchLearner):
         step = self._fused_steps[module_id]
         values = torch.stack([stats[k][0].float() for k in names] + [step.skipped[0].float()]).cpu().tolist()
         skipped_total = int(values.pop())
-        self._log_step_figures(module_id, dict(zip(names, values, strict=True)), skipped_total, steps, batch)
+        skipped, self._skipped_read[module_id] = skipped_total - self._skipped_read[module_id], skipped_total
+        self._log_step_figures(module_id, dict(zip(names, values, strict=True)), skipped, steps, batch)
 
-    def log_outside_update(
+    def record_steps(
         self,
         figures: dict[str, float],
-        skipped_total: int,
+        skipped: int,
         steps: int,
         batch: int,
         timesteps: dict[str, Any] | None = None,
         *,
         module_id: str = DEFAULT_MODULE_ID,
     ) -> dict[str, Any]:
-        """`steps` gradient steps run outside this learner (a seed stack's update, whose weights were
-        written into this learner's module), logged and reduced as `update_from_replay` logs its own:
-        `figures` are the last step's loss statistics (host floats, `total_loss` among them),
-        `skipped_total` the seed's non-finite steps skipped so far."""
+        """`steps` gradient steps of this learner's module run by a seed stack's stacked step (the
+        module's parameters are its row), logged and reduced as `update_from_replay` logs its own:
+        `figures` the last step's loss statistics (host floats, `total_loss` among them), `skipped`
+        how many of the steps were not finite (and so skipped)."""
         self._check_is_built()
-        self._skipped_read.setdefault(module_id, 0)
         self.before_gradient_based_update(timesteps=timesteps or {})
         self._weights_seq_no += 1
-        self._log_step_figures(module_id, figures, int(skipped_total), int(steps), int(batch))
+        self._log_step_figures(module_id, figures, int(skipped), int(steps), int(batch))
         self.after_gradient_based_update(timesteps=timesteps or {})
         return self.metrics.reduce()
 
-    def note_skipped_logged(self, skipped_total: int, module_id: str = DEFAULT_MODULE_ID) -> None:
-        """The non-finite steps skipped outside this learner so far (`log_outside_update`'s
-        `skipped_total`) are already logged: a stack restored from a checkpoint says so."""
-        self._skipped_read[module_id] = int(skipped_total)
-
     def _log_step_figures(
-        self, module_id: str, figures: dict[str, float], skipped_total: int, steps: int, batch: int
+        self, module_id: str, figures: dict[str, float], skipped: int, steps: int, batch: int
     ) -> None:
         if steps == 0:
             return
-        skipped = skipped_total - self._skipped_read[module_id]
-        self._skipped_read[module_id] = skipped_total
         self.metrics.log_dict({k: v for k, v in figures.items() if k != TOTAL_LOSS}, key=module_id, window=1)
         self.metrics.log_value((module_id, self.TOTAL_LOSS_KEY), figures[TOTAL_LOSS], window=1)
         self.metrics.log_value((module_id, NUM_TARGET_UPDATES), steps - skipped, reduce="lifetime_sum")

@@ -94,6 +94,7 @@ class StackedAgentUpdates:
         self.batch_size = int(cfg.train_batch_size_per_learner)
         self._active = torch.zeros(len(self.algos), dtype=torch.bool, device=self.device)
         self._cached: tuple[int, Any] | None = None  # (replay storage version, its step call)
+        self._skipped_logged = [0] * len(self.algos)  # each seed's non-finite steps its learner has logged
 
     def view(self, index: int) -> SeedUpdater:
         """Seed `index`'s updater (what its algorithm's `agent_updater` becomes)."""
@@ -112,11 +113,12 @@ class StackedAgentUpdates:
             for i, n in enumerate(owed):
                 if n == t + 1:  # seed i's last step of this round: its figures
                     last[i] = {k: v[i].detach().clone() for k, v in stats.items() if k != FINITE}
-        skipped = self.step.skipped.cpu().tolist()
+        skipped = self.step.skipped.cpu().tolist()  # every seed's non-finite steps so far
         out = {}
         for i, (n, timesteps) in requests.items():
             figures = {k: float(v) for k, v in last[i].items()} if i in last else {}
-            results = self.learners[i].log_outside_update(figures, skipped[i], n, self.batch_size, timesteps)
+            new_skips, self._skipped_logged[i] = skipped[i] - self._skipped_logged[i], skipped[i]
+            results = self.learners[i].record_steps(figures, new_skips, n, self.batch_size, timesteps)
             out[i] = [results] if figures else []
         return out
 
@@ -147,10 +149,8 @@ class StackedAgentUpdates:
         """Restores `get_state`'s snapshot (in place: the learners' modules, views of the step's rows,
         hold it too)."""
         self.step.set_state(state["step"])
-        # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint,
-        # so a learner counts only the steps skipped from here on (its own count restarts with it).
-        for learner, skipped in zip(self.learners, self.step.skipped.cpu().tolist(), strict=True):
-            learner.note_skipped_logged(int(skipped))
+        # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint.
+        self._skipped_logged = self.step.skipped.cpu().tolist()
 
 
 def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: Sequence[int]):
