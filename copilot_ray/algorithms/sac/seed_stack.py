@@ -118,6 +118,10 @@ class SeedStack:
         one local runner, the seeds' env steps in one loop): {seed index: its Subtasks, or its error}."""
         out: dict[int, Any] = {}
         left, records = {}, {i: [] for i in requests}
+        # each seed's own module acting (not stacked), built once a traversal: its weights sync in place
+        self._policies = (
+            {} if self.updates is not None else {i: self.runners[i].policy(True) for i in requests}
+        )
         for i, (trees, task_ids) in requests.items():
             algo = self.algos[i]
             left[i] = load_plan(self.runners[i], TraversalPlan(trees, algo.config.tree_depth, task_ids))
@@ -159,7 +163,7 @@ class SeedStack:
         """The exploring actions of seeds `ids` for their observations: each seed's noise from its own
         runner; one batched forward pass of the stacked actors, or each seed's own module."""
         if self.updates is None:
-            return [self.runners[i].policy(True)(obs) for i, obs in zip(ids, observations, strict=True)]
+            return [self._policies[i](obs) for i, obs in zip(ids, observations, strict=True)]
         step, device, n = self.updates.step, self.updates.device, len(self.algos)
         obs = torch.from_numpy(np.stack(observations).astype(np.float32, copy=False)).unsqueeze(1)
         noise = torch.cat([self.runners[i].draw_noise() for i in ids]).unsqueeze(1)

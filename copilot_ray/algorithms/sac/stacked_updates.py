@@ -183,9 +183,6 @@ class SeedUpdater:
     def add(self, episodes) -> None:
         self.stack.replay.add_episodes(episodes, seed=self.index)
 
-    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
-        raise RuntimeError("a stacked seed's updates are its stack's (SeedStack), not its own")
-
     def replay_size(self) -> int:
         """Transitions in this seed's ring of the stack's replay."""
         return self.stack.replay.size_of(self.index)
