@@ -180,9 +180,8 @@ class SeedStack:
         seeds' envs are one configuration): [(its next configuration, whether it was blocked)]."""
         space = self.runners[0].env.single_action_space
         configs = np.stack([self.envs[i].inner.configuration for i in ids])
-        moved, blocked = self.envs[ids[0]].inner.batch_step(
-            configs, np.stack([self._for_env(a, space) for a in actions])
-        )
+        # (what the env is given: elementwise, so one call serves every seed's row)
+        moved, blocked = self.envs[ids[0]].inner.batch_step(configs, self._for_env(np.stack(actions), space))
         return [(moved[k], bool(blocked[k])) for k in range(len(ids))]
 
     def _update(self, owed: Mapping[int, tuple[int, dict]]) -> dict[int, Any]:
