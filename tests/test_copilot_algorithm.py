@@ -170,6 +170,10 @@ def test_two_iterations_log_metrics_and_checkpoint_round_trips(
             assert (restored._rng.integers(1 << 30, size=4) == algo._rng.integers(1 << 30, size=4)).all()
             if fast_learner:
                 assert len(restored.agent_updater.buffer) == len(algo.agent_updater.buffer) > 0
+            # the lean loop's exploration noise goes on from where it stopped
+            runners = [a.env_runner_group.local_env_runner for a in (algo, restored)]
+            if hasattr(runners[0], "action_noise"):
+                assert torch.equal(runners[0].action_noise.get_state(), runners[1].action_noise.get_state())
             result = restored.train()
             assert lookup(result, EXPECTED_METRICS[-1]) > steps[-1]
         finally:
