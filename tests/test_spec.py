@@ -784,14 +784,18 @@ def test_a_spec_with_mistakes_in_several_sections_gets_them_all_in_one_report():
             {"seeds_per_trial": 2, "resources": {"num_env_runners": 1}},
             "needs resources.num_env_runners 0, got 1",
         ),
-        (  # the GPU's stacked update is the fast learner's step (on a CPU each seed updates on its own)
-            {
-                "seeds_per_trial": 2,
-                "config": {"tree_depth": 2, "fast_learner": False},
-                "resources": {"num_env_runners": 0, "gpus_per_trial": 1},
-            },
-            "on a GPU (resources.gpus_per_trial 1) the stacked update needs fast_learner: true, and it is "
-            "false in: repetitions=1, repetitions=2",
+        *(  # the seeds step in one loop with the lean traversal and update through the fused step
+            (
+                {
+                    "seeds_per_trial": 2,
+                    "config": {"tree_depth": 2, key: False},
+                    "resources": {"num_env_runners": 0, **gpu},
+                },
+                f"stacked seeds need {key}: true (they step in one loop with the lean traversal and "
+                "update through the fused step), and it is false in: repetitions=1, repetitions=2",
+            )
+            for key in ("fast_learner", "fused_update", "lean_traversal")
+            for gpu in ({}, {"gpus_per_trial": 1})
         ),
     ],
 )
@@ -800,8 +804,6 @@ def test_stacked_seeds_are_refused_where_a_stack_cannot_run(changes, expected):
     if "searcher" in changes:
         data["search"] = {"repetitions": {"int": [1, 2]}}
     assert expected in rejected(data)
-    if "gpus_per_trial" in str(changes):
-        parse_spec({**data, "resources": {"num_env_runners": 0}}, "x.yaml")  # on a CPU it runs
 
 
 def test_stacked_seeds_make_a_trial_per_group_and_say_so_in_the_plan():

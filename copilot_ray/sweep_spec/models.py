@@ -62,7 +62,8 @@ class BestOfSpec(_Model):
     chosen_from: str | None = None
 
 
-FAST_LEARNER = "fast_learner"  # the agent setting a GPU stack's update needs (algorithms/sac/settings.py)
+# The agent settings a seed stack needs at their defaults (algorithms/sac/settings.py; seed_stack.py)
+STACK_NEEDS = ("fast_learner", "fused_update", "lean_traversal")
 
 
 class SweepSpec(_Model):
@@ -333,21 +334,22 @@ class SweepSpec(_Model):
                     "seeds step their envs in the trial's own process)",
                 )
             ]
-        # On a GPU the seeds share one stacked update, which is the fast learner's step (on a CPU each
-        # seed updates as its own trial would, so any learner runs there).
-        slow = self.resources.gpus_per_trial > 0 and [
-            p for p in self.grid_points() if self.merged(p).get(FAST_LEARNER) is False
-        ]
-        if slow:
-            named = ", ".join(sorted({_point_label(p) for p in slow}))
-            return [
-                Issue(
-                    where,
-                    n,
-                    f"on a GPU (resources.gpus_per_trial {_number(self.resources.gpus_per_trial)}) the "
-                    f"stacked update needs {FAST_LEARNER}: true, and it is false in: {named}",
-                )
-            ]
+        # A stack's seeds step in one loop with the lean traversal (each drawing its own noise) and
+        # update through the fused step (each from its own streams), on any device.
+        slow = {
+            key: [p for p in self.grid_points() if self.merged(p).get(key) is False] for key in STACK_NEEDS
+        }
+        for key, points in slow.items():
+            if points:
+                named = ", ".join(sorted({_point_label(p) for p in points}))
+                return [
+                    Issue(
+                        where,
+                        n,
+                        f"stacked seeds need {key}: true (they step in one loop with the lean traversal "
+                        f"and update through the fused step), and it is false in: {named}",
+                    )
+                ]
         return []
 
     def seed_groups(self) -> list[list[int]]:
