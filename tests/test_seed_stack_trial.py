@@ -236,3 +236,23 @@ def test_on_a_faked_cuda_device_a_stacks_update_reaches_the_capture_site(ray_ses
     assert updates.step.noise.counters is noise and updates.replay.sampler.counters is sampler
     assert updates._active is active and updates._run() is run  # the same call while storage stays
     pair.stop()
+
+
+def test_without_batch_step_each_seeds_env_steps_itself_to_the_same_episodes(ray_session, tmp_path):
+    """An env without `batch_step` (the Ant, the walker) steps each seed's env in the loop; on the maze
+    that gives what one `batch_step` for all seeds gives, figure for figure."""
+    path = tmp_path / "her.yaml"
+    path.write_text(yaml.safe_dump({**SPEC, **HER, "tracking": {"storage": str(tmp_path / "results")}}))
+    batched, looped = _trial(str(path), [0, 1]), _trial(str(path), [0, 1])
+    assert batched.stack._move is not None
+    looped.stack._move = None  # as for an env without batch_step
+    moves = []
+    move = batched.stack._move
+    batched.stack._move = lambda ids, actions: moves.append(len(ids)) or move(ids, actions)
+    one, other = batched.train(), looped.train()
+    assert max(moves) == 2  # both seeds' agents moved in one call
+    for seed in (0, 1):
+        _assert_same(_figures(one, seed), _figures(other, seed), f"seed {seed}: batch_step vs its own step")
+    assert one[keys.SEED_RESULTS]["0"][keys.ENV_STEPS] > 0
+    batched.stop()
+    looped.stop()
