@@ -435,7 +435,12 @@ def report_sweep(
     )
     mlflow_status = {"finished": "FINISHED", "errored": "FAILED", "interrupted": "KILLED"}[status]
     tracking.end_sweep_run(
-        uri, parent_id, mlflow_status, header + summary + "\n", summary_metrics(rows, searched)
+        uri,
+        parent_id,
+        mlflow_status,
+        header + summary + "\n",
+        summary_metrics(rows, searched),
+        step=sum(int(r.env_steps) for r in rows),
     )
     _say("")
     _say(summary)

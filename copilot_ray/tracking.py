@@ -333,11 +333,13 @@ def end_sweep_run(
     status: str,
     summary_md: str | None = None,
     summary_metrics: Mapping[str, float] | None = None,
+    step: int = 0,
 ) -> None:
     """Closes the sweep's parent run with its summary: the table as an artifact, and per configuration
-    its figures as metrics (so the parent row in MLflow's runs list shows the sweep's outcome). A figure
-    the run already holds with the same value is not logged again: --resume closes a finished part once
-    more, and its history should keep one entry."""
+    its figures as metrics (so the parent row in MLflow's runs list shows the sweep's outcome), at
+    `step` (the env steps its trials have taken: each stop's summary is a point of its own, never a
+    second entry at one step). A figure the run already holds with the same value is not logged again:
+    --resume closes a finished part once more, and its history should keep one entry."""
     client = _client(tracking_uri)
     if summary_md is not None:
         client.log_text(run_id, summary_md, SUMMARY_ARTIFACT)
@@ -346,7 +348,9 @@ def end_sweep_run(
 
         now = int(time.time() * 1000)
         held = client.get_run(run_id).data.metrics
-        items = [Metric(k, float(v), now, 0) for k, v in summary_metrics.items() if held.get(k) != float(v)]
+        items = [
+            Metric(k, float(v), now, int(step)) for k, v in summary_metrics.items() if held.get(k) != float(v)
+        ]
         for i in range(0, len(items), 500):
             client.log_batch(run_id, metrics=items[i : i + 500])
     client.set_terminated(run_id, status=status)

@@ -609,9 +609,10 @@ def test_closing_a_finished_part_again_keeps_one_entry_per_summary_figure(tmp_pa
     for key in figures:
         assert len(client.get_metric_history(parent, key)) == 1
     tracking.end_sweep_run(
-        uri, parent, "FINISHED", "# table", {**figures, "summary/a/validation_success": 0.75}
+        uri, parent, "FINISHED", "# table", {**figures, "summary/a/validation_success": 0.75}, step=900
     )
     history = client.get_metric_history(parent, "summary/a/validation_success")
     assert [m.value for m in history] == [0.25, 0.75]
+    assert [m.step for m in history] == [0, 900]  # each stop's summary at its env steps, not twice at one
     assert client.get_run(parent).data.metrics["summary/a/validation_success"] == 0.75
     assert len(client.get_metric_history(parent, "summary/best/validation_success")) == 1
