@@ -71,7 +71,7 @@ def _one_seed_trial(spec_path: str):
 
 
 def _stacked_trial(spec_path: str, seeds: list[int], stacked_update: bool):
-    from copilot_ray.trials.seed_stack_trial import SeedStackTrial
+    from copilot_ray.algorithms.sac.trial import SeedStackTrial
 
     SeedStackTrial.stack_updates = stacked_update
     return SeedStackTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEEDS_KEY: seeds})

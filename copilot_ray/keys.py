@@ -209,7 +209,7 @@ SPEC_PATH_KEY = "_spec_path"  # the (resolved) spec the trial belongs to
 SEED_PARAM = "seed"  # also the MLflow param
 # A stacked trial (spec `seeds_per_trial` > 1) has `_seeds: [..]` instead of `seed`; its results carry
 # each seed's metrics under SEED_RESULTS ({seed: {metric: value}}) and its failed seeds' errors under
-# SEED_ERRORS ({seed: error}); copilot_ray.trials.seed_stack_trial.
+# SEED_ERRORS ({seed: error}); copilot_ray.algorithms.sac.trial.
 SEEDS_KEY = "_seeds"
 PLAN_SEEDS = "seeds"  # a stacked trial's seeds in a spec's `trial_plan()` (not a setting)
 SEED_RESULTS = "seed_results"

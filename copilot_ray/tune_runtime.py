@@ -47,7 +47,7 @@ def trainable(spec) -> type:
     """The trial class of the spec's algorithm (the registry's third entry), or the stacked-seeds trial
     for `seeds_per_trial` > 1."""
     if spec.seeds_per_trial > 1:
-        from copilot_ray.trials.seed_stack_trial import SeedStackTrial
+        from copilot_ray.algorithms.sac.trial import SeedStackTrial
 
         return SeedStackTrial
     return get_algorithm(spec.algorithm).trial_class()

@@ -13,8 +13,8 @@ import yaml
 from ray import tune
 
 from copilot_ray import keys
-from copilot_ray.trials import seed_stack_trial
-from copilot_ray.trials.seed_stack_trial import SeedStackTrial
+from copilot_ray.algorithms.sac import trial as seed_stack_trial
+from copilot_ray.algorithms.sac.trial import SeedStackTrial
 
 SPEC = {
     "name": "stack",

@@ -19,8 +19,8 @@ import yaml
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray import keys
+from copilot_ray.algorithms.sac.trial import SeedStackTrial
 from copilot_ray.tracking import result_metrics
-from copilot_ray.trials.seed_stack_trial import SeedStackTrial
 
 SPEC = {
     "name": "stack",

@@ -27,7 +27,7 @@
     tracking: {storage: results/}       # uri default: sqlite:///<abs storage>/<name>/mlflow.db
 
 Stacked seeds (``seeds_per_trial`` > 1): ``seeds`` is cut into consecutive groups of that size, one Tune
-trial per group and configuration (``copilot_ray.trials.seed_stack_trial``). The seeds take turns at their
+trial per group and configuration (``copilot_ray.algorithms.sac.trial``). The seeds take turns at their
 env steps; where the learner is on a GPU they share one stacked SAC update and one batched forward pass
 per env step, on a CPU each updates as its own trial would (so there it trains exactly as its one-seed
 trial). Each seed's figures, MLflow run, tags, checkpoint folder and

@@ -78,7 +78,7 @@ class SweepSpec(_Model):
     best_of: BestOfSpec | None = None
     seeds: list[int] = Field(default_factory=lambda: [0])
     # Seeds trained together in one trial, on a GPU their SAC updates stacked (consecutive groups of `seeds`);
-    # 1: a trial per seed (copilot_ray.trials.seed_stack_trial).
+    # 1: a trial per seed (copilot_ray.algorithms.sac.trial).
     seeds_per_trial: int = 1
     searcher: SearcherSpec = Field(default_factory=SearcherSpec)
     scheduler: SchedulerSpec | None = None
