@@ -2,10 +2,10 @@
 own trial, both in this process, CO-PILOT on the u-maze (`--layout`) with one SAC update per env step.
 
     PYTHONPATH=. python benchmarks/stacked_trial.py [--stacks 2 4] [--iterations 4] [--rounds 2] [--gpu]
-        [--updates both|stacked|own] [--layout u-maze]
+        [--layout u-maze]
 
-Rows: one seed's own trial; then per stack size N, N seeds in one trial with each seed's own update (a
-CPU's default) and with one stacked update and batched acting (a GPU's default). Each row builds its
+Rows: one seed's own trial; then per stack size N, N seeds in one trial (one batched act per env step,
+one stacked update per round, on every device). Each row builds its
 trial (not timed), runs one iteration to warm up (the planner's warm start, SAC's
 learning start), then times `--iterations` iterations; rows alternate over `--rounds` so that a machine
 whose load drifts affects both alike. Printed per row: aggregate env steps/s (all its seeds), per seed,
@@ -70,10 +70,9 @@ def _one_seed_trial(spec_path: str):
     return CoPilotTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEED_PARAM: 0})
 
 
-def _stacked_trial(spec_path: str, seeds: list[int], stacked_update: bool):
+def _stacked_trial(spec_path: str, seeds: list[int]):
     from copilot_ray.algorithms.sac.trial import SeedStackTrial
 
-    SeedStackTrial.stack_updates = stacked_update
     return SeedStackTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEEDS_KEY: seeds})
 
 
@@ -91,7 +90,7 @@ class Clock:
     `SeedStack._update`): patched in once, read per row."""
 
     traverse_s = update_s = 0.0
-    _inside: set[str] = set()  # the fields being timed now (a stack's own updates call the learner's)
+    _inside: set[str] = set()  # the fields being timed now (a timed call inside another counts once)
 
     @classmethod
     def install(cls) -> None:
@@ -154,13 +153,6 @@ def main() -> None:
         "--threads", type=int, default=1, help="torch threads (a trial's process has one core)"
     )
     parser.add_argument("--gpu", action="store_true", help="every trial's learner on the GPU")
-    parser.add_argument(
-        "--updates",
-        choices=("both", "stacked", "own"),
-        default="both",
-        help="the stacked rows to run: one stacked update, each seed's own, or both (default both); a lent "
-        "GPU's minutes go further without the own-update rows, which a GPU trial never takes",
-    )
     parser.add_argument("--layout", default="u-maze", help="the maze-point layout (default u-maze)")
     args = parser.parse_args()
     if any(n < 2 for n in args.stacks):
@@ -179,15 +171,10 @@ def main() -> None:
         print(f"round {round_ + 1}: {name}: {rows[name][-1][0]:.1f} env steps/s", flush=True)
         for n in args.stacks:
             seeds = list(range(n))
-            for stacked_update, how in ((False, "each its own update"), (True, "one stacked update")):
-                if args.updates != "both" and stacked_update != (args.updates == "stacked"):
-                    continue
-                name = f"{n} seeds in one trial, {how}"
-                spec = _spec_file(directory, seeds, args.gpu, args.layout)
-                rows.setdefault(name, []).append(
-                    measure(_stacked_trial(spec, seeds, stacked_update), args.iterations)
-                )
-                print(f"round {round_ + 1}: {name}: {rows[name][-1][0]:.1f} env steps/s", flush=True)
+            name = f"{n} seeds in one trial, one stacked update"
+            spec = _spec_file(directory, seeds, args.gpu, args.layout)
+            rows.setdefault(name, []).append(measure(_stacked_trial(spec, seeds), args.iterations))
+            print(f"round {round_ + 1}: {name}: {rows[name][-1][0]:.1f} env steps/s", flush=True)
     print(
         "\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial "
         "| host ms per seed env step |"

@@ -145,7 +145,7 @@ step pack "$py benchmarks/device_sweep.py pack $sweep_root $out/device_sweep.tar
 
 # -------------------------------------------------------------------------------------- stacked trial
 if [ "$cuda" = 1 ]; then
-  step stacked_trial "$py benchmarks/stacked_trial.py --gpu --stacks 64 --iterations 1 --rounds 1 --updates stacked --layout four-rooms"
+  step stacked_trial "$py benchmarks/stacked_trial.py --gpu --stacks 64 --iterations 1 --rounds 1 --layout four-rooms"
 else
   skip stacked_trial "no CUDA device"
 fi

@@ -1,12 +1,11 @@
 """`SeedStackTrial`: seeds of one configuration trained together in one trial (spec `seeds_per_trial`).
 
 In-process, without Tune (on the session's Ray: building an RLlib algorithm puts its config there, and
-would otherwise start a Ray of its own). With the updates stacked (a GPU's way, forced here on the CPU): a
-stack of seeds {0, 1} gives seed 1 exactly what a stack of seed 1 alone gives it (its planner,
-traversal, evaluation, actions and SAC updates: no draw of seed 0 leaks into it); a stack restored from
-its checkpoint continues as the stack that wrote it; a seed whose planner goes non-finite stops alone,
-named, while the other goes on. With each seed's own update (a CPU's way): seed 1 of a stack trains
-exactly as its one-seed trial.
+would otherwise start a Ray of its own). A stack of seeds {0, 1} gives seed 1 exactly what a stack of
+seed 1 alone gives it (its planner, traversal, evaluation, actions and SAC updates: no draw of seed 0
+leaks into it); a stack restored from its checkpoint continues as the stack that wrote it; a seed whose
+planner goes non-finite stops alone, named, while the other goes on; a stack of three seeds trains each
+exactly as its one-seed trial (CO-PILOT and HER); on a faked CUDA device its update is captured.
 """
 
 from __future__ import annotations
@@ -62,12 +61,6 @@ def _trial(spec_path, seeds):
     return SeedStackTrial(config={keys.SPEC_PATH_KEY: spec_path, keys.SEEDS_KEY: list(seeds)})
 
 
-@pytest.fixture
-def stacked_updates(monkeypatch):
-    """The stacked update and batched acting on this CPU (where a stack otherwise updates per seed)."""
-    monkeypatch.setattr(SeedStackTrial, "stack_updates", True)
-
-
 def _timing(key):
     return any(t in key for t in TIMING) or key == keys.TIME_TOTAL_S
 
@@ -89,7 +82,7 @@ def _weights(trial, index):
 
 
 def test_a_stacked_seed_trains_as_it_would_alone_restores_exactly_and_fails_alone(
-    ray_session, tmp_path, monkeypatch, stacked_updates
+    ray_session, tmp_path, monkeypatch
 ):
     from copilot_ray.algorithms.sac.seed_stack import SeedStack
 
@@ -168,21 +161,17 @@ def _learner_weights(algo):
     return {k: v.detach().clone() for k, v in module.state_dict().items()}
 
 
-@pytest.mark.parametrize(("algorithm", "stacked"), [("copilot", False), ("copilot", True), ("her", True)])
-def test_a_stack_of_three_seeds_trains_each_as_its_one_seed_trial(
-    ray_session, tmp_path, monkeypatch, algorithm, stacked
-):
-    """Seeds {0, 1, 2} in one stack (their env steps in one loop; stacked: one batched act and one
-    stacked update, HER relabelling in its stacked buffer) against each seed's own one-seed trial, over
-    two iterations: every clock-free figure of every seed, and its learner's weights."""
+@pytest.mark.parametrize("algorithm", ["copilot", "her"])
+def test_a_stack_of_three_seeds_trains_each_as_its_one_seed_trial(ray_session, tmp_path, algorithm):
+    """Seeds {0, 1, 2} in one stack (their env steps in one loop, one batched act and one stacked update,
+    HER relabelling in its stacked buffer) against each seed's own one-seed trial, over two
+    iterations: every clock-free figure of every seed, and its learner's weights."""
     from copilot_ray.registry import get_algorithm
 
-    monkeypatch.setattr(SeedStackTrial, "stack_updates", stacked)
     data = {**SPEC, **(HER if algorithm == "her" else {}), "seeds": [0, 1, 2], "seeds_per_trial": 3}
     path = tmp_path / "three.yaml"
     path.write_text(yaml.safe_dump({**data, "tracking": {"storage": str(tmp_path / "results")}}))
     stack = _trial(str(path), [0, 1, 2])
-    assert (stack.stack.updates is not None) == stacked
     assert stack.stack._move is not None  # the maze: every env step moves all seeds' agents at once
     trial_class = get_algorithm(algorithm).trial_class()
     alone = [trial_class(config={keys.SPEC_PATH_KEY: str(path), keys.SEED_PARAM: s}) for s in (0, 1, 2)]
@@ -210,7 +199,6 @@ def test_on_a_faked_cuda_device_a_stacks_update_reaches_the_capture_site(ray_ses
     from tests.test_graph_capture import Recorder
     from tests.test_no_host_sync import NoHostSync
 
-    monkeypatch.setattr(SeedStackTrial, "stack_updates", True)
     path = tmp_path / "her.yaml"
     path.write_text(yaml.safe_dump({**SPEC, **HER, "tracking": {"storage": str(tmp_path / "results")}}))
     pair = _trial(str(path), [0, 1])

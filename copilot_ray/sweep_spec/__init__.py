@@ -27,10 +27,9 @@
     tracking: {storage: results/}       # uri default: sqlite:///<abs storage>/<name>/mlflow.db
 
 Stacked seeds (``seeds_per_trial`` > 1): ``seeds`` is cut into consecutive groups of that size, one Tune
-trial per group and configuration (``copilot_ray.algorithms.sac.trial``). The seeds take turns at their
-env steps; where the learner is on a GPU they share one stacked SAC update and one batched forward pass
-per env step, on a CPU each updates as its own trial would (so there it trains exactly as its one-seed
-trial). Each seed's figures, MLflow run, tags, checkpoint folder and
+trial per group and configuration (``copilot_ray.algorithms.sac.trial``). The seeds step in one loop:
+one batched forward pass per env step and one stacked SAC update per round, on every device, and each
+seed trains exactly as its one-seed trial. Each seed's figures, MLflow run, tags, checkpoint folder and
 failure are its own, so ``stages``, ``best_of``, ``progress``, ``carry`` and the report read a stacked
 sweep as an unstacked one. What Tune's scheduler and a stop criterion see of a stacked trial: the mean
 over its live seeds of every metric (NaN while none has measured it, as a one-seed trial reports a

@@ -1,22 +1,21 @@
 """Several seeds of one goal-conditioned SAC configuration trained in one loop (a spec's
-`seeds_per_trial`): `SeedStack(algos, stacked)`, one `GoalSAC` per seed, all in this process.
+`seeds_per_trial`): `SeedStack(algos)`, one `GoalSAC` per seed, all in this process.
 
 Each seed keeps its own algorithm (its planner, curriculum, replay, evaluation, metrics and checkpoint,
 exactly as a one-seed run's); what the stack shares is the loop. `run_iteration` advances every seed's
 `iteration_steps` generator to its next traversal, then traverses all of them together: one loop over
 the seeds' sub-tasks (`traversal_runner.run_together`: at every env step one act for every seed whose
-sub-task is under way, and on the maze one `batch_step` moving all their agents), each seed's SAC updates due after its round of `subtasks_per_sample` sub-tasks,
-then every seed's next round. No thread and no global random state: every seed draws from its own
+sub-task is under way: one batched forward pass of the seeds' stacked actors, `SACStep.act`; on the
+maze one `batch_step` moving all their agents), then the SAC updates every seed owes after its round of
+`subtasks_per_sample` sub-tasks as one stacked step (`stacked_updates.StackedAgentUpdates`, the `active`
+mask for the seeds that owe none), then every seed's next round. No thread and no global random state: every seed draws from its own
 generators only (its env runner's action noise, its Philox update and replay streams, its numpy rng for
 tasks and planner), so seed i of a stack trains as seed i alone, whatever the other seeds draw
 (`tests/test_seed_stack_trial.py`). Each seed's `train()` afterwards finds its iteration done and only
 does RLlib's bookkeeping (its result, its counters).
 
-`stacked=True` (a GPU's way): the seeds' actors act in one batched forward pass (`SACStep.act` over
-their stacked parameters) and every round's updates are one stacked step for the seeds that owe some
-(`stacked_updates.StackedAgentUpdates`, the `active` mask for the others); `stacked=False` (a CPU's,
-where the stacked update measured slower than each seed's own): each seed acts with its own module and
-updates through its own learner.
+One stack, one path on every device: the stacked step at N seeds is the fused step of a one-seed
+run at N = 1 (`gc_sac.sac_step`), captured as one CUDA graph on a GPU.
 
 A seed whose iteration raises (a non-finite planner, a crashed env) stops alone: `run_iteration` returns
 its error and the others go on (a stacked update that raises fails every seed in it).
@@ -31,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from copilot_ray.algorithms.sac.agent_updates import fused_update
+from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates, stacking_problems
 from copilot_ray.algorithms.sac.traversal_channel import (
     Subtasks,
     TraversalPlan,
@@ -44,7 +43,8 @@ from copilot_ray.algorithms.sac.traversal_runner import TraversalEnvRunner, run_
 
 def stack_problems(algos: Sequence[Any]) -> list[str]:
     """Why these algorithms cannot share one loop ([] when they can): each seed must sample in this
-    process with the lean loop (its own noise) and update through the fused step (its own streams)."""
+    process with the lean loop (its own noise); what the stacked update needs is its own check
+    (`stacked_updates.stacking_problems`)."""
     first = algos[0].config
     problems = []
     if first.num_env_runners:
@@ -56,17 +56,13 @@ def stack_problems(algos: Sequence[Any]) -> list[str]:
         problems.append(
             "lean_traversal=False or episode callbacks: a stack steps the seeds with the lean loop"
         )
-    if not fused_update(first):
-        problems.append("fused_update=False: a stack's seeds update through the fused step")
-    return problems
+    return problems + stacking_problems(algos)
 
 
 class SeedStack:
     """N seeds' algorithms trained in one loop (module docstring)."""
 
-    def __init__(self, algos: Sequence[Any], stacked: bool):
-        from copilot_ray.algorithms.sac.stacked_updates import StackedAgentUpdates
-
+    def __init__(self, algos: Sequence[Any]):
         problems = stack_problems(algos)
         if problems:
             raise ValueError("these seeds cannot be trained as one stack: " + "; ".join(problems))
@@ -78,8 +74,8 @@ class SeedStack:
         batched = all(hasattr(e.inner, "batch_step") and hasattr(e.inner, "step_to") for e in self.envs)
         self._move = self._batch_move if batched else None
         self._for_env = self.runners[0]._action_for_env_fn()
-        self.updates = StackedAgentUpdates(self.algos) if stacked else None
-        for i, algo in enumerate(self.algos if stacked else ()):
+        self.updates = StackedAgentUpdates(self.algos)
+        for i, algo in enumerate(self.algos):
             algo.agent_updater = self.updates.view(i)  # its replay: its rings of the stacked buffer
 
     # ------------------------------------------------------------------ one iteration of every seed
@@ -118,10 +114,6 @@ class SeedStack:
         one local runner, the seeds' env steps in one loop): {seed index: its Subtasks, or its error}."""
         out: dict[int, Any] = {}
         left, records = {}, {i: [] for i in requests}
-        # each seed's own module acting (not stacked), built once a traversal: its weights sync in place
-        self._policies = (
-            {} if self.updates is not None else {i: self.runners[i].policy(True) for i in requests}
-        )
         for i, (trees, task_ids) in requests.items():
             algo = self.algos[i]
             left[i] = load_plan(self.runners[i], TraversalPlan(trees, algo.config.tree_depth, task_ids))
@@ -161,9 +153,7 @@ class SeedStack:
 
     def _act(self, ids: Sequence[int], observations: Sequence[np.ndarray]) -> list[np.ndarray]:
         """The exploring actions of seeds `ids` for their observations: each seed's noise from its own
-        runner; one batched forward pass of the stacked actors, or each seed's own module."""
-        if self.updates is None:
-            return [self._policies[i](obs) for i, obs in zip(ids, observations, strict=True)]
+        runner; one batched forward pass of the stacked actors."""
         step, device, n = self.updates.step, self.updates.device, len(self.algos)
         obs = torch.from_numpy(np.stack(observations).astype(np.float32, copy=False)).unsqueeze(1)
         noise = torch.cat([self.runners[i].draw_noise() for i in ids]).unsqueeze(1)
@@ -189,36 +179,18 @@ class SeedStack:
         the error its update raised}."""
         if not owed:
             return {}
-        if self.updates is not None:
-            t0 = time.perf_counter()
-            try:
-                results = self.updates.update(owed)
-            except Exception as err:  # noqa: BLE001 - it fails every seed it held
-                return dict.fromkeys(owed, err)
-            seconds = time.perf_counter() - t0  # every seed waited for the whole stacked step
-            return {i: (results[i], seconds) for i in owed}
-        out = {}
-        for i, (n, timesteps) in owed.items():
-            t0 = time.perf_counter()
-            try:
-                out[i] = (self.algos[i].agent_updater.update(n, timesteps), time.perf_counter() - t0)
-            except Exception as err:  # noqa: BLE001 - a seed's failure is its own
-                out[i] = err
-        return out
+        t0 = time.perf_counter()
+        try:
+            results = self.updates.update(owed)
+        except Exception as err:  # noqa: BLE001 - it fails every seed it held
+            return dict.fromkeys(owed, err)
+        seconds = time.perf_counter() - t0  # every seed waited for the whole stacked step
+        return {i: (results[i], seconds) for i in owed}
 
     # ------------------------------------------------------------------ checkpoints
-    def get_state(self) -> dict[str, Any] | None:
-        """The stacked update's state (every seed's parameters, optimizer state and noise stream), None
-        when each seed updates through its own learner (all of it in its checkpoint)."""
-        return None if self.updates is None else self.updates.get_state()
+    def get_state(self) -> dict[str, Any]:
+        """The stacked update's state (every seed's parameters, optimizer state and noise stream)."""
+        return self.updates.get_state()
 
-    def set_state(self, state: Mapping[str, Any] | None) -> None:
-        if (state is None) != (self.updates is None):
-            raise ValueError(
-                "a checkpoint written with the seeds' updates "
-                + ("each its own" if state is None else "stacked")
-                + " cannot restore a stack that runs them "
-                + ("stacked" if self.updates is not None else "each its own")
-            )
-        if self.updates is not None:
-            self.updates.set_state(state)
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        self.updates.set_state(state)

@@ -4,17 +4,15 @@
 
 `SeedStackTrial` trains several seeds of one configuration in one Tune trial (a spec's `seeds_per_trial`,
 for the algorithms whose settings say SEED_STACK), their env steps in one loop
-(`algorithms.sac.seed_stack.SeedStack`), on a GPU their SAC updates stacked into one
-(`algorithms.sac.stacked_updates`).
+(`algorithms.sac.seed_stack.SeedStack`): one batched act for all seeds at every env step and their SAC
+updates as one stacked update (`algorithms.sac.stacked_updates`), on every device.
 
 The trial's Tune config is a one-seed trial's with `_seeds: [s0, s1, ...]` in place of `seed`. It builds
 the algorithm's own trial class once per seed (its config with `seed: s`, its files under `seed_<s>/`),
 so each seed plans, traverses, evaluates and checkpoints exactly as a one-seed trial does; each
 iteration runs every seed's iteration in one loop (`algorithms.sac.seed_stack.SeedStack`: the seeds'
 env steps together, each drawing from its own generators), then each seed's `train()` for its result.
-Where the learner is on a GPU the seeds act in one batched forward pass and update in one stacked
-update; on a CPU, where the stacked update measured slower than one seed's own, each seed acts and
-updates as its own trial would. Either way a stacked seed trains as its one-seed trial (tested).
+A stacked seed trains as its one-seed trial (tested).
 
 What it reports (`step`):
 * `keys.SEED_RESULTS`: {seed: that seed's metrics, as a one-seed trial logs them} (the MLflow callback
@@ -41,7 +39,6 @@ import ray
 from ray import tune
 
 from copilot_ray import keys
-from copilot_ray.algorithms.sac.agent_updates import local_learner
 from copilot_ray.algorithms.sac.algorithm import GoalSAC
 from copilot_ray.algorithms.sac.seed_stack import SeedStack
 from copilot_ray.registry import get_algorithm
@@ -72,13 +69,6 @@ def _move_logdir(algo, logdir: Path) -> None:
         made.rmdir()
 
 
-def stacks_updates(algo, wanted: bool | None) -> bool:
-    """Whether a stack shares one stacked update: `wanted`, else where the learner is on a GPU."""
-    if wanted is not None:
-        return bool(wanted)
-    return local_learner(algo.config, algo.learner_group).device.type == "cuda"
-
-
 _COUNTERS = ("_iteration", "_time_total", "_timesteps_total", "_episodes_total")
 
 
@@ -88,14 +78,7 @@ def _reached(metrics: Mapping[str, float], stop: Mapping[str, int]) -> bool:
 
 
 class SeedStackTrial(tune.Trainable):
-    """Several seeds of one configuration in one trial (module docstring).
-
-    `stack_updates`: whether the seeds share the stacked update and batched acting (True), or each
-    seed updates and acts as its own trial would, in its turn (False); None (default): stacked where
-    the learner is on a GPU, each its own on a CPU, where stacking measured slower
-    (docs/throughput/stacked_trial.md)."""
-
-    stack_updates: bool | None = None
+    """Several seeds of one configuration in one trial (module docstring)."""
 
     @classmethod
     def default_resource_request(cls, config):
@@ -116,10 +99,7 @@ class SeedStackTrial(tune.Trainable):
             algo = trial_class(config=seed_config(config, seed))
             _move_logdir(algo, logdir)
             self.algos.append(algo)
-        # (an algorithm without iteration steps, a stand-in in tests, trains seed after seed)
-        together = hasattr(self.algos[0], "iteration_steps")
-        stacked = together and stacks_updates(self.algos[0], self.stack_updates)
-        self.stack = SeedStack(self.algos, stacked) if together else None
+        self.stack = SeedStack(self.algos)
         self.metrics: dict[int, dict[str, float]] = {}  # seed index -> its last metrics (no NaN)
         # Every metric a seed has reported, NaN ones included: a one-seed trial reports its evaluation
         # figures as NaN before its first evaluation so that Tune's strict metric check (a scheduler's
@@ -130,7 +110,7 @@ class SeedStackTrial(tune.Trainable):
 
     def step(self) -> dict[str, Any]:
         running = [i for i in range(len(self.seeds)) if i not in self.errors and i not in self.finished]
-        failed = self.stack.run_iteration(running) if self.stack is not None else {}
+        failed = self.stack.run_iteration(running)
         for i in running:
             error = failed.get(i)
             if error is None:
@@ -175,16 +155,16 @@ class SeedStackTrial(tune.Trainable):
     # ------------------------------------------------------------------ checkpoints
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         """Every seed's algorithm in `seed_<s>/`, and the stack's state (its weights and optimizer
-        state when its updates are stacked, the seeds' last metrics and errors).
+        state, the seeds' last metrics and errors).
 
-        With stacked updates a seed's folder alone is not that seed's whole state: its optimizer's moments
-        are in the stack's file (its learner's are never stepped). A stack restores from the whole
+        A seed's folder alone is not that seed's whole state: its optimizer's moments are in the
+        stack's file (its learner's are never stepped). A stack restores from the whole
         checkpoint; its seeds' folders are what MLflow keeps of each run for reading its weights."""
         for seed, algo in zip(self.seeds, self.algos, strict=True):
             algo.save_checkpoint(str(_seed_dir(checkpoint_dir, seed)))
         state = {
             "seeds": self.seeds,
-            "stack": None if self.stack is None else self.stack.get_state(),
+            "stack": self.stack.get_state(),
             "metrics": self.metrics,
             "reported": sorted(self.reported),
             "errors": self.errors,
@@ -208,8 +188,7 @@ class SeedStackTrial(tune.Trainable):
         for algo, counters in zip(self.algos, state.get("counters") or (), strict=False):
             for name, value in counters.items():
                 setattr(algo, name, value)
-        if self.stack is not None:  # after the algorithms: the stack's weights are the live ones
-            self.stack.set_state(state["stack"])
+        self.stack.set_state(state["stack"])  # after the algorithms: the stack's weights are the live ones
         self.metrics = dict(state["metrics"])
         self.reported = set(state.get("reported", ()))
         self.errors = dict(state["errors"])
