@@ -24,7 +24,6 @@ from ray.rllib.utils.replay_buffers import ReplayBuffer
 from ray.rllib.utils.replay_buffers.utils import update_priorities_in_episode_replay_buffer
 
 from copilot_ray.algorithms.gc_sac import (
-    DeviceTransitionBuffer,
     FlatTransitionBuffer,
     gc_sac_settings,
     update_from_buffer,
@@ -133,18 +132,13 @@ class FusedLearnerUpdater:
     every algorithm here runs): the buffer is handed to it, not shipped.
 
     `buffer`: a device buffer (`add_episodes`, `sample(n)` on the device, `get_state` / `set_state`,
-    `storage_version`, `device`); default: a `DeviceTransitionBuffer` of the config's replay capacity
-    on the learner's device. Its state keeps the numpy buffer's format, so checkpoints of either path
-    restore into the other."""
+    `storage_version`, `device`; `GoalSAC.device_replay`). Its state keeps the numpy buffer's format,
+    so checkpoints of either path restore into the other."""
 
-    def __init__(self, config, learner_group, buffer=None):
+    def __init__(self, config, learner_group, buffer):
         self.config = config
         self.learner_group = learner_group
         self.learner = local_learner(config, learner_group)
-        if buffer is None:
-            buffer = DeviceTransitionBuffer(
-                replay_capacity(config), device=self.learner.device, seed=int(config.seed or 0)
-            )
         self.buffer = buffer
 
     def add(self, episodes) -> None:
@@ -196,11 +190,3 @@ def fused_update(config) -> bool:
 def replay_capacity(config) -> int:
     """Transitions the agent's replay buffer keeps (RLlib's `replay_buffer_config["capacity"]`)."""
     return int(config.replay_buffer_config.get("capacity", 1_000_000))
-
-
-def make_agent_updater(algo):
-    if fused_update(algo.config):
-        return FusedLearnerUpdater(algo.config, algo.learner_group)
-    if algo.config.fast_learner:
-        return FastLearnerUpdater(algo.config, algo.learner_group)
-    return StockLearnerUpdater(algo.config, algo.learner_group, algo.local_replay_buffer)

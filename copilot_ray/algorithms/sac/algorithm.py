@@ -58,6 +58,7 @@ from ray.tune.registry import register_env
 from copilot_ray import keys
 from copilot_ray.algorithms.gc_sac import (
     DeviceHindsightBuffer,
+    DeviceTransitionBuffer,
     GoalLayout,
     GradientStepSchedule,
     HindsightReplayBuffer,
@@ -69,9 +70,9 @@ from copilot_ray.algorithms.sac import settings as agent_settings
 from copilot_ray.algorithms.sac.agent_updates import (
     FastLearnerUpdater,
     FusedLearnerUpdater,
+    StockLearnerUpdater,
     fused_update,
     local_learner,
-    make_agent_updater,
     replay_capacity,
 )
 from copilot_ray.algorithms.sac.planned_evaluation import PlannedEvaluation
@@ -416,29 +417,45 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
         )
 
     def _make_agent_updater(self):
-        """What turns sampled episodes into SAC gradient steps (agent_updates.py): with hindsight
-        relabelling, the fast learner fed by HER's buffer (on the learner's device, relabelled inside
-        the fused step, unless `fused_update=False`)."""
+        """What turns sampled episodes into SAC gradient steps (agent_updates.py): the fused update on
+        the learner's device (`device_replay`), else the numpy buffers of `fused_update=False` (HER's
+        relabelling one where the agent relabels), else RLlib's stock path."""
         cfg = self.config
-        if not cfg.uses_hindsight_buffer():
-            return make_agent_updater(self)
-        her = {"n_sampled_goal": cfg.her["n_sampled_goal"], "goal_selection": cfg.her["goal_selection"]}
         if fused_update(cfg):
             device = local_learner(cfg, self.learner_group).device
-            reward = DeviceRelabelledReward(self.goal_env.unwrapped, self.rules, device)
-            buffer = DeviceHindsightBuffer(
-                replay_capacity(cfg),
-                self.goal_layout(),
-                reward,
-                **her,
-                device=device,
-                seed=int(cfg.seed or 0),
+            return FusedLearnerUpdater(
+                cfg, self.learner_group, self.device_replay(device, [int(cfg.seed or 0)])
             )
-            return FusedLearnerUpdater(cfg, self.learner_group, buffer)
+        if not cfg.fast_learner:
+            return StockLearnerUpdater(cfg, self.learner_group, self.local_replay_buffer)
+        if not cfg.uses_hindsight_buffer():
+            return FastLearnerUpdater(cfg, self.learner_group)
         buffer = HindsightReplayBuffer(
-            replay_capacity(cfg), self.goal_layout(), self.relabelled_reward, **her
+            replay_capacity(cfg),
+            self.goal_layout(),
+            self.relabelled_reward,
+            n_sampled_goal=cfg.her["n_sampled_goal"],
+            goal_selection=cfg.her["goal_selection"],
         )
         return FastLearnerUpdater(cfg, self.learner_group, buffer)
+
+    def device_replay(self, device: torch.device, seeds: list[int], dims: tuple[int, int] | None = None):
+        """The agent's replay on `device` with a ring per seed (a run's one seed, or a stack's seeds):
+        HER's relabelling buffer, its reward computed on the device, where the agent relabels; else
+        flat transitions, allocated at the first episodes unless `dims` (observation, action) are given
+        (a stack's: a seed's checkpoint restores into its ring before any episode)."""
+        cfg = self.config
+        if not cfg.uses_hindsight_buffer():
+            return DeviceTransitionBuffer(replay_capacity(cfg), device, *(dims or (None, None)), seeds=seeds)
+        return DeviceHindsightBuffer(
+            replay_capacity(cfg),
+            self.goal_layout(),
+            DeviceRelabelledReward(self.goal_env.unwrapped, self.rules, device),
+            n_sampled_goal=cfg.her["n_sampled_goal"],
+            goal_selection=cfg.her["goal_selection"],
+            device=device,
+            seeds=seeds,
+        )
 
     def goal_layout(self) -> GoalLayout:
         """Where observation and goal sit in the agent's flat input."""

@@ -32,10 +32,8 @@ import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer
-from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep, replay_step_call
-from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner, replay_capacity
-from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
+from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner
 
 
 def stacking_problems(algos: Sequence[Any]) -> list[str]:
@@ -89,7 +87,8 @@ class StackedAgentUpdates:
             seeds=self.seeds,
         )
         self.action_dim = int(np.prod(modules[0].action_space.shape))
-        self.replay = _stacked_replay(algos, modules[0], self.device, self.seeds)
+        dims = (int(np.prod(modules[0].observation_space.shape)), self.action_dim)
+        self.replay = algos[0].device_replay(self.device, self.seeds, dims)  # a ring per seed
         self.hindsight = isinstance(self.replay, DeviceHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
         self._active = torch.zeros(len(self.algos), dtype=torch.bool, device=self.device)
@@ -151,26 +150,6 @@ class StackedAgentUpdates:
         self.step.set_state(state["step"])
         # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint.
         self._skipped_logged = self.step.skipped.cpu().tolist()
-
-
-def _stacked_replay(algos: Sequence[Any], module, device: torch.device, seeds: Sequence[int]):
-    """The seeds' replay as one stacked buffer: HER's relabelling buffer where the agent uses one (its
-    reward on the device, as the one-seed fused path relabels), else flat transitions."""
-    cfg = algos[0].config
-    action_dim = int(np.prod(module.action_space.shape))
-    if not cfg.uses_hindsight_buffer():
-        obs_dim = int(np.prod(module.observation_space.shape))
-        return DeviceTransitionBuffer(replay_capacity(cfg), device, obs_dim, action_dim, seeds=seeds)
-    first = algos[0]
-    return DeviceHindsightBuffer(
-        replay_capacity(cfg),
-        first.goal_layout(),
-        DeviceRelabelledReward(first.goal_env.unwrapped, first.rules, device),
-        n_sampled_goal=cfg.her["n_sampled_goal"],
-        goal_selection=cfg.her["goal_selection"],
-        device=device,
-        seeds=seeds,
-    )
 
 
 class SeedUpdater:
