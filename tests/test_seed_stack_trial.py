@@ -157,7 +157,10 @@ HER = {
 
 
 def _learner_weights(algo):
-    module = algo.learner_group._learner.module[DEFAULT_MODULE_ID]
+    return _module_weights(algo.learner_group._learner.module[DEFAULT_MODULE_ID])
+
+
+def _module_weights(module):
     return {k: v.detach().clone() for k, v in module.state_dict().items()}
 
 
@@ -184,6 +187,10 @@ def test_a_stack_of_three_seeds_trains_each_as_its_one_seed_trial(ray_session, t
         want = _learner_weights(own)
         for key, value in _learner_weights(stack.algos[seed]).items():
             torch.testing.assert_close(value, want[key], rtol=1e-5, atol=1e-6, msg=f"seed {seed}: {key}")
+        # the module its evaluation acts with (its env runner's): synced as the one-seed trial's is
+        evaluated = _module_weights(own.get_module())
+        for key, value in _module_weights(stack.algos[seed].get_module()).items():
+            torch.testing.assert_close(value, evaluated[key], rtol=1e-5, atol=1e-6, msg=f"seed {seed}: {key}")
         assert together[keys.SEED_RESULTS][str(seed)][keys.AGENT_SAC_UPDATES] > 0
         own.stop()
     assert _figures(together, 0) != _figures(together, 1)  # the seeds differ: the comparison could fail

@@ -174,13 +174,18 @@ class RunnerTraversal:
             NUM_AGENT_STEPS_SAMPLED_LIFETIME: lifetime,
         }
 
-    def _updated(self, num_updates: int, learner_results, seconds: float) -> None:
-        """After `num_updates` gradient steps (taking `seconds`): counted, their results logged, the
-        runners given the new weights."""
+    def _updated(self, num_updates: int, learner_results, seconds: float, sync: bool = True) -> None:
+        """After `num_updates` gradient steps (taking `seconds`): counted, their results logged, and
+        (`sync`) the runners given the new weights."""
         self._update_seconds += seconds
         self._updates_done += num_updates
         if learner_results:
             self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
+        if sync:
+            self._sync_runners()
+
+    def _sync_runners(self) -> None:
+        """The env runners' modules given the learner's weights."""
         self.env_runner_group.sync_weights(
             from_worker_or_learner_group=self.learner_group, inference_only=True
         )

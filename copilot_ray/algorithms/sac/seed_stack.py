@@ -140,11 +140,13 @@ class SeedStack:
                 if isinstance(results, Exception):
                     out[i] = results
                 else:
-                    self.algos[i]._updated(owed[i][0], results[0], results[1])
+                    # its runner's module does not act here (the stacked actors do): synced once below
+                    self.algos[i]._updated(owed[i][0], results[0], results[1], sync=False)
             for i in active:
                 self.algos[i].heartbeat.beat(self.algos[i]._traversal_progress)
         for i in requests:
             if i not in out:
+                self.algos[i]._sync_runners()  # what the seed's evaluation and checkpoint read
                 if not records[i]:
                     out[i] = RuntimeError("no sub-task of this repetition was traversed")
                 else:
