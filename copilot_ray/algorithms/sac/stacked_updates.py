@@ -31,7 +31,6 @@ import numpy as np
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
-from copilot_ray.algorithms.gc_sac.device_hindsight import DeviceHindsightBuffer
 from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep, replay_step_call
 from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner
 
@@ -72,13 +71,11 @@ class StackedAgentUpdates:
         self.learners = [local_learner(a.config, a.learner_group) for a in algos]
         self.device = self.learners[0].device
         modules = [learner.module[DEFAULT_MODULE_ID].unwrapped() for learner in self.learners]
-        self.modules = modules
-        self.log_alphas = [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in self.learners]
         cfg = algos[0].config
         module_cfg = self.learners[0].config.get_config_for_module(DEFAULT_MODULE_ID)
         self.step = SACStep(
             modules,
-            self.log_alphas,
+            [learner.curr_log_alpha[DEFAULT_MODULE_ID] for learner in self.learners],
             [learner._sac_optimizers(DEFAULT_MODULE_ID) for learner in self.learners],
             self.learners[0].target_entropy[DEFAULT_MODULE_ID],
             gamma=module_cfg.gamma,
@@ -86,10 +83,9 @@ class StackedAgentUpdates:
             critic_loss=self.learners[0]._gc_settings["critic_loss"],
             seeds=self.seeds,
         )
-        self.action_dim = int(np.prod(modules[0].action_space.shape))
-        dims = (int(np.prod(modules[0].observation_space.shape)), self.action_dim)
+        space = modules[0].observation_space, modules[0].action_space
+        dims = (int(np.prod(space[0].shape)), int(np.prod(space[1].shape)))
         self.replay = algos[0].device_replay(self.device, self.seeds, dims)  # a ring per seed
-        self.hindsight = isinstance(self.replay, DeviceHindsightBuffer)
         self.batch_size = int(cfg.train_batch_size_per_learner)
         self._active = torch.zeros(len(self.algos), dtype=torch.bool, device=self.device)
         self._cached: tuple[int, Any] | None = None  # (replay storage version, its step call)
