@@ -13,7 +13,10 @@ A comparison runs for longer than one machine may live. The archive holds what `
   without theirs (``--resume`` skips them by the store). Of an unfinished trial's checkpoints only the one
   Tune restores from (the latest its newest experiment state registered) goes with its files; the
   others go as empty folders, so that every folder Tune's state names still exists when Tune deletes
-  it by path as the trial goes on;
+  it by path as the trial goes on. Left out of it: TensorBoard's event files (a copy of the results that
+  nothing here reads; Tune starts new ones on resume) and Tune's experiment and searcher states that a
+  newer one of the same kind supersedes (Tune resumes from the newest name), which a sweep resumed
+  session after session otherwise carries once per session;
 * the sweep's log, ``<storage>/<file stem>.log``, when there is one;
 * with ``--report-only``, no Tune folder at all: the store and the small artifacts, what a report reads
   (``analysis.report``, ``progress``) and what a results page commits. ``--resume`` from it skips the
@@ -151,6 +154,28 @@ def _checkpoints_tune_restores(tune_folder: Path) -> dict[Path, Path]:
     return restores
 
 
+# Tune's state files, one written per run of the experiment; Tune and its searchers restore from the
+# newest name of each kind (`max` of the names matching the pattern).
+TUNE_STATE_PATTERNS = (
+    "experiment_state-*.json",
+    "basic-variant-state-*.json",
+    "search_gen_state-*.json",
+    "searcher-state-*.pkl",
+)
+TENSORBOARD_EVENTS = "events.out.tfevents."
+
+
+def _superseded_states(tune_folder: Path) -> set[Path]:
+    """Tune's state files under `tune_folder` that a newer one of the same kind in the same experiment
+    folder supersedes."""
+    superseded: set[Path] = set()
+    experiments = [p for p in tune_folder.iterdir() if p.is_dir()] if tune_folder.is_dir() else []
+    for experiment in experiments:
+        for pattern in TUNE_STATE_PATTERNS:
+            superseded.update(p.resolve() for p in sorted(experiment.glob(pattern))[:-1])
+    return superseded
+
+
 def _latest_checkpoint(run_metadata: str) -> Path | None:
     """The latest checkpoint a trial's run metadata registered (Tune pickles its checkpoint manager into
     it; the archive is the user's own results, which Tune unpickles on every resume as well)."""
@@ -184,9 +209,12 @@ def pack(
         sweep_root(s) / "tune" for s, st in zip(specs, states, strict=True) if st.finished or report_only
     }
     restores: dict[Path, Path] = {}
+    superseded: set[Path] = set()
     for spec, state in zip(specs, states, strict=True):
         if not state.finished and not report_only:
-            restores |= _checkpoints_tune_restores((root / sweep_root(spec) / "tune").resolve())
+            tune_folder = (root / sweep_root(spec) / "tune").resolve()
+            restores |= _checkpoints_tune_restores(tune_folder)
+            superseded |= _superseded_states(tune_folder)
 
     def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
         path = root / info.name
@@ -195,6 +223,8 @@ def pack(
         if path in finished_tune:
             return None
         if not final_checkpoints and path.parts[-2:] == FINAL_CHECKPOINT:
+            return None
+        if path.name.startswith(TENSORBOARD_EVENTS) or (not info.isdir() and path.resolve() in superseded):
             return None
         if info.isdir() and path.name.startswith("checkpoint_") and _trial_finished(path.parent):
             return None  # Tune skips a finished trial on resume and never loads its checkpoints

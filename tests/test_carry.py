@@ -55,6 +55,12 @@ def _three_parts(tmp_path: Path):
     (finished / "checkpoint_000003").mkdir(parents=True)
     (finished / "checkpoint_000003" / "state.pkl").write_bytes(b"weights")
     (finished / "result.json").write_text('{"done": false}\n{"done": true}\n')
+    # Tune's states of two runs of the cut part (a resumed sweep writes one per run) and a TensorBoard log
+    experiment = finished.parent
+    for stamp in ("2026-12-01_10-00-00", "2026-12-02_10-00-00"):
+        (experiment / f"experiment_state-{stamp}.json").write_text('{"trial_data": []}')
+        (experiment / f"basic-variant-state-{stamp}.json").write_text("{}")
+    (experiment / "trial_1" / "events.out.tfevents.1796179652.vm").write_bytes(b"scalars")
     (tmp_path / "results" / "three.log").write_text("=== part 1 of 3\n")
     return path, uri, (done, cut, fresh)
 
@@ -82,6 +88,13 @@ def test_pack_keeps_the_store_and_unfinished_tune_folders_and_leaves_out_the_res
     assert "results/done/mlartifacts/run1/artifacts/config.yaml" in names
     assert "results/done/optuna.db" in names and "results/cut/optuna.db" in names
     assert not any("/artifacts/checkpoint" in n for n in names)
+    # Tune resumes from its newest states; the older ones and TensorBoard's copy of the results stay behind
+    tune_names = {n.rsplit("/", 1)[-1] for n in names if n.startswith("results/cut/tune/cut/")}
+    assert {
+        "experiment_state-2026-12-02_10-00-00.json",
+        "basic-variant-state-2026-12-02_10-00-00.json",
+    } <= tune_names
+    assert not any(n.endswith("2026-12-01_10-00-00.json") or ".tfevents." in n for n in tune_names)
     with tarfile.open(out) as tar:
         manifest = json.loads(tar.extractfile("results/carry.json").read())
         tar.extract("results/carried.db", tmp_path / "unpacked", filter="data")
