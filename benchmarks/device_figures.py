@@ -175,7 +175,7 @@ def stacked_update_rows(lines: list[str]) -> dict[str, tuple[float, float] | str
     return rows
 
 
-# The rows the check's stacked_trial step prints, in order (`--stacks 64 --updates stacked`).
+# The rows the check's stacked_trial step prints, in order (`--stacks 64`).
 STACKED_TRIAL_ORDER = ["one seed, its own trial", "64 seeds in one trial, one stacked update"]
 
 
