@@ -8,11 +8,11 @@ the seeds' sub-tasks (`traversal_runner.run_together`: at every env step one act
 sub-task is under way: one batched forward pass of the seeds' stacked actors, `SACStep.act`; on the
 maze one `batch_step` moving all their agents), then the SAC updates every seed owes after its round of
 `subtasks_per_sample` sub-tasks as one stacked step (`stacked_updates.StackedAgentUpdates`, the `active`
-mask for the seeds that owe none), then every seed's next round. No thread and no global random state: every seed draws from its own
-generators only (its env runner's action noise, its Philox update and replay streams, its numpy rng for
-tasks and planner), so seed i of a stack trains as seed i alone, whatever the other seeds draw
-(`tests/test_seed_stack_trial.py`). Each seed's `train()` afterwards finds its iteration done and only
-does RLlib's bookkeeping (its result, its counters).
+mask for the seeds that owe none), then every seed's next round. No thread and no global random
+state: every seed draws from its own generators only (its env runner's action noise, its Philox update
+and replay streams, its numpy rng for tasks and planner), so seed i of a stack trains as seed i alone,
+whatever the other seeds draw (`tests/test_seed_stack_trial.py`). Each seed's `train()` afterwards
+finds its iteration done and only does RLlib's bookkeeping (its result, its counters).
 
 One stack, one path on every device: the stacked step at N seeds is the fused step of a one-seed
 run at N = 1 (`gc_sac.sac_step`), captured as one CUDA graph on a GPU.
