@@ -282,30 +282,26 @@ class GCSACTorchLearner(SACTorchLearner):
             raise ValueError(
                 f"update_from_replay: the replay is on {replay.device}, the learner on {self.device}"
             )
-        timesteps = timesteps or {}
-        self.before_gradient_based_update(timesteps=timesteps)
-        self._weights_seq_no += 1
         run = self._replay_run(module_id, replay, batch_size)
         stats = {}
         for _ in range(int(num_steps)):
             stats = run()
-        self._log_fused_results(module_id, stats, int(num_steps), int(batch_size))
-        self.after_gradient_based_update(timesteps=timesteps)
-        return self.metrics.reduce()
+        figures, skipped = self._read_fused_results(module_id, stats, int(num_steps))
+        return self.record_steps(figures, skipped, num_steps, batch_size, timesteps, module_id=module_id)
 
-    def _log_fused_results(
-        self, module_id: str, stats: dict[str, torch.Tensor], steps: int, batch: int
-    ) -> None:
-        """One device-to-host read of the last step's statistics and the skip counter, logged as
-        RLlib's path logs them."""
+    def _read_fused_results(
+        self, module_id: str, stats: dict[str, torch.Tensor], steps: int
+    ) -> tuple[dict[str, float], int]:
+        """One device-to-host read of the last step's statistics and the skip counter: (the figures,
+        the steps skipped since the last read)."""
         if steps == 0:
-            return
+            return {}, 0
         names = [k for k in stats if k != FINITE]
         step = self._fused_steps[module_id]
         values = torch.stack([stats[k][0].float() for k in names] + [step.skipped[0].float()]).cpu().tolist()
         skipped_total = int(values.pop())
         skipped, self._skipped_read[module_id] = skipped_total - self._skipped_read[module_id], skipped_total
-        self._log_step_figures(module_id, dict(zip(names, values, strict=True)), skipped, steps, batch)
+        return dict(zip(names, values, strict=True)), skipped
 
     def record_steps(
         self,
@@ -317,22 +313,22 @@ class GCSACTorchLearner(SACTorchLearner):
         *,
         module_id: str = DEFAULT_MODULE_ID,
     ) -> dict[str, Any]:
-        """`steps` gradient steps of this learner's module run by a seed stack's stacked step (the
-        module's parameters are its row), logged and reduced as `update_from_replay` logs its own:
-        `figures` the last step's loss statistics (host floats, `total_loss` among them), `skipped`
-        how many of the steps were not finite (and so skipped)."""
+        """`steps` gradient steps of this learner's module, logged and reduced as `Learner.update` logs
+        them, whoever ran them (its own `update_from_replay`, or a seed stack's stacked step, where the
+        module's parameters are its row): `figures` the last step's loss statistics (host floats,
+        `total_loss` among them), `skipped` how many of the steps were not finite (and so skipped)."""
         self._check_is_built()
-        self.before_gradient_based_update(timesteps=timesteps or {})
+        timesteps = timesteps or {}
+        self.before_gradient_based_update(timesteps=timesteps)
         self._weights_seq_no += 1
-        self._log_step_figures(module_id, figures, int(skipped), int(steps), int(batch))
-        self.after_gradient_based_update(timesteps=timesteps or {})
+        if steps:
+            self._log_step_figures(module_id, figures, int(skipped), int(steps), int(batch))
+        self.after_gradient_based_update(timesteps=timesteps)
         return self.metrics.reduce()
 
     def _log_step_figures(
         self, module_id: str, figures: dict[str, float], skipped: int, steps: int, batch: int
     ) -> None:
-        if steps == 0:
-            return
         self.metrics.log_dict({k: v for k, v in figures.items() if k != TOTAL_LOSS}, key=module_id, window=1)
         self.metrics.log_value((module_id, self.TOTAL_LOSS_KEY), figures[TOTAL_LOSS], window=1)
         self.metrics.log_value((module_id, NUM_TARGET_UPDATES), steps - skipped, reduce="lifetime_sum")
