@@ -220,6 +220,8 @@ def pack(
         path = root / info.name
         if path.name.startswith(db.name):  # the store (and its -wal, -shm): its snapshot goes in instead
             return None
+        if path == db.parent / MANIFEST:  # an earlier archive's, unpacked here: this one writes its own
+            return None
         if path in finished_tune:
             return None
         if not final_checkpoints and path.parts[-2:] == FINAL_CHECKPOINT:

@@ -187,3 +187,22 @@ def test_it_says_what_the_archive_holds_and_report_only_leaves_every_tune_folder
         assert json.loads(tar.extractfile("results/carry.json").read())["report_only"] is True
     with pytest.raises(SystemExit):  # the two ask for opposite things
         carry.parse_args([str(path), str(report), "--report-only", "--final-checkpoints"])
+
+
+def test_packed_again_where_an_earlier_archive_was_unpacked_it_holds_one_manifest_the_new_one(tmp_path):
+    """A store in its part's own folder (the default uri) carried, unpacked, resumed and packed again: the
+    unpacked manifest stays behind (two would read as one broken record in run_at_commit.sh)."""
+    base = yaml.safe_load((ROOT / "sweeps" / "smoke.yaml").read_text())
+    base["tracking"] = {"storage": str(tmp_path / "results")}
+    path = tmp_path / "one.yaml"
+    path.write_text(yaml.safe_dump(base, sort_keys=False))
+    (spec,) = load_specs(path)
+    _, parent, _ = tracking.open_sweep_run(spec.tracking.uri, spec.experiment, spec.name, resume=False)
+    folder = tmp_path / "results" / spec.name
+    (folder / carry.MANIFEST).write_text('{"root": "elsewhere"}')  # an earlier archive's
+    out = tmp_path / "again.tar.gz"
+    carry.pack(path, out, tmp_path)
+    with tarfile.open(out) as tar:
+        manifests = [m for m in tar.getmembers() if m.name.endswith(carry.MANIFEST)]
+        assert [m.name for m in manifests] == [f"results/{spec.name}/{carry.MANIFEST}"]
+        assert json.loads(tar.extractfile(manifests[0]).read())["root"] == str(tmp_path)
