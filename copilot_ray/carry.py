@@ -132,13 +132,17 @@ def _trial_finished(trial_folder: Path) -> bool:
         return False
 
 
+def _experiment_folders(tune_folder: Path) -> list[Path]:
+    """The Tune experiments under a part's Tune folder (one per env of the part)."""
+    return sorted(p for p in tune_folder.iterdir() if p.is_dir()) if tune_folder.is_dir() else []
+
+
 def _checkpoints_tune_restores(tune_folder: Path) -> dict[Path, Path]:
     """Trial folder -> the checkpoint a resume restores it from, for every trial of every experiment
     under ``tune_folder`` whose newest experiment state (the file Tune itself picks) registered one.
     Trials missing here (no state yet, or one this Ray cannot read) keep all their checkpoints."""
     restores: dict[Path, Path] = {}
-    experiments = sorted(p for p in tune_folder.iterdir() if p.is_dir()) if tune_folder.is_dir() else []
-    for experiment in experiments:
+    for experiment in _experiment_folders(tune_folder):
         states = sorted(experiment.glob("experiment_state-*.json"))  # Tune resumes from the newest name
         if not states:
             continue
@@ -169,8 +173,7 @@ def _superseded_states(tune_folder: Path) -> set[Path]:
     """Tune's state files under `tune_folder` that a newer one of the same kind in the same experiment
     folder supersedes."""
     superseded: set[Path] = set()
-    experiments = [p for p in tune_folder.iterdir() if p.is_dir()] if tune_folder.is_dir() else []
-    for experiment in experiments:
+    for experiment in _experiment_folders(tune_folder):
         for pattern in TUNE_STATE_PATTERNS:
             superseded.update(p.resolve() for p in sorted(experiment.glob(pattern))[:-1])
     return superseded
