@@ -272,13 +272,17 @@ class SACStep:
             for head in ("qf", "qf_twin")
         )
 
-    def _policy(self, obs, noise):
-        """(logits, squashed action, its log-probability) with the module's own distribution, its
-        Gaussian sample taken with `noise` (as torch's Normal.rsample does: loc + noise * scale)."""
+    def _sample(self, obs, noise):
+        """(logits, the module's own distribution, its Gaussian sample before squashing) with `noise`
+        (as torch's Normal.rsample takes it: loc + noise * scale)."""
         logits = self._call("pi", self._call("pi_encoder", {Columns.OBS: obs})[ENCODER_OUT])
         dist = self._dist_cls.from_logits(logits)
         gaussian = dist._dist  # noqa: SLF001 - the distribution's Normal, to sample it with given noise
-        unsquashed = gaussian.loc + noise * gaussian.scale
+        return logits, dist, gaussian.loc + noise * gaussian.scale
+
+    def _policy(self, obs, noise):
+        """(logits, squashed action, its log-probability) of `_sample`."""
+        logits, dist, unsquashed = self._sample(obs, noise)
         return logits, dist._squash(unsquashed), dist._squashed_logp(unsquashed)  # noqa: SLF001
 
     def _forward_train(self, params, targets, batch, noise, noise_next) -> dict[str, torch.Tensor]:
@@ -393,7 +397,8 @@ class SACStep:
                 if z is None:
                     logits = self._call("pi", self._call("pi_encoder", {Columns.OBS: o})[ENCODER_OUT])
                     return logits.chunk(2, dim=-1)[0]
-                return self._policy(o, z)[1]
+                _, dist, unsquashed = self._sample(o, z)  # acting needs no log-probability
+                return dist._squash(unsquashed)  # noqa: SLF001
 
         if noise is None:
             return self._per_seed(lambda params, o: one_seed(params, o, None), (actor,), obs)
