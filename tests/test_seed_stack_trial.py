@@ -192,6 +192,10 @@ def test_a_stack_of_three_seeds_trains_each_as_its_one_seed_trial(ray_session, t
         for key, value in _module_weights(stack.algos[seed].get_module()).items():
             torch.testing.assert_close(value, evaluated[key], rtol=1e-5, atol=1e-6, msg=f"seed {seed}: {key}")
         assert together[keys.SEED_RESULTS][str(seed)][keys.AGENT_SAC_UPDATES] > 0
+        # its replay is its ring of the stack's: as full as its one-seed twin's, and updated by the stack
+        assert stack.algos[seed].agent_updater.replay_size() == own.agent_updater.replay_size() > 0
+        with pytest.raises(RuntimeError, match="updated by its stack"):
+            stack.algos[seed].agent_updater.update(1, {})
         own.stop()
     assert _figures(together, 0) != _figures(together, 1)  # the seeds differ: the comparison could fail
     stack.stop()

@@ -133,19 +133,24 @@ class FusedLearnerUpdater:
 
     `buffer`: a device buffer (`add_episodes`, `sample(n)` on the device, `get_state` / `set_state`,
     `storage_version`, `device`; `GoalSAC.device_replay`). Its state keeps the numpy buffer's format,
-    so checkpoints of either path restore into the other."""
+    so checkpoints of either path restore into the other. `ring`: which of the buffer's seed rings is
+    this agent's: 0 alone; seed i of a seed stack, whose buffer and updates are the stack's
+    (`stacked_updates.StackedAgentUpdates`), so it never calls `update`."""
 
-    def __init__(self, config, learner_group, buffer):
+    def __init__(self, config, learner_group, buffer, ring: int = 0):
         self.config = config
         self.learner_group = learner_group
         self.learner = local_learner(config, learner_group)
         self.buffer = buffer
+        self.ring = int(ring)
 
     def add(self, episodes) -> None:
-        self.buffer.add_episodes(episodes)
+        self.buffer.add_episodes(episodes, seed=self.ring)
 
     def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
         """As `LearnerGroup.update` returns: one result dict per learner (here one), [] for no step."""
+        if self.buffer.num_seeds != 1:
+            raise RuntimeError("a stacked seed's agent is updated by its stack, not alone")
         if num_updates <= 0 or len(self.buffer) == 0:
             return []
         return [
@@ -155,20 +160,21 @@ class FusedLearnerUpdater:
         ]
 
     def replay_size(self) -> int:
-        """Transitions in this agent's replay."""
-        return len(self.buffer)
+        """Transitions in this agent's ring of the replay."""
+        return self.buffer.size_of(self.ring)
 
     def replay_states(self, n: int, rng: np.random.Generator):
         """n replayed (observations, achieved goals) of a hindsight buffer (SoRB's graph)."""
-        return self.buffer.sample_states(n, rng)
+        return self.buffer.sample_states(n, rng, seed=self.ring)
 
     def get_state(self) -> dict[str, Any]:
-        """The buffer, its sampling stream's counter included (sampling reads no global generator)."""
-        return {"buffer": self.buffer.get_state()}
+        """The agent's ring, its sampling stream's counter included (sampling reads no global
+        generator)."""
+        return {"buffer": self.buffer.get_state(seed=self.ring)}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Restores the buffer (a numpy path's checkpoint too: its sampling rng has no use here)."""
-        self.buffer.set_state(state["buffer"])
+        """Restores the ring (a numpy path's checkpoint too: its sampling rng has no use here)."""
+        self.buffer.set_state(state["buffer"], seed=self.ring)
 
 
 def local_learner(config, learner_group):

@@ -4,9 +4,9 @@
 parameters and Adam state become views of its rows: a seed's learner always holds its current agent) and
 their replay (one device buffer with a ring per seed: flat transitions, `gc_sac.DeviceTransitionBuffer`,
 or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.DeviceHindsightBuffer`, relabelled on
-the device as the one-seed fused path relabels), and gives each algorithm an
-updater view, `SeedUpdater`, in place of its own `FusedLearnerUpdater`: adding episodes writes the
-seed's rows of the stacked replay. `update({seed: (n, timesteps)})` (a `seed_stack.SeedStack` round, for
+the device as the one-seed fused path relabels), and gives each algorithm a `FusedLearnerUpdater`
+over its ring of the stacked replay in place of its own: adding episodes writes the seed's rows of the
+stacked replay. `update({seed: (n, timesteps)})` (a `seed_stack.SeedStack` round, for
 every seed that owes steps) runs max(n) stacked steps, seed i active in its first n_i (its learner's
 module is its row: the env runners sync from there, as after any update), and logs each seed's figures
 on its own learner. The seeds' actions come from `self.step.act`, one batched forward pass.
@@ -32,7 +32,7 @@ import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac.sac_step import FINITE, SACStep, replay_step_call
-from copilot_ray.algorithms.sac.agent_updates import fused_update, local_learner
+from copilot_ray.algorithms.sac.agent_updates import FusedLearnerUpdater, fused_update, local_learner
 
 
 def stacking_problems(algos: Sequence[Any]) -> list[str]:
@@ -91,9 +91,11 @@ class StackedAgentUpdates:
         self._cached: tuple[int, Any] | None = None  # (replay storage version, its step call)
         self._skipped_logged = [0] * len(self.algos)  # each seed's non-finite steps its learner has logged
 
-    def view(self, index: int) -> SeedUpdater:
-        """Seed `index`'s updater (what its algorithm's `agent_updater` becomes)."""
-        return SeedUpdater(self, index)
+    def view(self, index: int) -> FusedLearnerUpdater:
+        """Seed `index`'s updater (what its algorithm's `agent_updater` becomes): its ring of the
+        stacked replay; its updates are this stack's."""
+        algo = self.algos[index]
+        return FusedLearnerUpdater(algo.config, algo.learner_group, self.replay, ring=index)
 
     # ------------------------------------------------------------------ one round
     def update(self, requests: Mapping[int, tuple[int, dict[str, Any]]]) -> dict[int, list[dict[str, Any]]]:
@@ -137,7 +139,7 @@ class StackedAgentUpdates:
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, Any]:
         """Every seed's parameters, optimizer state and noise stream (each seed's replay rows and
-        sampling stream are in its algorithm's checkpoint, through its `SeedUpdater`)."""
+        sampling stream are in its algorithm's checkpoint, through its updater's ring)."""
         return {"step": self.step.get_state()}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
@@ -146,28 +148,3 @@ class StackedAgentUpdates:
         self.step.set_state(state["step"])
         # The seeds' skipped-step counts come back with the step; each was logged before the checkpoint.
         self._skipped_logged = self.step.skipped.cpu().tolist()
-
-
-class SeedUpdater:
-    """Seed `index`'s agent updater inside a stack: `agent_updates.FusedLearnerUpdater`'s interface,
-    over the seed's rings of the stack's replay (its updates are the stack's)."""
-
-    def __init__(self, stack: StackedAgentUpdates, index: int):
-        self.stack, self.index = stack, int(index)
-
-    def add(self, episodes) -> None:
-        self.stack.replay.add_episodes(episodes, seed=self.index)
-
-    def replay_size(self) -> int:
-        """Transitions in this seed's ring of the stack's replay."""
-        return self.stack.replay.size_of(self.index)
-
-    def replay_states(self, n: int, rng: np.random.Generator):
-        """n replayed (observations, achieved goals) of this seed's ring (SoRB's graph)."""
-        return self.stack.replay.sample_states(n, rng, seed=self.index)
-
-    def get_state(self) -> dict[str, Any]:
-        return {"buffer": self.stack.replay.get_state(seed=self.index)}
-
-    def set_state(self, state: dict[str, Any]) -> None:
-        self.stack.replay.set_state(state["buffer"], seed=self.index)
