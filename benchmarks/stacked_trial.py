@@ -10,7 +10,10 @@ trial (not timed), runs one iteration to warm up (the planner's warm start, SAC'
 learning start), then times `--iterations` iterations; rows alternate over `--rounds` so that a machine
 whose load drifts affects both alike. Printed per row: aggregate env steps/s (all its seeds), per seed,
 and the host cost per seed env step: the traversals' wall time less their SAC updates', over the env
-steps they took (acting, env stepping, episodes; the target is <= 0.1 ms at 16 seeds).
+steps they took (acting, env stepping, episodes; the target is <= 0.1 ms at 16 seeds), and of it the
+acting (the actor's forward pass and the noise: one batched pass for a stack) and, for a stack on the
+maze, the moving (one `batch_step` for every seed's agent); the rest is each seed's env step and its
+sub-task's bookkeeping.
 
 What it answers on a CPU: a two-core machine runs either seeds as trials two at a time (two one-seed
 processes side by side) or stacks side by side; a stack of N is not slower in aggregate when its row is
@@ -87,9 +90,10 @@ def _env_steps(result: dict) -> float:
 class Clock:
     """Seconds spent inside the traversals and inside their SAC updates, for one-seed trials
     (`RunnerTraversal._traverse`, `FusedLearnerUpdater.update`) and stacks (`SeedStack._traverse`,
-    `SeedStack._update`): patched in once, read per row."""
+    `SeedStack._update`), and inside acting (a runner's exploring policy; `SeedStack._act`) and a
+    stack's moving (`SeedStack._batch_move`): patched in once, read per row."""
 
-    traverse_s = update_s = 0.0
+    traverse_s = update_s = act_s = move_s = 0.0
     _inside: set[str] = set()  # the fields being timed now (a timed call inside another counts once)
 
     @classmethod
@@ -97,14 +101,24 @@ class Clock:
         from copilot_ray.algorithms.sac.agent_updates import FusedLearnerUpdater
         from copilot_ray.algorithms.sac.runner_traversal import RunnerTraversal
         from copilot_ray.algorithms.sac.seed_stack import SeedStack
+        from copilot_ray.algorithms.sac.traversal_runner import TraversalEnvRunner
 
         for owner, name, field in (
             (RunnerTraversal, "_traverse", "traverse_s"),
             (SeedStack, "_traverse", "traverse_s"),
             (FusedLearnerUpdater, "update", "update_s"),
             (SeedStack, "_update", "update_s"),
+            (SeedStack, "_act", "act_s"),
+            (SeedStack, "_batch_move", "move_s"),
         ):
             setattr(owner, name, cls._timed(getattr(owner, name), field))
+        policy = TraversalEnvRunner.policy  # a one-seed runner's act is the function it returns
+
+        def timed_policy(self, explore):
+            act = policy(self, explore)
+            return cls._timed(act, "act_s") if explore else act
+
+        TraversalEnvRunner.policy = timed_policy
 
     @classmethod
     def _timed(cls, fn, field: str):
@@ -122,26 +136,31 @@ class Clock:
         return timed
 
 
-def measure(trial, iterations: int) -> tuple[float, float]:
-    """(env steps/s of all the trial's seeds, host ms per seed env step) over `iterations` iterations
-    after one to warm up; each iteration prints its running rate, so a run cut off (a lent machine's
-    minutes) keeps a figure."""
+def measure(trial, iterations: int) -> tuple[float, float, float, float]:
+    """(env steps/s of all the trial's seeds, then host, acting and moving ms per seed env step) over
+    `iterations` iterations after one to warm up; each iteration prints its running rate, so a run cut
+    off (a lent machine's minutes) keeps a figure."""
     start = time.perf_counter()
     before = _env_steps(trial.train())
     print(f"   warm-up iteration: {before:.0f} env steps in {time.perf_counter() - start:.0f} s", flush=True)
-    Clock.traverse_s = Clock.update_s = 0.0
+    Clock.traverse_s = Clock.update_s = Clock.act_s = Clock.move_s = 0.0
     start = time.perf_counter()
     for i in range(iterations):
         after = _env_steps(trial.train())
         seconds = time.perf_counter() - start
-        host_ms = 1000 * (Clock.traverse_s - Clock.update_s) / max(after - before, 1)
+        per_step = 1000 / max(after - before, 1)  # ms per seed env step, per second spent
+        host, act, move = (
+            (Clock.traverse_s - Clock.update_s) * per_step,
+            Clock.act_s * per_step,
+            Clock.move_s * per_step,
+        )
         print(
             f"   iteration {i + 1}: {(after - before) / seconds:.1f} env steps/s so far, host "
-            f"{host_ms:.3f} ms per seed env step",
+            f"{host:.3f} ms per seed env step (acting {act:.3f}, moving {move:.3f})",
             flush=True,
         )
     trial.stop()
-    return (after - before) / seconds, host_ms
+    return (after - before) / seconds, host, act, move
 
 
 def main() -> None:
@@ -162,7 +181,7 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     Clock.install()
     directory = Path(tempfile.mkdtemp(prefix="stacked_trial_"))
-    rows: dict[str, list[tuple[float, float]]] = {}
+    rows: dict[str, list[tuple[float, float, float, float]]] = {}
     for round_ in range(args.rounds):
         name = "one seed, its own trial"
         rows.setdefault(name, []).append(
@@ -177,16 +196,20 @@ def main() -> None:
             print(f"round {round_ + 1}: {name}: {rows[name][-1][0]:.1f} env steps/s", flush=True)
     print(
         "\n| trial | env steps/s, all its seeds (per round) | per seed | vs one seed's trial "
-        "| host ms per seed env step |"
+        "| host ms per seed env step (per round) | of it acting | moving |"
     )
-    print("|---|---|---|---|---|")
-    base = sum(rate for rate, _ in rows["one seed, its own trial"]) / args.rounds
+    print("|---|---|---|---|---|---|---|")
+    base = sum(row[0] for row in rows["one seed, its own trial"]) / args.rounds
     for name, values in rows.items():
         n = 1 if name.startswith("one") else int(name.split()[0])
-        mean = sum(rate for rate, _ in values) / len(values)
-        host = sum(ms for _, ms in values) / len(values)
-        runs = ", ".join(f"{rate:.1f}" for rate, _ in values)
-        print(f"| {name} | {mean:.1f} ({runs}) | {mean / n:.1f} | {mean / base:.2f}x | {host:.3f} |")
+        rate, host, act, move = (sum(column) / len(values) for column in zip(*values, strict=True))
+        runs = ", ".join(f"{row[0]:.1f}" for row in values)
+        hosts = ", ".join(f"{row[1]:.3f}" for row in values)
+        moving = f"{move:.3f}" if n > 1 else "(in its env step)"
+        print(
+            f"| {name} | {rate:.1f} ({runs}) | {rate / n:.1f} | {rate / base:.2f}x | {host:.3f} ({hosts}) "
+            f"| {act:.3f} | {moving} |"
+        )
 
 
 if __name__ == "__main__":
