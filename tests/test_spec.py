@@ -821,7 +821,7 @@ def test_stacked_seeds_make_a_trial_per_group_and_say_so_in_the_plan():
     # a trial's configuration is its searched values; its seeds are not part of it
     assert sorted({config_key(point) for point in spec.trial_plan()}) == ["repetitions=1", "repetitions=2"]
     plan = format_plan(spec)
-    assert "2 seeds per trial: each trial trains its seeds in turns in one process" in plan
+    assert "2 seeds per trial: each trial steps its seeds together in one process" in plan
     assert "0, 1 | 2, 3" in plan
     if _has("ray"):
         space = to_tune_search_space(spec)

@@ -78,8 +78,9 @@ def _what_runs(spec: SweepSpec) -> list[str]:
         lines.append(f"  grid: {len(points)} configuration(s) x {len(spec.seeds)} seed(s)")
         if spec.seeds_per_trial > 1:
             lines.append(
-                f"  {spec.seeds_per_trial} seeds per trial: each trial trains its seeds in turns in one "
-                "process, on a GPU with one stacked SAC update (each seed still its own MLflow run)"
+                f"  {spec.seeds_per_trial} seeds per trial: each trial steps its seeds together in one "
+                "process, one batched act per env step and one stacked SAC update per round on every "
+                "device (each seed still its own MLflow run)"
             )
         for row in [header, *rows]:
             lines.append(
