@@ -16,8 +16,8 @@
       tree_depth: {grid: [1, 2, 3, 4, 5, 6]}
     seeds: [0, 1, 2]                    # every configuration runs once per seed
     seeds_per_trial: 3                  # optional (default 1): seeds trained together in one trial (grid,
-                                        #   num_env_runners 0; the SAC-agent methods), on a GPU their SAC
-                                        #   updates stacked into one; each seed is still its own MLflow run
+                                        #   num_env_runners 0; the SAC-agent methods), their SAC updates
+                                        #   stacked into one on every device; each seed its own MLflow run
     searcher: {type: grid}              # or {type: optuna, sampler: tpe, metric: ..., mode: max, ...}
     scheduler: {type: asha, max_t: 200000, grace_period: 20000, reduction_factor: 3}   # optional
     stop: {env_steps: 200000}           # and/or iterations
