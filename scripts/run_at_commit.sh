@@ -3,7 +3,7 @@
 # checkout while it runs (hours) cannot leak into its trials, and every trial's MLflow run names that
 # commit (tag git_commit). The worktree and its own .venv live beside this checkout:
 #
-#   bash scripts/run_at_commit.sh [--commit REV] [--spec-from REV2] [--carry STORE.tar.gz] SPEC.yaml [sweep flags]
+#   bash scripts/run_at_commit.sh [--commit REV] [--spec-from REV2] [--carry STORE.tar.gz|.tar.xz] SPEC.yaml [sweep flags]
 #
 # --carry: a results archive from another machine or session (made in the old worktree with `python -m
 # copilot_ray.carry SPEC.yaml STORE.tar.gz`: the MLflow store, its artifacts and the unfinished parts' Tune
@@ -38,7 +38,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 if [ $# -lt 1 ]; then
-  echo "usage: bash scripts/run_at_commit.sh [--commit REV] [--spec-from REV2] [--carry STORE.tar.gz] SPEC.yaml [sweep flags]" >&2
+  echo "usage: bash scripts/run_at_commit.sh [--commit REV] [--spec-from REV2] [--carry STORE.tar.gz|.tar.xz] SPEC.yaml [sweep flags]" >&2
   exit 2
 fi
 spec="$1"
@@ -78,9 +78,9 @@ if [ -n "$carry" ]; then
   # An archive from `python -m copilot_ray.carry` says where and at which commit it was packed: its store
   # continues only at that commit (one experiment, one commit) and at that path (Tune's state and the
   # trials' configs name absolute paths). An archive without that manifest is a store alone.
-  manifest="$(tar -tzf "$carry" | grep -m1 -E '(^|/)carry\.json$' || true)"
+  manifest="$(tar -tf "$carry" | grep -m1 -E '(^|/)carry\.json$' || true)"
   if [ -n "$manifest" ]; then
-    read -r packed_root packed_commit < <(tar -xzOf "$carry" "$manifest" |
+    read -r packed_root packed_commit < <(tar -xOf "$carry" "$manifest" |
       python3 -c 'import json, sys; m = json.load(sys.stdin); print(m["root"], m["commit"])')
     if [ "$packed_commit" != "$sha" ]; then
       echo "error: --carry $carry was packed at commit ${packed_commit:0:7}, not ${sha:0:7}: a store continues only at the commit that began it" >&2
@@ -95,7 +95,7 @@ fi
 if [ -n "$carry" ] && [ -d "$tree" ]; then
   # Every archive has a manifest (checked above: same commit, same folder); any other file it would
   # overwrite is another sweep's, or this one's newer copy.
-  clash="$(tar -tzf "$carry" | grep -v '/$' | grep -v -E '(^|/)carry\.json$' |
+  clash="$(tar -tf "$carry" | grep -v '/$' | grep -v -E '(^|/)carry\.json$' |
     while IFS= read -r member; do
       if [ -e "$tree/$member" ]; then echo "$member"; break; fi
     done || true)"
@@ -128,7 +128,7 @@ if [ "$spec_sha" != "$sha" ] && [ ! -e "$tree/$spec" ]; then
 fi
 (cd "$tree" && bash scripts/setup_env.sh)
 if [ -n "$carry" ]; then
-  tar -xzf "$carry" -C "$tree"
+  tar -xf "$carry" -C "$tree"  # gzip or xz: tar reads either
   echo "carried:  $carry -> $tree/results"
 fi
 log="$tree/results/$(basename "$spec" .yaml).log"
