@@ -67,6 +67,24 @@ def _replay(num_seeds: int, device: torch.device) -> DeviceTransitionBuffer:
     return replay
 
 
+def stacked_step(learner, n: int, device: str) -> SACStep:
+    """One `SACStep` for `n` seeds, each with its own modules (the step views their weights), at
+    `learner`'s settings."""
+    config = learner.config.get_config_for_module(DEFAULT_MODULE_ID)
+    seeds = [_learner(device) for _ in range(n)]
+    return SACStep(
+        [s.module[DEFAULT_MODULE_ID].unwrapped() for s in seeds],
+        [s.curr_log_alpha[DEFAULT_MODULE_ID] for s in seeds],
+        None,
+        learner.target_entropy[DEFAULT_MODULE_ID],
+        gamma=config.gamma,
+        tau=config.tau,
+        critic_loss="huber",
+        seeds=range(n),
+        lrs={"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr},
+    )
+
+
 def _rate(fn, seconds: float, device: torch.device) -> float:
     for _ in range(3):
         fn()
@@ -103,8 +121,6 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
     learner = _learner(args.device)
-    config = learner.config.get_config_for_module(DEFAULT_MODULE_ID)
-    lrs = {"qf": config.critic_lr, "policy": config.actor_lr, "alpha": config.alpha_lr}
     print(
         f"# device {device} ({torch.cuda.get_device_name() if device.type == 'cuda' else f'{args.threads} threads'}), "
         f"torch {torch.__version__}, batch {BATCH}, networks [256, 256]",
@@ -117,18 +133,7 @@ def main() -> None:
     _row("one seed, fused", 1, lambda: fused.step(one.sample(BATCH)), args.seconds, device)
     for n in args.seeds:
         replay = _replay(n, device)
-        seeds = [_learner(args.device) for _ in range(n)]  # its own modules: the step views their weights
-        step = SACStep(
-            [s.module[DEFAULT_MODULE_ID].unwrapped() for s in seeds],
-            [s.curr_log_alpha[DEFAULT_MODULE_ID] for s in seeds],
-            None,
-            learner.target_entropy[DEFAULT_MODULE_ID],
-            gamma=config.gamma,
-            tau=config.tau,
-            critic_loss="huber",
-            seeds=range(n),
-            lrs=lrs,
-        )
+        step = stacked_step(learner, n, args.device)
 
         def run(step=step, replay=replay):
             return step.step(replay.sample(BATCH))
