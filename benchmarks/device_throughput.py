@@ -16,7 +16,7 @@ cores: `--suite --cpus-per-trial 1`, the two CPU trials side by side).
 
 The update alone (`--updates-seconds` > 0): SAC gradient steps of the trial's learner (256x256 networks,
 batch 256, random four-rooms-sized transitions: obs 4, action 2) in this process, per device and path:
-"batches" (RLlib's `update(batch=...)` from a numpy buffer, the finite check on the host: the path before
+"batches" (RLlib's `update(batch=...)` from the replay sampled on the host, the finite check on the host: the path before
 the fused update), "fused eager" (`update_from_replay`: the step and its replay sampling on the device,
 no host sync), and on a GPU "fused captured" (one CUDA graph replay per step) and "fused compiled +
 captured" (torch.compile'd first). Each row warms up (capture, compilation: its seconds printed), then
@@ -266,12 +266,12 @@ def _largest_difference(reference: str, path: str, threads: int) -> float:
 
 def _update_setup(device: str, path: str, threads: int):
     """A learner group of the trial's learner on `device` for `path`, and its replay filled with random
-    four-rooms-sized transitions (a numpy buffer for "batches", else one on the learner's device)."""
+    four-rooms-sized transitions (on the host for "batches", else on the learner's device)."""
     import numpy as np
     from gymnasium import spaces
     from ray.rllib.algorithms.sac import SACConfig
 
-    from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, FlatTransitionBuffer, use_fast_learner
+    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, use_fast_learner
 
     config = use_fast_learner(
         SACConfig()
@@ -297,27 +297,23 @@ def _update_setup(device: str, path: str, threads: int):
         "rewards": -(rng.random(n) > 0.05).astype(np.float32),
         "terminateds": rng.random(n) < 0.05,
     }
-    if path == "batches":
-        replay = FlatTransitionBuffer(n)
-    else:
-        replay = DeviceTransitionBuffer(n, device=learner_group._learner.device)
+    replay = FlatTransitionBuffer(n, device="cpu" if path == "batches" else learner_group._learner.device)
     replay.add(columns)
     return learner_group, replay
 
 
 def _update_row(device: str, path: str, seconds: float, threads: int) -> tuple[str, float, float]:
-    import numpy as np
     import torch
 
-    from copilot_ray.algorithms.gc_sac import update_from_buffer
+    from copilot_ray.algorithms.gc_sac import host_sampler, update_from_buffer
 
     learner_group, replay = _update_setup(device, path, threads)
     learner = learner_group._learner
-    rng = np.random.default_rng(0)
+    sample = host_sampler(replay)
     if path == "batches":
 
         def call() -> None:
-            update_from_buffer(learner_group, replay, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, rng, len(replay))
+            update_from_buffer(learner_group, sample, UPDATE_STEPS_PER_CALL, UPDATE_BATCH, len(replay))
     else:
 
         def call() -> None:

@@ -24,7 +24,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 
-import numpy as np  # noqa: E402
 from learner_speed import BATCH_SIZE, HIDDEN, collect_random_episodes, make_env, to_rllib_episodes  # noqa: E402
 
 
@@ -33,7 +32,12 @@ def build(env, episodes, what: str | None, threads: int, device: str):
     from ray.rllib.algorithms.sac import SACConfig
     from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer, use_fast_learner
+    from copilot_ray.algorithms.gc_sac import (
+        FlatTransitionBuffer,
+        host_sampler,
+        update_from_buffer,
+        use_fast_learner,
+    )
 
     config = SACConfig().environment(observation_space=env.observation_space, action_space=env.action_space)
     if what is not None:
@@ -43,9 +47,8 @@ def build(env, episodes, what: str | None, threads: int, device: str):
     group = use_fast_learner(config, hidden=HIDDEN, torch_threads=threads).build_learner_group()
     buffer = FlatTransitionBuffer(100_000)
     buffer.add_episodes(episodes)
-    rng = np.random.default_rng(0)
     timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: buffer.num_added}
-    return lambda n: update_from_buffer(group, buffer, n, BATCH_SIZE, rng, timesteps)
+    return lambda n: update_from_buffer(group, host_sampler(buffer), n, BATCH_SIZE, timesteps)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -6,11 +6,11 @@ with random actions on a goal-conditioned point env (`copilot_ray.envs.make("maz
 Dict observation flattened to concat(observation, desired_goal); a tiny numpy point env if that
 package is not importable). Everything runs in one process with the same torch thread count.
 
-    (a) fused: `use_fast_learner(SACConfig())` + `DeviceTransitionBuffer` +
+    (a) fused: `use_fast_learner(SACConfig())` + `FlatTransitionBuffer` on the learner's device +
         `learner.update_from_replay`: the whole step, replay sampling included, as one function over
         device tensors with the finite check on the device (`--compile`: also torch.compile'd).
     (b) batches: the path before it, `use_fast_learner(..., fused_update=False)` + `FlatTransitionBuffer`
-        + `update_from_buffer` with `--steps-per-call` gradient steps per
+        sampled on the host + `update_from_buffer` with `--steps-per-call` gradient steps per
         `learner_group.update(batch=...)` call (RLlib's minibatch loop, the finite check on the host).
     (c) stock: RLlib 2.60 default SAC module + `SACTorchLearner`, its default training path:
         `PrioritizedEpisodeReplayBuffer.sample(...)` -> `learner_group.update(episodes=...)`
@@ -180,11 +180,17 @@ def build_stock(obs_space, act_space, episodes):
 
 
 def build_batches(obs_space, act_space, episodes, steps_per_call: int, torch_threads: int):
-    """The path before the fused update: numpy buffer, RLlib's `update(batch=...)` per chunk of steps."""
+    """The path before the fused update: the replay sampled on the host, RLlib's `update(batch=...)` per
+    chunk of steps."""
     from ray.rllib.algorithms.sac import SACConfig
     from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, update_from_buffer, use_fast_learner
+    from copilot_ray.algorithms.gc_sac import (
+        FlatTransitionBuffer,
+        host_sampler,
+        update_from_buffer,
+        use_fast_learner,
+    )
 
     config = use_fast_learner(
         SACConfig().environment(observation_space=obs_space, action_space=act_space),
@@ -195,14 +201,14 @@ def build_batches(obs_space, act_space, episodes, steps_per_call: int, torch_thr
     lg = config.build_learner_group()
     buffer = FlatTransitionBuffer(1_000_000)
     buffer.add_episodes(episodes)
-    rng = np.random.default_rng(0)
+    sample = host_sampler(buffer)
     timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: buffer.num_added}
 
     def run(n: int) -> None:
         done = 0
         while done < n:
             k = min(steps_per_call, n - done)
-            update_from_buffer(lg, buffer, k, BATCH_SIZE, rng, timesteps)
+            update_from_buffer(lg, sample, k, BATCH_SIZE, timesteps)
             done += k
 
     return run, lg
@@ -216,7 +222,7 @@ def build_fused(
     from ray.rllib.algorithms.sac import SACConfig
     from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-    from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, use_fast_learner
+    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, use_fast_learner
 
     config = use_fast_learner(
         SACConfig().environment(observation_space=obs_space, action_space=act_space),
@@ -225,7 +231,7 @@ def build_fused(
         compile_update=compile_update,
     )
     learner = config.build_learner_group()._learner
-    buffer = DeviceTransitionBuffer(1_000_000, device=learner.device)
+    buffer = FlatTransitionBuffer(1_000_000, device=learner.device)
     buffer.add_episodes(episodes)
     timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: buffer.num_added}
 

@@ -8,7 +8,7 @@ Rows, per device: "one seed, fused" (the learner's `SACStep`, N = 1, the path a 
 updates/s is its seed-updates/s), then for each N "N stacked" (one `SACStep` for N seeds); on a GPU each also
 "captured" (one CUDA graph per update, `graph_capture.CapturedCall`). Each row warms up for 3 calls,
 then runs for `--seconds`; it prints updates/s of the stack and seed-updates/s (N x that). Each seed
-samples its batch from its own ring of one replay inside the step (`DeviceTransitionBuffer` with a ring per seed, random
+samples its batch from its own ring of one replay inside the step (`FlatTransitionBuffer` with a ring per seed, random
 transitions; one gather per column for all seeds, no host sync).
 
 On a CPU compare "N stacked" at `--threads` T against T one-seed trials side by side, each on one
@@ -27,8 +27,8 @@ from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from copilot_ray.algorithms.gc_sac import use_fast_learner
-from copilot_ray.algorithms.gc_sac.device_replay import DeviceTransitionBuffer
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
+from copilot_ray.algorithms.gc_sac.replay_buffer import FlatTransitionBuffer
 from copilot_ray.algorithms.gc_sac.sac_step import SACStep
 
 OBS, ACT, BATCH, CAPACITY = 4, 2, 256, 100_000
@@ -60,8 +60,8 @@ def _transitions(seed: int) -> dict[str, np.ndarray]:
     }
 
 
-def _replay(num_seeds: int, device: torch.device) -> DeviceTransitionBuffer:
-    replay = DeviceTransitionBuffer(CAPACITY, device, OBS, ACT, seeds=range(num_seeds))
+def _replay(num_seeds: int, device: torch.device) -> FlatTransitionBuffer:
+    replay = FlatTransitionBuffer(CAPACITY, device, OBS, ACT, seeds=range(num_seeds))
     for seed in range(num_seeds):
         replay.add(_transitions(seed), seed=seed)
     return replay
@@ -127,7 +127,7 @@ def main() -> None:
         flush=True,
     )
 
-    one = DeviceTransitionBuffer(CAPACITY, device)
+    one = FlatTransitionBuffer(CAPACITY, device)
     one.add(_transitions(0))
     fused = learner.fused_step()
     _row("one seed, fused", 1, lambda: fused.step(one.sample(BATCH)), args.seconds, device)

@@ -35,10 +35,12 @@ def _her(**search):
     return config.search(**search) if search else config
 
 
-def test_her_reports_the_common_metric_and_resumes_with_its_replay(ray_session, tmp_path):
+@pytest.mark.parametrize("fused", [True, False], ids=["fused", "host_batches"])
+def test_her_reports_the_common_metric_and_resumes_with_its_replay(ray_session, tmp_path, fused):
     """HER's evaluation is one rollout of its agent; a restored checkpoint has the same relabelling buffer
-    and samples the same batches."""
-    algo = _her().build_algo()
+    and samples the same batches. Either update path trains from the one relabelling buffer (sampled in
+    the fused step on the learner's device, or on the host for RLlib's `update(batch=...)`)."""
+    algo = _her().agent(fused_update=fused).build_algo()
     try:
         results, evaluated = _train(algo, 3)
         last = evaluated[-1]
@@ -47,8 +49,9 @@ def test_her_reports_the_common_metric_and_resumes_with_its_replay(ray_session, 
         assert keys.result_value(last, keys.EVAL_SUCCESS) == keys.result_value(last, keys.SUCCESS_DIRECT)
         assert keys.result_value(last, keys.PATH_SUCCESS) is None  # [s0, g] is no path to score
         buffer = algo.agent_updater.buffer
-        # On the learner's device, relabelled inside the fused step (the default fused_update).
-        assert type(buffer).__name__ == "DeviceHindsightBuffer" and buffer.n_sampled_goal == 4
+        assert type(algo.agent_updater).__name__ == ("FusedLearnerUpdater" if fused else "FastLearnerUpdater")
+        assert type(buffer).__name__ == "HindsightReplayBuffer" and buffer.n_sampled_goal == 4
+        assert buffer.sampler.counters.tolist()[0] > 0  # the updates sampled it
         path = algo.save_to_path(str(tmp_path / "ckpt"))
         steps = keys.result_value(results[-1], keys.ENV_STEPS)
         from copilot_ray.algorithms.sac.algorithm import GoalSAC

@@ -17,7 +17,7 @@ from ray.rllib.utils.metrics import ALL_MODULES
 
 from copilot_ray.algorithms.gc_sac import (
     NONFINITE_SKIPPED_KEY,
-    DeviceTransitionBuffer,
+    FlatTransitionBuffer,
     gc_sac_settings,
     make_train_batch,
     use_fast_learner,
@@ -168,7 +168,7 @@ def test_the_fused_step_is_rllibs_step_for_the_same_batch(critic_loss, monkeypat
 
 def test_update_from_replay_samples_its_batch_inside_the_step_and_logs_as_rllib_does():
     by_hand, from_replay = _twins()
-    replays = [DeviceTransitionBuffer(100, device=from_replay._learner.device) for _ in range(2)]
+    replays = [FlatTransitionBuffer(100, device=from_replay._learner.device) for _ in range(2)]
     for replay in replays:  # twins: each samples its own rows from the same stream
         replay.add(_columns(n=40))
     fused = by_hand._learner.fused_step()
@@ -189,12 +189,12 @@ def test_update_from_replay_samples_its_batch_inside_the_step_and_logs_as_rllib_
 def test_a_nonfinite_step_changes_nothing_and_is_counted_on_the_device():
     learner_group = _learner_group()
     learner = learner_group._learner
-    replay = DeviceTransitionBuffer(100, device=learner.device)
+    replay = FlatTransitionBuffer(100, device=learner.device)
     replay.add(_columns(n=40))
     learner.update_from_replay(replay, 2, 16)  # Adam's moments exist and are not zero
     before = _snapshot(learner_group)
 
-    poisoned = DeviceTransitionBuffer(100, device=learner.device)
+    poisoned = FlatTransitionBuffer(100, device=learner.device)
     poisoned.add(_columns(n=40, reward=np.nan))
     result = learner.update_from_replay(poisoned, 3, 16)
     assert result[ALL_MODULES][NONFINITE_SKIPPED_KEY].peek() == 3
@@ -221,7 +221,7 @@ def test_a_checkpoint_restores_optimizer_state_log_alpha_noise_and_the_replay_th
     tmp_path,
 ):
     original = _learner_group()
-    replay = DeviceTransitionBuffer(64, device=original._learner.device)
+    replay = FlatTransitionBuffer(64, device=original._learner.device)
     replay.add(_columns(n=50, seed=1))
     replay.add(_columns(n=30, seed=2))  # wraps around: the write pointer matters
     original._learner.update_from_replay(replay, 5, 16)
@@ -230,7 +230,7 @@ def test_a_checkpoint_restores_optimizer_state_log_alpha_noise_and_the_replay_th
 
     restored = _learner_group()
     restored.restore_from_path(tmp_path / "learner_group")
-    restored_replay = DeviceTransitionBuffer(1, device=restored._learner.device)
+    restored_replay = FlatTransitionBuffer(1, device=restored._learner.device)
     restored_replay.set_state(replay_state)
     _assert_same(
         _snapshot(original), _snapshot(restored), rtol=0, atol=0
@@ -258,7 +258,7 @@ def test_a_knob_that_is_not_a_bool_is_refused_naming_it(key):
 def test_an_empty_replay_is_refused():
     learner = _learner_group()._learner
     with pytest.raises(ValueError, match="the replay is empty"):
-        learner.update_from_replay(DeviceTransitionBuffer(8, device=learner.device), 1, 4)
+        learner.update_from_replay(FlatTransitionBuffer(8, device=learner.device), 1, 4)
 
 
 def test_an_agents_learner_options_are_checked_by_name():

@@ -20,6 +20,7 @@ from copilot_ray.algorithms.gc_sac import (
     GradientStepSchedule,
     count_parameters,
     gc_sac_settings,
+    host_sampler,
     make_train_batch,
     update_from_buffer,
     use_fast_learner,
@@ -142,10 +143,9 @@ def test_learner_group_update_from_buffer_and_checkpoint(tmp_path):
     learner = lg._learner
     module = learner.module[DEFAULT_MODULE_ID]
     buf = _buffer()
-    rng = np.random.default_rng(0)
     before = {k: v.clone() for k, v in module.state_dict().items()}
 
-    results = update_from_buffer(lg, buf, num_gradient_steps=4, batch_size=32, rng=rng, timesteps=512)
+    results = update_from_buffer(lg, host_sampler(buf), num_gradient_steps=4, batch_size=32, timesteps=512)
     res = results[0][DEFAULT_MODULE_ID]
     for key in ("qf_loss", "policy_loss", "alpha_value", "qf_twin_loss", "num_target_updates"):
         assert key in res, key
@@ -173,11 +173,14 @@ def test_learner_group_update_from_buffer_and_checkpoint(tmp_path):
     assert w1.keys() == w2.keys()
     for k in w1:
         np.testing.assert_array_equal(w1[k], w2[k])
-    # Both continue identically from the restored state (same batch, same torch seed).
+    # Both continue identically from the restored state (same batch: the replay's stream rewound; same
+    # torch seed).
+    stream = buf.get_state()
     torch.manual_seed(1)
-    r1 = update_from_buffer(lg, buf, 2, 32, np.random.default_rng(5), 600)[0][DEFAULT_MODULE_ID]
+    r1 = update_from_buffer(lg, host_sampler(buf), 2, 32, 600)[0][DEFAULT_MODULE_ID]
+    buf.set_state(stream)
     torch.manual_seed(1)
-    r2 = update_from_buffer(lg2, buf, 2, 32, np.random.default_rng(5), 600)[0][DEFAULT_MODULE_ID]
+    r2 = update_from_buffer(lg2, host_sampler(buf), 2, 32, 600)[0][DEFAULT_MODULE_ID]
     assert r1["qf_loss"].peek() == pytest.approx(r2["qf_loss"].peek(), rel=1e-5)
 
 
@@ -186,9 +189,7 @@ def test_nan_batch_is_skipped_without_touching_weights():
     learner = lg._learner
     module = learner.module[DEFAULT_MODULE_ID]
     buf = _buffer()
-    cols = buf.sample(
-        64, np.random.default_rng(0), columns=("obs", "new_obs", "actions", "rewards", "terminateds")
-    )
+    cols = {k: v.copy() for k, v in host_sampler(buf)(64).items()}
     cols["rewards"][3] = np.nan
     before = {k: v.clone() for k, v in module.state_dict().items()}
     alpha_before = learner.curr_log_alpha[DEFAULT_MODULE_ID].detach().clone()
@@ -201,7 +202,7 @@ def test_nan_batch_is_skipped_without_touching_weights():
     assert all(torch.equal(before[k], after[k]) for k in before)  # online and target nets untouched
     assert torch.equal(alpha_before, learner.curr_log_alpha[DEFAULT_MODULE_ID].detach())
     # A clean batch afterwards trains normally.
-    update_from_buffer(lg, buf, 1, 64, np.random.default_rng(1), 64)
+    update_from_buffer(lg, host_sampler(buf), 1, 64, 64)
     assert not torch.equal(before["qf.net.mlp.0.weight"], module.state_dict()["qf.net.mlp.0.weight"])
 
 
@@ -209,9 +210,7 @@ def test_stock_learner_accepts_the_same_batch_with_weights_and_n_step():
     cfg = SACConfig().environment(observation_space=OBS_SPACE, action_space=ACT_SPACE)
     cfg.rl_module(model_config={"fcnet_hiddens": [16, 16]})
     lg = cfg.build_learner_group()
-    res = update_from_buffer(
-        lg, _buffer(), 2, 32, np.random.default_rng(0), 100, with_weights_and_n_step=True
-    )
+    res = update_from_buffer(lg, host_sampler(_buffer()), 2, 32, 100, with_weights_and_n_step=True)
     assert "qf_loss" in res[0][DEFAULT_MODULE_ID]
 
 

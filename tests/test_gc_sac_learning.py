@@ -22,6 +22,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from copilot_ray.algorithms.gc_sac import (
     FlatTransitionBuffer,
     GradientStepSchedule,
+    host_sampler,
     update_from_buffer,
     use_fast_learner,
 )
@@ -91,9 +92,10 @@ def train(fast: bool, env_steps: int, seed: int = 0, torch_threads: int = 1):
         use_fast_learner(config, hidden=(64, 64), torch_threads=torch_threads, updates_per_env_step=1.0)
     runner = SingleAgentEnvRunner(config=config)
     learner_group = config.build_learner_group(env=runner.env)
-    updater = (
-        FastLearnerUpdater(config, learner_group) if fast else StockLearnerUpdater(config, learner_group)
-    )
+    if fast:
+        updater = FastLearnerUpdater(config, learner_group, FlatTransitionBuffer(100_000, seed=seed))
+    else:
+        updater = StockLearnerUpdater(config, learner_group)
     schedule = GradientStepSchedule(1.0, learning_starts=500)
     sampled = 0
     while sampled < env_steps:
@@ -161,7 +163,9 @@ def test_the_fast_learner_finds_the_best_action_of_a_one_step_task():
     learner_group = config.build_learner_group()
     module = learner_group._learner.module[DEFAULT_MODULE_ID]
     untrained = _steer_error(module)
-    update_from_buffer(learner_group, buffer, num_gradient_steps=300, batch_size=128, rng=rng, timesteps=4096)
+    update_from_buffer(
+        learner_group, host_sampler(buffer), num_gradient_steps=300, batch_size=128, timesteps=4096
+    )
     trained = _steer_error(module)
     assert untrained > 0.8, untrained  # a fresh policy does not steer
     assert trained < 0.25, (untrained, trained)

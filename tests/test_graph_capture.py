@@ -81,7 +81,7 @@ def test_the_learners_fused_update_reaches_the_capture_site_with_its_noise_strea
     from ray.rllib.algorithms.sac import SACConfig
     from ray.rllib.core import DEFAULT_MODULE_ID
 
-    from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, GCSACTorchLearner, use_fast_learner
+    from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, GCSACTorchLearner, use_fast_learner
 
     cfg = SACConfig().environment(
         observation_space=gym.spaces.Box(0.0, 1.0, (4,), np.float32),
@@ -92,7 +92,7 @@ def test_the_learners_fused_update_reaches_the_capture_site_with_its_noise_strea
         .build_learner_group()
         ._learner
     )
-    replay = DeviceTransitionBuffer(50, device="cpu")
+    replay = FlatTransitionBuffer(50, device="cpu")
     rng = np.random.default_rng(0)
     replay.add(
         {

@@ -13,7 +13,7 @@ from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.core import DEFAULT_MODULE_ID
 from torch.utils._python_dispatch import TorchDispatchMode
 
-from copilot_ray.algorithms.gc_sac import DeviceTransitionBuffer, use_fast_learner
+from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, use_fast_learner
 from copilot_ray.algorithms.gc_sac.sac_step import SACStep
 
 SEEDS = (0, 1, 2)
@@ -71,7 +71,7 @@ class NoHostSync(TorchDispatchMode):
 
 def test_the_learners_one_seed_update_never_syncs_with_the_host():
     learner = _learner()
-    replay = DeviceTransitionBuffer(100, device=learner.device)
+    replay = FlatTransitionBuffer(100, device=learner.device)
     replay.add(_columns(40))
     run = learner._replay_run(DEFAULT_MODULE_ID, replay, 16)  # what the learner captures on a GPU
     before = learner.fused_step().flat.clone()

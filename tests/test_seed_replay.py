@@ -1,16 +1,14 @@
-"""N seeds' rings in one storage: `DeviceTransitionBuffer` and `DeviceHindsightBuffer` with a ring per
+"""N seeds' rings in one storage: `FlatTransitionBuffer` and `HindsightReplayBuffer` with a ring per
 seed. Each seed keeps exactly what its own one-seed buffer would keep, a sample gives every seed rows of
 its own (HER's relabelled within that seed's episodes), the rows and goals its own one-seed buffer draws
 (one sampler: each seed's Philox stream), and a seed's checkpoint is the one-seed format (either way
-round)."""
+round, its stream's counter included)."""
 
 import numpy as np
 import pytest
 import torch
 
 from copilot_ray.algorithms.gc_sac import (
-    DeviceHindsightBuffer,
-    DeviceTransitionBuffer,
     FlatTransitionBuffer,
     GoalLayout,
     HindsightReplayBuffer,
@@ -21,7 +19,7 @@ from copilot_ray.algorithms.gc_sac.replay_buffer import OBS, REWARDS, TERMINATED
 def StackedTransitionBuffer(num_seeds, capacity, device, obs_dim, action_dim, seeds=None):  # noqa: N802
     """A flat buffer with a ring per seed (seeds 0 ... N - 1 unless given)."""
     seeds = range(num_seeds) if seeds is None else seeds
-    return DeviceTransitionBuffer(capacity, device, obs_dim, action_dim, seeds=seeds)
+    return FlatTransitionBuffer(capacity, device, obs_dim, action_dim, seeds=seeds)
 
 
 def _rows(seed, start, n):
@@ -39,7 +37,7 @@ def _rows(seed, start, n):
 
 def test_each_seed_keeps_what_its_own_buffer_keeps_through_wraps():
     stack = StackedTransitionBuffer(3, capacity=10, device="cpu", obs_dim=2, action_dim=2)
-    alone = [DeviceTransitionBuffer(10, device="cpu") for _ in range(3)]
+    alone = [FlatTransitionBuffer(10, device="cpu") for _ in range(3)]
     adds = {0: [4, 4], 1: [7, 6, 9], 2: [25]}  # no wrap, wraps twice, one add over the capacity
     for seed, sizes in adds.items():
         start = 0
@@ -83,11 +81,12 @@ def test_a_seeds_state_is_the_one_seed_format_both_ways():
     flat = FlatTransitionBuffer(8)
     flat.set_state(stack.get_state(seed=0))
     np.testing.assert_array_equal(flat.transitions()["obs"], stack.transitions(seed=0)["obs"])
-    other = StackedTransitionBuffer(2, capacity=8, device="cpu", obs_dim=2, action_dim=2)
-    other.set_state(seed=1, state=flat.get_state())  # seed 0's rows restored as seed 1 of another stack
+    # seed 0's rows restored as ring 1 of another stack (whose ring 1 is seed 0: its stream comes along)
+    other = StackedTransitionBuffer(2, capacity=8, device="cpu", obs_dim=2, action_dim=2, seeds=(3, 0))
+    other.set_state(seed=1, state=flat.get_state())
     np.testing.assert_array_equal(other.transitions(seed=1)["obs"], stack.transitions(seed=0)["obs"])
     assert other.sizes.tolist() == [0, 8]
-    other.set_state(seed=0, state=FlatTransitionBuffer(8).get_state())  # an empty snapshot keeps the storage
+    other.set_state(seed=0, state=FlatTransitionBuffer(8, seed=3).get_state())  # empty: the storage stays
     other.add(seed=0, transitions=_rows(0, 0, 2))
     assert other.sizes.tolist() == [2, 8] and other.transitions(seed=0)["obs"][1, 1] == 1.0
 
@@ -129,12 +128,12 @@ def _line(buffer, x0, steps, goal=(9.0, 9.0), seed=None):
 def _her_stack(num_seeds=3, capacity=1000, seeds=None, **kwargs):
     """HER's device buffer with a ring per seed (seeds 0 ... N - 1 unless given)."""
     seeds = range(num_seeds) if seeds is None else seeds
-    return DeviceHindsightBuffer(capacity, LAYOUT, _reached_reward, seeds=seeds, **kwargs)
+    return HindsightReplayBuffer(capacity, LAYOUT, _reached_reward, seeds=seeds, **kwargs)
 
 
 def test_each_seeds_her_buffer_keeps_what_its_own_buffer_keeps():
     stack = _her_stack(2, capacity=12)
-    alone = DeviceHindsightBuffer(12, LAYOUT, _reached_reward, seed=1)  # seed 1's: its sampler's too
+    alone = HindsightReplayBuffer(12, LAYOUT, _reached_reward, seed=1)  # seed 1's: its sampler's too
     for x0, steps in ((0, 5), (100, 6), (200, 4)):  # the third wraps the ring
         _line(stack, x0, steps, seed=1)
         _line(alone, x0, steps)
@@ -175,7 +174,7 @@ def test_a_stacked_her_seeds_state_is_the_one_seed_format_and_bad_input_is_named
     _line(stack, 0, 8, seed=0)
     plain = HindsightReplayBuffer(50, LAYOUT, lambda *a: None)
     plain.set_state(stack.get_state(seed=0))
-    other = _her_stack(2, capacity=50)
+    other = _her_stack(2, capacity=50, seeds=(3, 0))  # ring 1 is seed 0: its stream comes along
     other.set_state(plain.get_state(), seed=1)
     np.testing.assert_array_equal(
         other.get_state(seed=1)["data"]["next_achieved"],
@@ -229,9 +228,9 @@ def test_a_stacked_seed_samples_the_rows_and_goals_its_one_seed_buffer_samples()
         flat.add(seed=i, transitions=_rows(i, 0, 10 + 5 * i))
         _line(her, 100 * i, 8, seed=i)
         _line(her, 100 * i + 50, 6, seed=i)
-    flat_alone = DeviceTransitionBuffer(30, device="cpu", seed=7)
+    flat_alone = FlatTransitionBuffer(30, device="cpu", seed=7)
     flat_alone.add(_rows(1, 0, 15))
-    her_alone = DeviceHindsightBuffer(40, LAYOUT, _reached_reward, seed=7)
+    her_alone = HindsightReplayBuffer(40, LAYOUT, _reached_reward, seed=7)
     _line(her_alone, 100, 8)
     _line(her_alone, 150, 6)
     active = torch.tensor([False, True, True])
@@ -242,11 +241,11 @@ def test_a_stacked_seed_samples_the_rows_and_goals_its_one_seed_buffer_samples()
                 assert torch.equal(batch[key][1], column[0]), key
     assert flat.sampler.counters.tolist()[0] == 0 and her.sampler.counters.tolist()[0] == 0
     # A seed's buffer checkpoints its stream's counter; its one-seed buffer takes it, and draws on alike.
-    restored = DeviceTransitionBuffer(30, device="cpu", seed=7)
+    restored = FlatTransitionBuffer(30, device="cpu", seed=7)
     restored.set_state(flat.get_state(seed=1))
     assert torch.equal(restored.sample(20)["obs"][0], flat.sample(20)["obs"][1])
     with pytest.raises(ValueError, match="does not fit these streams"):
-        DeviceTransitionBuffer(30, device="cpu", seed=8).set_state(flat.get_state(seed=1))
+        FlatTransitionBuffer(30, device="cpu", seed=8).set_state(flat.get_state(seed=1))
 
 
 def test_sorbs_replayed_states_come_from_the_asked_seeds_ring():

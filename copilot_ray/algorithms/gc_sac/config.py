@@ -53,7 +53,7 @@ def use_fast_learner(
         critic_loss: "huber" (RLlib's SAC default) or "mse" (SB3's 0.5 * squared error).
         fused_update: train through `GCSACTorchLearner.update_from_replay` (the whole step on the
             learner's device, the replay sampled there, no host sync inside; GoalSAC's default), or,
-            False, through RLlib's `update(batch=...)` fed from a numpy buffer (the path before it).
+            False, through RLlib's `update(batch=...)` fed from the same replay sampled on the host.
         cuda_graph: on a CUDA learner, capture the fused step in one CUDA graph and replay it.
         compile_update: `torch.compile` the fused step (before the capture on a GPU).
     """

@@ -1,7 +1,8 @@
-"""Driving a (GC-)SAC `LearnerGroup` from a `FlatTransitionBuffer` with one call per iteration."""
+"""Driving a (GC-)SAC `LearnerGroup` from a replay buffer with one call per iteration."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -9,7 +10,16 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS, FlatTransitionBuffer
+from copilot_ray.algorithms.gc_sac.replay_buffer import TRAIN_COLUMNS
+
+# n -> n sampled transitions as the learner's columns (obs, new_obs, actions, rewards, terminateds), numpy
+Sampler = Callable[[int], dict[str, np.ndarray]]
+
+
+def host_sampler(buffer) -> Sampler:
+    """`Sampler` of a one-seed torch replay buffer (`FlatTransitionBuffer`, `HindsightReplayBuffer`): its
+    seed's rows on the host (a view of CPU storage, a copy from another device)."""
+    return lambda n: {k: v[0].cpu().numpy() for k, v in buffer.sample(int(n), TRAIN_COLUMNS).items()}
 
 
 def make_train_batch(
@@ -34,20 +44,19 @@ def make_train_batch(
 
 def update_from_buffer(
     learner_group,
-    buffer: FlatTransitionBuffer,
+    sample: Sampler,
     num_gradient_steps: int,
     batch_size: int,
-    rng: np.random.Generator,
     timesteps: dict[str, Any] | int | None = None,
     *,
     module_id: str = DEFAULT_MODULE_ID,
     with_weights_and_n_step: bool = False,
     steps_per_call: int = 16,
 ) -> list[dict[str, Any]]:
-    """`num_gradient_steps` SAC gradient steps of `batch_size` uniform samples.
+    """`num_gradient_steps` SAC gradient steps of `batch_size` samples each from `sample`.
 
     Every `steps_per_call` gradient steps are one learner call: sample `steps_per_call * batch_size`
-    transitions at once and `learner_group.update(batch=..., minibatch_size=batch_size, num_epochs=1,
+    transitions at once (`host_sampler(buffer)` for a replay buffer) and `learner_group.update(batch=..., minibatch_size=batch_size, num_epochs=1,
     shuffle_batch_per_epoch=False, timesteps=...)`, which runs one gradient step per minibatch.
     Why chunks: RLlib's minibatch iterator slices the whole batch for every minibatch, so the cost
     per step grows with the batch (measured: 118 updates/s at 16 steps per call, 32 at 256, 11 at 1024).
@@ -56,14 +65,14 @@ def update_from_buffer(
     as `LearnerGroup.update` returns), or [] when nothing was done.
     """
     n = int(num_gradient_steps)
-    if n <= 0 or len(buffer) == 0:
+    if n <= 0:
         return []
     if isinstance(timesteps, int | np.integer):
         timesteps = {NUM_ENV_STEPS_SAMPLED_LIFETIME: int(timesteps)}
     results: list[dict[str, Any]] = []
     for start in range(0, n, int(steps_per_call)):
         k = min(int(steps_per_call), n - start)
-        cols = buffer.sample(k * int(batch_size), rng, columns=TRAIN_COLUMNS)
+        cols = sample(k * int(batch_size))
         batch = make_train_batch(cols, module_id=module_id, with_weights_and_n_step=with_weights_and_n_step)
         results += learner_group.update(
             batch=batch,

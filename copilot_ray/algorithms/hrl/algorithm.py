@@ -11,6 +11,7 @@ Before `num_steps_sampled_before_learning_starts` env steps both levels act unif
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import gymnasium as gym
@@ -18,7 +19,12 @@ import numpy as np
 import torch
 
 from copilot_ray import keys
-from copilot_ray.algorithms.gc_sac import FlatTransitionBuffer, GradientStepSchedule, update_from_buffer
+from copilot_ray.algorithms.gc_sac import (
+    FlatTransitionBuffer,
+    GradientStepSchedule,
+    host_sampler,
+    update_from_buffer,
+)
 from copilot_ray.algorithms.hrl import settings as S
 from copilot_ray.algorithms.hrl.buffer import SegmentReplayBuffer
 from copilot_ray.algorithms.hrl.config import HRLConfig
@@ -57,9 +63,8 @@ class HRL:
         self.generator = torch.Generator().manual_seed(cfg.seed)  # exploration while training
         self.low, self.high = Actor(self.low_group), Actor(self.high_group)
         self.rng = np.random.default_rng([cfg.seed, 0])  # training tasks, random warm-up actions
-        self.low_rng = np.random.default_rng([cfg.seed, 1])  # low-level replay sampling
         self.high_rng = np.random.default_rng([cfg.seed, 2])  # high-level replay sampling + candidates
-        self.low_buffer = FlatTransitionBuffer(cfg.replay_capacity)
+        self.low_buffer = FlatTransitionBuffer(cfg.replay_capacity, seed=cfg.seed)  # samples its own stream
         corrector = self.correct if cfg.hrl_off_policy_correction else None
         self.high_buffer = SegmentReplayBuffer(max(1, cfg.replay_capacity // cfg.hrl_c), corrector)
         self.low_schedule = GradientStepSchedule(
@@ -141,19 +146,27 @@ class HRL:
             returns += [cfg.reward_scale * float(ep.rewards.sum()) for ep in episodes]
             reached.append(subgoals_reached(episodes, cfg.hrl_c, self.compute_terminated))
             learning = self.env_steps >= cfg.num_steps_sampled_before_learning_starts
-            for level, group, buffer, rng, steps in (
-                ("low", self.low_group, self.low_buffer, self.low_rng, self.low_schedule.on_env_steps(n)),
+            high_sample = functools.partial(self.high_buffer.sample, rng=self.high_rng)
+            for level, group, buffer, sample, steps in (
+                (
+                    "low",
+                    self.low_group,
+                    self.low_buffer,
+                    host_sampler(self.low_buffer),
+                    self.low_schedule.on_env_steps(n),
+                ),
                 (
                     "high",
                     self.high_group,
                     self.high_buffer,
-                    self.high_rng,
+                    high_sample,
                     self.high_schedule.on_env_steps(added if learning else 0),
                 ),
             ):
                 settings = getattr(cfg, level)
+                steps = steps if len(buffer) else 0
                 results = update_from_buffer(
-                    group, buffer, steps, settings["train_batch_size_per_learner"], rng, self.env_steps
+                    group, sample, steps, settings["train_batch_size_per_learner"], self.env_steps
                 )
                 stats.update({f"{keys.HRL_PREFIX}{level}/{k}": v for k, v in learner_stats(results).items()})
         self.iteration += 1
@@ -222,7 +235,7 @@ class HRL:
             "high_buffer": self.high_buffer.get_state(),
             "low_schedule": self.low_schedule.get_state(),
             "high_schedule": self.high_schedule.get_state(),
-            "rngs": [r.bit_generator.state for r in (self.rng, self.low_rng, self.high_rng)],
+            "rngs": [r.bit_generator.state for r in (self.rng, self.high_rng)],
             "generator": self.generator.get_state(),
             "torch_rng": torch.get_rng_state(),
             "env_steps": self.env_steps,
@@ -238,7 +251,7 @@ class HRL:
         self.high_buffer.set_state(state["high_buffer"])
         self.low_schedule.set_state(state["low_schedule"])
         self.high_schedule.set_state(state["high_schedule"])
-        for r, s in zip((self.rng, self.low_rng, self.high_rng), state["rngs"], strict=True):
+        for r, s in zip((self.rng, self.high_rng), state["rngs"], strict=True):
             r.bit_generator.state = s
         self.generator.set_state(state["generator"])
         torch.set_rng_state(state["torch_rng"])

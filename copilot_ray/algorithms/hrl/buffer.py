@@ -1,7 +1,7 @@
 """The high level's replay: transitions (s_t, g, offset, sum of rewards, s_{t+c}) that keep the low-level
 segment behind them, so that a sampled offset can be relabelled by HIRO's off-policy correction.
 
-A sample has `FlatTransitionBuffer`'s columns (obs, new_obs, actions, rewards, terminateds), so
+A sample has the flat replay's columns (obs, new_obs, actions, rewards, terminateds), so
 `gc_sac.update_from_buffer` drives the high level's learner from it unchanged; the correction runs when
 a batch is sampled (with the current low level), as in HIRO.
 """

@@ -1,10 +1,10 @@
 """How CO-PILOT's agent phase turns sampled sub-task episodes into SAC gradient steps.
 
 Three interchangeable paths (config `fast_learner`, and the fast learner's `fused_update` knob):
-- `FusedLearnerUpdater` (default): the replay lives on the learner's device (`DeviceTransitionBuffer`,
-  or HER's `DeviceHindsightBuffer`) and each call is `learner.update_from_replay`: every gradient step
+- `FusedLearnerUpdater` (default): the replay lives on the learner's device (`FlatTransitionBuffer`,
+  or HER's `HindsightReplayBuffer`) and each call is `learner.update_from_replay`: every gradient step
   samples its batch there and runs as one fused step with no host sync (a CUDA graph replay on a GPU).
-- `FastLearnerUpdater` (`fused_update=False`): numpy flat transition buffer + SB3-shaped SAC learner,
+- `FastLearnerUpdater` (`fused_update=False`): the same replay on the host + SB3-shaped SAC learner,
   many gradient steps per `learner_group.update(batch=...)` call (copilot_ray.algorithms.gc_sac). About
   10x faster than the stock path on CPU.
 - `StockLearnerUpdater`: RLlib's own episode replay buffer and learner connector, one gradient step per
@@ -23,11 +23,7 @@ from ray.rllib.utils.numpy import convert_to_numpy
 from ray.rllib.utils.replay_buffers import ReplayBuffer
 from ray.rllib.utils.replay_buffers.utils import update_priorities_in_episode_replay_buffer
 
-from copilot_ray.algorithms.gc_sac import (
-    FlatTransitionBuffer,
-    gc_sac_settings,
-    update_from_buffer,
-)
+from copilot_ray.algorithms.gc_sac import gc_sac_settings, host_sampler, update_from_buffer
 
 
 class StockLearnerUpdater:
@@ -82,82 +78,26 @@ def make_rllib_replay_buffer(config):
     return from_config(ReplayBuffer, buffer_config)
 
 
-class FastLearnerUpdater:
-    """Flat transition buffer -> N gradient steps in one `learner_group.update(batch=...)` call.
-
-    `buffer`: any buffer with `add_episodes`, `sample(n, rng, columns)`, `get_state` / `set_state`
-    (default: a `FlatTransitionBuffer` of the config's replay capacity; HER passes its own)."""
-
-    def __init__(self, config, learner_group, buffer=None):
-        self.config = config
-        self.learner_group = learner_group
-        if buffer is None:
-            buffer = FlatTransitionBuffer(replay_capacity(config))
-        self.buffer = buffer
-        seed = 0 if config.seed is None else int(config.seed)
-        self.rng = np.random.default_rng([seed, 1])  # its own stream: buffer sampling
-
-    def add(self, episodes) -> None:
-        self.buffer.add_episodes(episodes)
-
-    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
-        return update_from_buffer(
-            self.learner_group,
-            self.buffer,
-            num_updates,
-            self.config.train_batch_size_per_learner,
-            self.rng,
-            timesteps,
-        )
-
-    def replay_size(self) -> int:
-        """Transitions in this agent's replay."""
-        return len(self.buffer)
-
-    def replay_states(self, n: int, rng: np.random.Generator):
-        """n replayed (observations, achieved goals) of a hindsight buffer (SoRB's graph)."""
-        return self.buffer.sample_states(n, rng)
-
-    def get_state(self) -> dict[str, Any]:
-        return {"buffer": self.buffer.get_state(), "rng": self.rng.bit_generator.state}
-
-    def set_state(self, state: dict[str, Any]) -> None:
-        self.buffer.set_state(state["buffer"])
-        self.rng.bit_generator.state = state["rng"]
-
-
-class FusedLearnerUpdater:
-    """The replay on the learner's device, sampled inside each fused gradient step
-    (`GCSACTorchLearner.update_from_replay`). Needs the learner in this process (`num_learners=0`, as
-    every algorithm here runs): the buffer is handed to it, not shipped.
-
-    `buffer`: a device buffer (`add_episodes`, `sample(n)` on the device, `get_state` / `set_state`,
-    `storage_version`, `device`; `GoalSAC.device_replay`). Its state keeps the numpy buffer's format,
-    so checkpoints of either path restore into the other. `ring`: which of the buffer's seed rings is
-    this agent's: 0 alone; seed i of a seed stack, whose buffer and updates are the stack's
-    (`stacked_updates.StackedAgentUpdates`), so it never calls `update`."""
+class ReplayUpdater:
+    """What both fast paths share: the agent's ring `ring` of a torch replay buffer (`add_episodes`,
+    `sample(n)`, `get_state` / `set_state` per seed; `GoalSAC.device_replay`). 0 alone; seed i of a seed
+    stack, whose buffer and updates are the stack's (`stacked_updates.StackedAgentUpdates`), so it never
+    calls `update`. Sampling reads no global generator: the ring's state holds its stream's counter."""
 
     def __init__(self, config, learner_group, buffer, ring: int = 0):
         self.config = config
         self.learner_group = learner_group
-        self.learner = local_learner(config, learner_group)
         self.buffer = buffer
         self.ring = int(ring)
 
     def add(self, episodes) -> None:
         self.buffer.add_episodes(episodes, seed=self.ring)
 
-    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
-        """As `LearnerGroup.update` returns: one result dict per learner (here one), [] for no step."""
+    def _steps(self, num_updates: int) -> bool:
+        """Whether `num_updates` gradient steps are owed and can be sampled."""
         if self.buffer.num_seeds != 1:
             raise RuntimeError("a stacked seed's agent is updated by its stack, not alone")
-        if num_updates <= 0 or len(self.buffer) == 0:
-            return []
-        return [
-            self.learner.update_from_replay(
-                self.buffer, num_updates, self.config.train_batch_size_per_learner, timesteps
-            )
-        ]
+        return num_updates > 0 and len(self.buffer) > 0
 
     def replay_size(self) -> int:
         """Transitions in this agent's ring of the replay."""
@@ -168,13 +108,40 @@ class FusedLearnerUpdater:
         return self.buffer.sample_states(n, rng, seed=self.ring)
 
     def get_state(self) -> dict[str, Any]:
-        """The agent's ring, its sampling stream's counter included (sampling reads no global
-        generator)."""
         return {"buffer": self.buffer.get_state(seed=self.ring)}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Restores the ring (a numpy path's checkpoint too: its sampling rng has no use here)."""
         self.buffer.set_state(state["buffer"], seed=self.ring)
+
+
+class FastLearnerUpdater(ReplayUpdater):
+    """`fused_update=False`: the replay sampled on the host, N gradient steps in one
+    `learner_group.update(batch=...)` call (the learners may be remote)."""
+
+    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
+        if not self._steps(num_updates):
+            return []
+        batch_size = self.config.train_batch_size_per_learner
+        return update_from_buffer(
+            self.learner_group, host_sampler(self.buffer), num_updates, batch_size, timesteps
+        )
+
+
+class FusedLearnerUpdater(ReplayUpdater):
+    """The replay on the learner's device, sampled inside each fused gradient step
+    (`GCSACTorchLearner.update_from_replay`). Needs the learner in this process (`num_learners=0`, as
+    every algorithm here runs): the buffer is handed to it, not shipped."""
+
+    def __init__(self, config, learner_group, buffer, ring: int = 0):
+        super().__init__(config, learner_group, buffer, ring)
+        self.learner = local_learner(config, learner_group)
+
+    def update(self, num_updates: int, timesteps: dict[str, int]) -> list[dict[str, Any]]:
+        """As `LearnerGroup.update` returns: one result dict per learner (here one), [] for no step."""
+        if not self._steps(num_updates):
+            return []
+        batch_size = self.config.train_batch_size_per_learner
+        return [self.learner.update_from_replay(self.buffer, num_updates, batch_size, timesteps)]
 
 
 def local_learner(config, learner_group):

@@ -27,8 +27,8 @@ method with long iterations (CO-PILOT: b x its trees) on the same evaluation cad
 ones; the sequence of draws, planner phases and traversals is the same as without it.
 
 HER is a replay buffer, as in Stable-Baselines3: `gc_sac.HindsightReplayBuffer` relabels goals when a
-batch is sampled and recomputes rewards with the goal env's `compute_reward` / `compute_terminated` under
-the same `TraversalRules.reward` the env runners use, so a relabelled transition is rewarded exactly as
+batch is sampled and recomputes rewards as the goal env's `compute_reward` / `compute_terminated` under
+the same `TraversalRules.reward` the env runners use would (`DeviceRelabelledReward`, tested against them), so a relabelled transition is rewarded exactly as
 a real one reaching that goal would be.
 """
 
@@ -57,8 +57,7 @@ from ray.tune.registry import register_env
 
 from copilot_ray import keys
 from copilot_ray.algorithms.gc_sac import (
-    DeviceHindsightBuffer,
-    DeviceTransitionBuffer,
+    FlatTransitionBuffer,
     GoalLayout,
     GradientStepSchedule,
     HindsightReplayBuffer,
@@ -76,7 +75,7 @@ from copilot_ray.algorithms.sac.agent_updates import (
     replay_capacity,
 )
 from copilot_ray.algorithms.sac.planned_evaluation import PlannedEvaluation
-from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward, relabelled_reward
+from copilot_ray.algorithms.sac.relabel_reward import DeviceRelabelledReward
 from copilot_ray.algorithms.sac.runner_traversal import RunnerTraversal
 from copilot_ray.algorithms.sac.traversal_channel import (
     Subtasks,
@@ -418,26 +417,16 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
 
     def _make_agent_updater(self):
         """What turns sampled episodes into SAC gradient steps (agent_updates.py): the fused update on
-        the learner's device (`device_replay`), else the numpy buffers of `fused_update=False` (HER's
-        relabelling one where the agent relabels), else RLlib's stock path."""
+        the learner's device (`device_replay` there), else the same replay sampled on the host for
+        `fused_update=False`, else RLlib's stock path."""
         cfg = self.config
+        seeds = [int(cfg.seed or 0)]
         if fused_update(cfg):
             device = local_learner(cfg, self.learner_group).device
-            return FusedLearnerUpdater(
-                cfg, self.learner_group, self.device_replay(device, [int(cfg.seed or 0)])
-            )
+            return FusedLearnerUpdater(cfg, self.learner_group, self.device_replay(device, seeds))
         if not cfg.fast_learner:
             return StockLearnerUpdater(cfg, self.learner_group, self.local_replay_buffer)
-        if not cfg.uses_hindsight_buffer():
-            return FastLearnerUpdater(cfg, self.learner_group)
-        buffer = HindsightReplayBuffer(
-            replay_capacity(cfg),
-            self.goal_layout(),
-            self.relabelled_reward,
-            n_sampled_goal=cfg.her["n_sampled_goal"],
-            goal_selection=cfg.her["goal_selection"],
-        )
-        return FastLearnerUpdater(cfg, self.learner_group, buffer)
+        return FastLearnerUpdater(cfg, self.learner_group, self.device_replay(torch.device("cpu"), seeds))
 
     def device_replay(self, device: torch.device, seeds: list[int], dims: tuple[int, int] | None = None):
         """The agent's replay on `device` with a ring per seed (a run's one seed, or a stack's seeds):
@@ -446,8 +435,8 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
         (a stack's: a seed's checkpoint restores into its ring before any episode)."""
         cfg = self.config
         if not cfg.uses_hindsight_buffer():
-            return DeviceTransitionBuffer(replay_capacity(cfg), device, *(dims or (None, None)), seeds=seeds)
-        return DeviceHindsightBuffer(
+            return FlatTransitionBuffer(replay_capacity(cfg), device, *(dims or (None, None)), seeds=seeds)
+        return HindsightReplayBuffer(
             replay_capacity(cfg),
             self.goal_layout(),
             DeviceRelabelledReward(self.goal_env.unwrapped, self.rules, device),
@@ -465,13 +454,6 @@ class GoalSAC(LocalLogdir, RunnerTraversal, PlannedEvaluation, SAC):
             goal_dim=int(env.goal_space.shape[0]),
             with_delta=self.rules.agent_input == "state_goal_delta",
         )
-
-    def relabelled_reward(
-        self, next_achieved: np.ndarray, goals: np.ndarray, collisions: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(rewards, terminateds) of transitions given new goals: the goal env's reward and
-        termination under the traversal rules the env runners apply (one sub-task = one task here)."""
-        return relabelled_reward(self.goal_env.unwrapped, self.rules, next_achieved, goals, collisions)
 
     # --------------------------------------------------------------------------- training step
     @override(DQN)

@@ -1,33 +1,23 @@
-"""What a relabelled transition earns: HER's reward for a new goal, on the host and on the learner's
-device.
+"""What a relabelled transition earns: HER's reward for a new goal, on the learner's device.
 
-`relabelled_reward` is the goal env's sparse reward and termination under the traversal rules the env
-runners apply (one sub-task = one task: layer 0), as numpy; `DeviceRelabelledReward` is the same on
-torch tensors of the learner's device, with no host synchronisation, for `DeviceHindsightBuffer`. It
-reads the env's distance as data (`goal_metric`, held equal to `goal_distance` by the env contract)
-and computes in float64, as the numpy one does.
+`DeviceRelabelledReward` is the goal env's sparse reward and termination (`compute_reward`,
+`compute_terminated`) under the traversal rules the env runners apply (one sub-task = one task: layer
+0), on torch tensors of the learner's device, with no host synchronisation, for `HindsightReplayBuffer`.
+It reads the env's distance as data (`goal_metric`, held equal to `goal_distance` by the env contract)
+and computes in float64, as the env does.
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from copilot_ray.algorithms.sac.traversal_env import TraversalRules
 
 
-def relabelled_reward(
-    env, rules: TraversalRules, next_achieved: np.ndarray, goals: np.ndarray, collisions: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(rewards, terminateds) of transitions given new goals, for the (unwrapped) goal env `env`."""
-    reached = env.compute_terminated(next_achieved, goals, None)
-    return rules.reward(env.compute_reward(next_achieved, goals, None), reached, collisions, layer=0)
-
-
 class DeviceRelabelledReward:
-    """`relabelled_reward` on device tensors: a `gc_sac.TorchRewardFn` for `DeviceHindsightBuffer`."""
+    """HER's relabelled reward on device tensors: a `gc_sac.TorchRewardFn` for `HindsightReplayBuffer`."""
 
     def __init__(self, env, rules: TraversalRules, device: torch.device | str):
         metric = env.goal_metric

@@ -2,8 +2,8 @@
 
 `StackedAgentUpdates(algos)` stacks the seeds' learner modules into one `gc_sac.sac_step.SACStep` (their
 parameters and Adam state become views of its rows: a seed's learner always holds its current agent) and
-their replay (one device buffer with a ring per seed: flat transitions, `gc_sac.DeviceTransitionBuffer`,
-or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.DeviceHindsightBuffer`, relabelled on
+their replay (one device buffer with a ring per seed: flat transitions, `gc_sac.FlatTransitionBuffer`,
+or HER's relabelling buffer for her, sorb and sorb_map, `gc_sac.HindsightReplayBuffer`, relabelled on
 the device as the one-seed fused path relabels), and gives each algorithm a `FusedLearnerUpdater`
 over its ring of the stacked replay in place of its own: adding episodes writes the seed's rows of the
 stacked replay. `update({seed: (n, timesteps)})` (a `seed_stack.SeedStack` round, for
