@@ -169,7 +169,8 @@ class HindsightReplayBuffer:
             return
         if self._storage is not None and self.num_seeds > 1:
             raise ValueError(
-                f"seed {self.seeds[seed]}: action size {action_dim} does not fit the stack's {self._action_dim}"
+                f"seed {self.seeds[seed]}: action size {action_dim} does not fit the stack's "
+                f"{self._action_dim}"
             )
         self._action_dim = int(action_dim)
         widths = {"obs": self.layout.obs_dim, "goal": self.layout.goal_dim, "action": self._action_dim}

@@ -56,8 +56,9 @@ def update_from_buffer(
     """`num_gradient_steps` SAC gradient steps of `batch_size` samples each from `sample`.
 
     Every `steps_per_call` gradient steps are one learner call: sample `steps_per_call * batch_size`
-    transitions at once (`host_sampler(buffer)` for a replay buffer) and `learner_group.update(batch=..., minibatch_size=batch_size, num_epochs=1,
-    shuffle_batch_per_epoch=False, timesteps=...)`, which runs one gradient step per minibatch.
+    transitions at once (`host_sampler(buffer)` for a replay buffer) and `learner_group.update(batch=...,
+    minibatch_size=batch_size, num_epochs=1, shuffle_batch_per_epoch=False, timesteps=...)`, which runs
+    one gradient step per minibatch.
     Why chunks: RLlib's minibatch iterator slices the whole batch for every minibatch, so the cost
     per step grows with the batch (measured: 118 updates/s at 16 steps per call, 32 at 256, 11 at 1024).
     `timesteps` is RLlib's timesteps dict (an int is taken as `num_env_steps_sampled_lifetime`); it
