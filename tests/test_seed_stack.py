@@ -193,6 +193,27 @@ def test_one_batched_forward_acts_as_each_seeds_module_acts():
     torch.testing.assert_close(one.act(obs[2:], noise[2:]), explored[2:], rtol=1e-5, atol=1e-6)
 
 
+def test_the_traced_act_acts_with_the_weights_of_the_moment_as_the_vmapped_actor_does():
+    """For N > 1 `act` replays a graph traced once per input shape: it must read the actor's current
+    parameters (an update moves its actions), give what the vmapped actor gives to the bit, and trace
+    again only for a new shape or the other kind of action."""
+    learners = [_learner(s) for s in SEEDS]
+    step = _stack_of(learners)
+    obs = torch.as_tensor(np.random.default_rng(0).uniform(0, 1, (3, 1, 4)), dtype=torch.float32)
+    noise = torch.as_tensor(np.random.default_rng(1).normal(0, 1, (3, 1, 2)), dtype=torch.float32)
+    before = step.act(obs, noise)
+    for _ in range(3):
+        step.step(stack_batches([_batch(s) for s in SEEDS]))
+    after = step.act(obs, noise)
+    assert not torch.allclose(before, after)
+    actor = step.leaves[len(step.critic_layout) : len(step.critic_layout) + len(step.actor_layout)]
+    with torch.no_grad():
+        vmapped = torch.vmap(lambda p, o, z: step._act_one_seed(p, o, z))(actor, obs, noise)
+    assert torch.equal(after, vmapped)
+    step.act(obs, noise), step.act(obs), step.act(obs.repeat(1, 2, 1), noise.repeat(1, 2, 1))
+    assert len(step._traced_acts) == 3
+
+
 def test_the_step_refuses_what_it_cannot_stack():
     learner = _learner(0)
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()

@@ -41,6 +41,7 @@ import torch
 from ray.rllib.algorithms.sac.sac_learner import QF_PREDS, QF_TWIN_PREDS
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.models.base import ENCODER_OUT
+from torch.fx.experimental.proxy_tensor import make_fx
 
 from copilot_ray.algorithms.gc_sac.graph_capture import CapturedCall
 from copilot_ray.algorithms.gc_sac.losses import sac_losses
@@ -133,6 +134,7 @@ class SACStep:
         for net, name, *_ in self.critic_layout + self.actor_layout + self.target_layout:
             owner, _, attr = name.rpartition(".")
             self._slots[(net, name)] = (getattr(self.module, net).get_submodule(owner), attr)
+        self._traced_acts: dict[tuple, torch.fx.GraphModule] = {}  # `act`'s graphs, by input shape
 
         with torch.no_grad():
             self.flat = torch.stack([self._row(m, a) for m, a in zip(modules, log_alphas, strict=True)])
@@ -388,21 +390,39 @@ class SACStep:
     def act(self, obs: torch.Tensor, noise: torch.Tensor | None = None) -> torch.Tensor:
         """Every seed's actions for its own observations `obs` [N, E, d] in one batched forward pass of
         the modules' actor: with standard-normal `noise` [N, E, A] a sample of its squashed Gaussian,
-        without it the distribution's deterministic action (RLlib's: the mean, before squashing)."""
+        without it the distribution's deterministic action (RLlib's: the mean, before squashing).
 
+        For N > 1 the vmapped actor is traced once per input shape into a graph of the aten ops vmap
+        dispatches (`make_fx`; the actor's parameters are its inputs, so it acts with the current
+        weights) and the graph is replayed: the same kernels on the same numbers, without vmap's
+        per-op batching in Python, which at one row per seed cost about half the traversal's host
+        time (`benchmarks/stacked_trial.py`)."""
         actor = self.leaves[len(self.critic_layout) : len(self.critic_layout) + len(self.actor_layout)]
-
-        def one_seed(params, o, z):
-            with self._bound(self.actor_layout, params):
-                if z is None:
-                    logits = self._call("pi", self._call("pi_encoder", {Columns.OBS: o})[ENCODER_OUT])
-                    return logits.chunk(2, dim=-1)[0]
-                _, dist, unsquashed = self._sample(o, z)  # acting needs no log-probability
-                return dist._squash(unsquashed)  # noqa: SLF001
-
+        # (make_fx counts a function's positional arguments from its code: a plain function each)
         if noise is None:
-            return self._per_seed(lambda params, o: one_seed(params, o, None), (actor,), obs)
-        return self._per_seed(one_seed, (actor,), obs, noise)
+            inputs, one_seed = (obs,), lambda params, o: self._act_one_seed(params, o, None)
+        else:
+            inputs, one_seed = (obs, noise), lambda params, o, z: self._act_one_seed(params, o, z)
+        if self.num_seeds == 1:
+            return self._per_seed(one_seed, (actor,), *inputs)
+        key = (tuple(obs.shape), noise is None, obs.device, obs.dtype)
+        traced = self._traced_acts.get(key)
+        if traced is None:
+            traced = make_fx(torch.vmap(one_seed))(list(actor), *inputs)
+            baked = [node.target for node in traced.graph.nodes if node.op == "get_attr"]
+            if baked:  # a tensor the trace read from outside its inputs would stay at its traced value
+                raise RuntimeError(f"the traced actor holds tensors that are not its inputs: {baked}")
+            self._traced_acts[key] = traced
+        return traced(list(actor), *inputs)
+
+    def _act_one_seed(self, params, obs, noise):
+        """One seed's action (`act`) with its actor's parameters `params`."""
+        with self._bound(self.actor_layout, params):
+            if noise is None:
+                logits = self._call("pi", self._call("pi_encoder", {Columns.OBS: obs})[ENCODER_OUT])
+                return logits.chunk(2, dim=-1)[0]
+            _, dist, unsquashed = self._sample(obs, noise)  # acting needs no log-probability
+            return dist._squash(unsquashed)  # noqa: SLF001
 
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, Any]:
